@@ -1,0 +1,86 @@
+"""The paper's figure scenarios on documented defaults (used by notebooks and tests).
+
+The paper gives no attack amplitudes, start times or durations.  The defaults
+below are chosen on the default ``LFCParams`` so that each figure's situation
+is clear, not marginal (reproduction notes section 4):
+
+* Fig. 4: a 1 Hz sinusoid on dPc (the paper's "≈1 Hz" oscillation).  The
+  ROCOF relay first trips at ~0.26 pu; 0.5 pu (about twice that) peaks at
+  ~0.096 pu/s (1.9x the setting).  Panel (d) uses 0.1 pu (peak ~0.019 pu/s).
+* Fig. 5: a +0.04 pu bias on the frequency reference dw_ref: the local
+  integrator drives dw toward 0.04 pu > F = 0.03 pu (OF2 at ~15 s).
+* Fig. 6: a 0.1 pu load step, half the E12 limit ``M * rocof_limit`` = 0.2 pu.
+Attacks and disturbances start at 1 s so each plot shows the steady state first.
+"""
+
+from __future__ import annotations
+
+from lfc.cbf import SafetyFilter
+from lfc.model import LFCParams
+from lfc.relays import RelaySettings
+from lfc.signals import Sinusoid, Step
+from lfc.simulate import SimResult, simulate
+
+ATTACK_START = 1.0      # s
+FIG4_AMPLITUDE = 0.5    # pu, trips ROCOF without SCC
+FIG4_WEAK = 0.1         # pu, neither trips nor activates the SCC (alpha = 20)
+FIG4_FREQ = 1.0         # Hz
+FIG4_DURATION = 10.0    # s
+FIG5_BIAS = 0.04        # pu on dw_ref
+FIG5_DURATION = 30.0    # s
+FIG6_LOAD = 0.1         # pu load step
+FIG6_DURATION = 30.0    # s
+
+
+def fig4_rocof_attack(params: LFCParams | None = None, *, alphas: tuple[float, float] = (3.0, 20.0),
+                      amplitude: float = FIG4_AMPLITUDE, weak_amplitude: float = FIG4_WEAK,
+                      freq_hz: float = FIG4_FREQ, Ts: float = 0.25,
+                      duration: float = FIG4_DURATION, **sim) -> dict[str, SimResult]:
+    """Fig. 4 panels: (a) no SCC, (b) SCC alphas[0], (c) SCC alphas[1], (d) weak attack, SCC alphas[1].
+
+    ``sim`` is passed on to :func:`lfc.simulate` (``relays``, ``control_period``,
+    ``estimator``, ``noise_std``, ``seed``, ...).
+    """
+    params = params or LFCParams()
+    relays = sim.pop("relays", None) or RelaySettings()
+    strong = Sinusoid(amplitude, freq_hz, start=ATTACK_START)
+    weak = Sinusoid(weak_amplitude, freq_hz, start=ATTACK_START)
+    scc = [SafetyFilter(params, relays, alpha=a, Ts=Ts) for a in alphas]
+    runs = {"a": (strong, None), "b": (strong, scc[0]), "c": (strong, scc[1]),
+            "d": (weak, scc[1])}
+    return {k: simulate(params, duration=duration, pc_attack=atk, scc=f, relays=relays, **sim)
+            for k, (atk, f) in runs.items()}
+
+
+def fig5_bias_attack(params: LFCParams | None = None, *, alpha: float = 20.0,
+                     bias: float = FIG5_BIAS, Ts: float = 0.25,
+                     duration: float = FIG5_DURATION, **sim) -> dict[str, SimResult]:
+    """Fig. 5: a bias on dw_ref, without SCC (``"no_scc"``) and with it (``"scc"``)."""
+    params = params or LFCParams()
+    relays = sim.pop("relays", None) or RelaySettings()
+    attack = Step(bias, start=ATTACK_START)
+    scc = SafetyFilter(params, relays, alpha=alpha, Ts=Ts)
+    return {name: simulate(params, duration=duration, wref_attack=attack, scc=f,
+                           relays=relays, **sim)
+            for name, f in (("no_scc", None), ("scc", scc))}
+
+
+def fig6_load_step(params: LFCParams | None = None, *, alpha: float = 20.0,
+                   load_step: float = FIG6_LOAD, Ts: float = 0.25,
+                   duration: float = FIG6_DURATION, **sim) -> dict[str, SimResult]:
+    """Fig. 6: a sudden load addition, without SCC (``"no_scc"``) and with it (``"scc"``)."""
+    params = params or LFCParams()
+    relays = sim.pop("relays", None) or RelaySettings()
+    load = Step(load_step, start=ATTACK_START)
+    scc = SafetyFilter(params, relays, alpha=alpha, Ts=Ts)
+    return {name: simulate(params, duration=duration, load=load, scc=f, relays=relays, **sim)
+            for name, f in (("no_scc", None), ("scc", scc))}
+
+
+def rocof_limit_load_step(params: LFCParams, relays: RelaySettings) -> float:
+    """Largest load step (pu) whose initial ROCOF ``dPL / M`` stays within the relay (E12).
+
+    Above it the ROCOF relay trips whatever the governor does: no controller
+    at the generator can prevent it.
+    """
+    return params.M * relays.rocof_limit

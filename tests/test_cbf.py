@@ -1,0 +1,220 @@
+import math
+
+import cvxpy as cp
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from lfc.cbf import SafetyFilter, _CvxpyQP, barrier_gamma, solve_interval_qp
+from lfc.model import LFCParams
+from lfc.relays import RelaySettings
+
+P = LFCParams()
+EXACT = SafetyFilter(P)
+SCALE = np.array([0.5, 0.5, 0.04, 0.04, 0.08])  # typical magnitudes, includes outside states
+
+
+def _random_cases(n, seed):
+    rng = np.random.default_rng(seed)
+    return (rng.normal(size=(n, 5)) * SCALE, rng.normal(scale=0.5, size=n),
+            rng.normal(scale=0.05, size=n))
+
+
+@pytest.mark.parametrize("limits", [(-math.inf, math.inf), (-0.5, 0.8)])
+def test_exact_and_cvxpy_agree_on_random_states(limits):
+    exact = SafetyFilter(P, u_min=limits[0], u_max=limits[1])
+    ref = SafetyFilter(P, u_min=limits[0], u_max=limits[1], solver="cvxpy")
+    x, u_ref, pl = _random_cases(1500, seed=1)
+    kinds = set()
+    for i in range(len(u_ref)):
+        ue, ie = exact.filter(x[i], u_ref[i], pl[i])
+        uc, ic = ref.filter(x[i], u_ref[i], pl[i])
+        assert not ic.solver_error
+        assert abs(ue - uc) <= 1e-6 * max(1.0, abs(ue)), (i, ue, uc, ie)
+        assert (ie.active, ie.infeasible, ie.outside) == (ic.active, ic.infeasible, ic.outside)
+        kinds.add((ie.active, ie.infeasible, ie.outside))
+    # the sample exercises every regime: inactive, active, outside, conflicting
+    assert {(False, False, False), (True, False, False), (True, False, True),
+            (True, True, True)} <= kinds
+
+
+def test_cvxpy_problem_is_dpp_and_uses_clarabel():
+    qp = SafetyFilter(P, solver="cvxpy")._cvx
+    assert qp.hard.is_dpp() and qp.soft.is_dpp()
+    qp.solve(0.0, np.array([1, -1]), np.array([-1.0, 1.0]))
+    assert qp.hard.solver_stats.solver_name == cp.CLARABEL
+
+
+def test_scalar_and_batch_agree():
+    x, u_ref, pl = _random_cases(3000, seed=2)
+    ub, flags = EXACT.filter_batch(x, u_ref, pl)
+    for i in range(len(u_ref)):
+        u, info = EXACT.filter(x[i], u_ref[i], pl[i])
+        assert u == pytest.approx(ub[i], rel=1e-12, abs=1e-12)
+        assert info.active == flags["active"][i] and info.outside == flags["outside"][i]
+        assert info.infeasible == flags["infeasible"][i]
+        assert info.h_freq == pytest.approx(flags["h"][i, 0], rel=1e-12, abs=1e-15)
+
+
+def test_safe_reference_passes_unchanged():
+    for u_ref in (-0.2, 0.0, 0.05, 0.2):
+        u, info = EXACT.filter(np.zeros(5), u_ref)
+        assert u == u_ref and not info.active and not info.alarm
+        assert info.binding == () and info.reason == ""
+
+
+state = st.tuples(*(st.floats(-3 * s, 3 * s) for s in SCALE))
+
+
+@given(state, st.floats(-2, 2), st.floats(-0.2, 0.2))
+def test_constraints_met_when_feasible(x, u_ref, pl):
+    u, info = EXACT.filter(np.array(x), u_ref, pl)
+    assert math.isfinite(u)
+    if not info.infeasible:
+        assert info.margin_freq >= -1e-9 * (1 + abs(u)) * 1e3
+        assert info.margin_rocof >= -1e-9 * (1 + abs(u)) * 1e3
+    if not info.active:
+        assert u == u_ref
+
+
+@given(state, st.floats(-5, 5), st.floats(-0.2, 0.2))
+def test_actuator_limits_always_respected(x, u_ref, pl):
+    f = SafetyFilter(P, u_min=-0.3, u_max=0.4)
+    u, info = f.filter(np.array(x), u_ref, pl)
+    assert -0.3 <= u <= 0.4
+    assert info.active == (u != u_ref) or info.active
+
+
+@given(state, st.floats(-2, 2))
+def test_minimal_modification(x, u_ref):
+    """The applied command is the admissible command closest to u_ref.
+
+    The constraint rows depend on u_ref (the prediction holds it, E5), so the
+    admissible set is checked on the rows of this call, on a grid of commands.
+    """
+    u, info = EXACT.filter(np.array(x), u_ref)
+    if not info.active or info.infeasible:
+        return
+    assert info.binding, info
+    _, flags = EXACT.filter_batch(np.array([x]), np.array([u_ref]))
+    kind, bound = flags["kind"][0], flags["bound"][0]
+    grid = u_ref + np.linspace(-1, 1, 2001) * 2 * abs(u - u_ref)
+    ok = np.all(np.where(kind == 1, grid[:, None] >= bound,
+                         np.where(kind == -1, grid[:, None] <= bound, True)), axis=1)
+    assert ok.any()
+    assert np.min(np.abs(grid[ok] - u_ref)) >= abs(u - u_ref) * (1 - 1e-9) - 1e-12
+
+
+def test_steady_over_frequency_is_pushed_back():
+    """E9: from a steady state at dw = 0.05 pu (> F), the command lowers frequency."""
+    dw = 0.05
+    pm = P.D * dw
+    x = np.array([pm, pm, dw, dw, 0.0])
+    u_hold = pm + dw / P.droop  # the command that holds this state
+    u, info = EXACT.filter(x, u_hold)
+    assert info.outside and info.active and u < u_hold
+    assert info.margin_freq >= -1e-12 and info.h_freq < 0
+    # holding it, the frequency moves back toward the set
+    from lfc.model import discretize
+    Ad, Bd = discretize(P, 0.25)
+    assert (Ad @ x + Bd[:, 0] * u)[3] < dw - 0.005
+
+
+def test_push_back_uses_actuator_limit_when_it_cannot_do_enough():
+    dw = 0.05
+    x = np.array([0.05, 0.05, dw, dw, 0.0])
+    f = SafetyFilter(P, u_min=0.5, u_max=2.0)
+    u, info = f.filter(x, 1.05)
+    assert u == 0.5 and info.infeasible and "u_min" in info.binding
+
+
+def test_conflicting_constraints_give_finite_relaxed_compromise():
+    x, u_ref, pl = _random_cases(4000, seed=3)
+    _, flags = EXACT.filter_batch(x, u_ref, pl)
+    idx = np.flatnonzero(flags["infeasible"])
+    assert len(idx) > 0
+    for i in idx[:50]:
+        u, info = EXACT.filter(x[i], u_ref[i], pl[i])
+        assert math.isfinite(u) and info.infeasible and "relaxed" in info.reason
+        lo = [b for k, b in zip(flags["kind"][i], flags["bound"][i]) if k == 1]
+        hi = [b for k, b in zip(flags["kind"][i], flags["bound"][i]) if k == -1]
+        if lo and hi:  # a true conflict: the compromise lies between the bounds
+            assert min(hi) - 1e-9 <= u <= max(lo) + 1e-9
+
+
+def test_relaxed_qp_splits_conflict_evenly():
+    u, feasible = solve_interval_qp(np.array([0.0]), np.array([[1, -1]]),
+                                    np.array([[0.3, 0.1]]), -np.inf, np.inf, 1e4)
+    assert not feasible[0]
+    assert u[0] == pytest.approx(0.2, abs=1e-4)
+
+
+@pytest.mark.parametrize("x, u_ref, expected", [
+    ([np.nan, 0, 0, 0, 0], 0.2, 0.2),
+    ([0, 0, np.inf, 0, 0], -0.1, -0.1),
+    ([0, 0, 0, 0, 0], np.nan, 0.0),
+    ([0, 0, 0, 0, 0], np.inf, 0.0),
+    ([1e200, 0, 0, 0, 0], 0.1, 0.1),
+])
+def test_non_finite_input_gives_finite_flagged_command(x, u_ref, expected):
+    for solver in ("exact", "cvxpy"):
+        u, info = SafetyFilter(P, solver=solver).filter(np.array(x, float), u_ref)
+        assert u == expected and info.invalid_input and info.alarm
+        assert "non-finite" in info.reason
+
+
+def test_non_finite_reference_clipped_to_actuator_limit():
+    u, info = SafetyFilter(P, u_min=-1, u_max=0.05).filter(np.zeros(5), 0.1)
+    assert u == 0.05 and info.active and info.binding == ("u_max",)
+    u, info = SafetyFilter(P, u_min=-1, u_max=1).filter(np.zeros(5), np.inf)
+    assert u == 0.0 and info.invalid_input
+    u, _ = SafetyFilter(P).filter(np.zeros(5), 0.1, p_load=np.nan)
+    assert u == 0.1
+
+
+def test_cvxpy_failure_falls_back_to_exact(monkeypatch):
+    def boom(self, *args):
+        raise cp.error.SolverError("simulated failure")
+    monkeypatch.setattr(_CvxpyQP, "solve", boom)
+    x = np.array([0.0, 0.0, 0.02, 0.02, 0.04])
+    u, info = SafetyFilter(P, solver="cvxpy").filter(x, 0.5)
+    assert info.solver_error and "exact solution used" in info.reason
+    assert u == EXACT.filter(x, 0.5)[0]
+
+
+def test_gamma_is_extended_class_k():
+    h = np.linspace(-0.01, 0.01, 2001)
+    g = barrier_gamma(h, 3.0)
+    assert np.all(np.diff(g) > 0) and barrier_gamma(np.array([0.0]), 3.0)[0] == 0.0
+    # paper's form: dB/dt <= alpha / B  <=>  dh/dt >= -alpha h (1+h) / B(h)
+    hp = 0.002
+    B = -math.log(hp / (1 + hp))
+    assert barrier_gamma(np.array([hp]), 3.0)[0] == pytest.approx(3.0 * hp * (1 + hp) / B)
+
+
+def test_smaller_alpha_is_stricter():
+    x = np.array([0.0, 0.1, 0.01, 0.01, 0.03])
+    u3, _ = SafetyFilter(P, alpha=3).filter(x, 0.6)
+    u20, _ = SafetyFilter(P, alpha=20).filter(x, 0.6)
+    assert u3 <= u20 < 0.6
+
+
+@pytest.mark.parametrize("kwargs, name", [
+    ({"alpha": 0}, "alpha"), ({"alpha": -3}, "alpha"), ({"Ts": 0}, "Ts"),
+    ({"Ts": float("nan")}, "Ts"), ({"solver": "osqp"}, "solver"),
+    ({"u_min": 1, "u_max": 1}, "u_min"), ({"u_min": float("nan")}, "u_min"),
+    ({"slack_weight": 0}, "slack_weight")])
+def test_bad_parameters(kwargs, name):
+    with pytest.raises(ValueError, match=name):
+        SafetyFilter(P, **kwargs)
+
+
+def test_bad_state_shape():
+    with pytest.raises(ValueError, match="5 entries"):
+        EXACT.filter(np.zeros(4), 0.0)
+
+
+def test_safe_set_comes_from_relay_settings():
+    f = SafetyFilter(P, RelaySettings(of2=1.02, uf2=0.95, rocof_limit=0.03))
+    np.testing.assert_allclose(f.limits, [0.02, 0.03])
