@@ -331,9 +331,17 @@ class SafetyFilter:
         hi = min([b for k, b in zip(kind, bound) if k == -1] + [self.u_max])
         if lo <= hi:
             return min(max(u_ref, lo), hi), True
-        u, _ = solve_interval_qp(np.array([u_ref]), np.array([kind]), np.array([bound]),
-                                 self.u_min, self.u_max, self.slack_weight)
-        return float(u[0]), False
+        rows = [(k, b) for k, b in zip(kind, bound) if k]
+        rho = self.slack_weight
+
+        def objective(u: float) -> float:
+            return 0.5 * (u - u_ref) ** 2 + 0.5 * rho * sum(
+                max(k * (b - u), 0.0) ** 2 for k, b in rows)
+
+        candidates = [(u_ref + rho * sum(b for _, b in sub)) / (1 + rho * len(sub))
+                      for sub in ([], rows[:1], rows[1:], rows)]  # violated-set guesses
+        u = min(candidates, key=objective)
+        return min(max(u, self.u_min), self.u_max), False
 
     def _invalid(self, u_ref: float) -> tuple[float, FilterInfo]:
         u = min(max(u_ref if math.isfinite(u_ref) else 0.0, self.u_min), self.u_max)
