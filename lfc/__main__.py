@@ -1,0 +1,54 @@
+"""Command line: ``python -m lfc reproduce`` and ``python -m lfc sweep``."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from lfc import runner
+
+
+def _parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="python -m lfc", description=__doc__)
+    sub = ap.add_subparsers(dest="command", required=True)
+    rep = sub.add_parser("reproduce", help="regenerate the paper's figures (notebooks)")
+    rep.add_argument("--only", nargs="+", choices=list(runner.FIGURES), metavar="NAME",
+                     help=f"a subset of {list(runner.FIGURES)}")
+    rep.add_argument("--plant", default="linear", choices=runner.PLANT_CHOICES)
+    rep.add_argument("--jobs", type=int, default=2, help="notebooks run in parallel")
+    rep.add_argument("--figures-dir", type=Path, default=runner.ROOT / "figures")
+    rep.add_argument("--build-dir", type=Path, default=runner.ROOT / "build")
+    sw = sub.add_parser("sweep", help="run a notebook over a parameter grid")
+    sw.add_argument("notebook", type=Path)
+    sw.add_argument("-p", "--param", nargs="+", action="append", default=[],
+                    metavar=("NAME", "VALUE"), help="a parameter and its values")
+    sw.add_argument("--jobs", type=int, default=2)
+    sw.add_argument("--out", type=Path, default=None,
+                    help="default build/sweeps/<notebook name>")
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        if args.command == "reproduce":
+            outcomes = runner.reproduce(args.only, args.plant, args.jobs, args.figures_dir,
+                                        args.build_dir)
+            print(runner.summary_table(outcomes).to_string(index=False))
+            return 0 if all(o.ok for o in outcomes) else 1
+        grid = {}
+        for name, *values in args.param:
+            if not values:
+                raise ValueError(f"parameter {name!r} has no values")
+            grid[name] = [runner.parse_value(v) for v in values]
+        table = runner.sweep(args.notebook, grid, args.out, args.jobs)
+        print(table.to_string(index=False))
+        return 0
+    except (ValueError, RuntimeError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

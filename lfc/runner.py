@@ -1,0 +1,222 @@
+"""Execute the notebooks with papermill: reproduce every figure, or sweep parameters.
+
+Runs go to an executor (default: a thread pool; each papermill run drives its
+own kernel process, so threads give real parallelism).  Any
+``concurrent.futures.Executor`` can be passed.
+"""
+
+from __future__ import annotations
+
+import ast
+import itertools
+import json
+import re
+import time
+from concurrent.futures import Executor, ThreadPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+import papermill as pm
+from tqdm.auto import tqdm
+
+ROOT = Path(__file__).resolve().parent.parent
+NOTEBOOKS_DIR = ROOT / "notebooks"
+FIGURES = {  # name -> (notebook, what it reproduces)
+    "tutorial": ("01_tutorial_cbf_lfc.ipynb", "tutorial: the CBF-QP step by step"),
+    "fig4": ("02_fig4_rocof_attack.ipynb", "Fig. 4: ROCOF attack, SCC alpha = 3 vs 20"),
+    "fig5": ("03_fig5_bias_attack.ipynb", "Fig. 5: bias attack on the frequency reference"),
+    "fig6": ("04_fig6_load_step.ipynb", "Fig. 6: large load step, SCC does not interfere"),
+    "kalman": ("07_kalman.ipynb", "beyond: SCC on Kalman estimates vs true states"),
+}
+POSITIVE = {"duration", "Ts", "control_period", "alpha", "alphas", "dt"}
+PLANT_CHOICES = ("linear",)
+
+
+@dataclass
+class RunOutcome:
+    """What one notebook execution produced."""
+
+    name: str
+    ok: bool
+    seconds: float
+    claims: dict[str, bool]
+    error: str = ""
+
+
+def execute(notebook: Path, output: Path, parameters: dict) -> None:
+    """Run ``notebook`` with papermill into ``output`` (the notebook's folder as cwd)."""
+    output.parent.mkdir(parents=True, exist_ok=True)
+    pm.execute_notebook(str(notebook), str(output), parameters=parameters,
+                        cwd=str(notebook.parent), kernel_name="python3",
+                        progress_bar=False, log_output=False)
+
+
+def _run_one(name: str, notebook: Path, results: Path, parameters: dict) -> RunOutcome:
+    t0 = time.perf_counter()
+    error = ""
+    try:
+        execute(notebook, results / notebook.name, parameters)
+        ok = True
+    except pm.PapermillExecutionError as err:
+        ok, error = False, f"{err.ename}: {err.evalue}"
+    claims_file = results / "claims.json"
+    claims = json.loads(claims_file.read_text()) if claims_file.exists() else {}
+    return RunOutcome(name, ok and all(claims.values()), time.perf_counter() - t0, claims, error)
+
+
+def _progress(futures: dict, desc: str) -> list:
+    done = []
+    with tqdm(total=len(futures), desc=desc, unit="run") as bar:
+        for fut in as_completed(futures):
+            done.append(fut.result())
+            bar.update(1)
+    return done
+
+
+def reproduce(only: list[str] | None = None, plant: str = "linear", jobs: int = 2,
+              figures_dir: Path = ROOT / "figures", build_dir: Path = ROOT / "build",
+              executor: Executor | None = None) -> list[RunOutcome]:
+    """Execute every figure notebook (or ``only`` those) with its claims checked.
+
+    Figures go to ``figures_dir``; executed notebooks, ``metrics.json`` and
+    ``claims.json`` to ``build_dir/reproduce/<name>/``.
+    """
+    names = only or list(FIGURES)
+    unknown = [n for n in names if n not in FIGURES]
+    if unknown:
+        raise ValueError(f"unknown figure(s) {unknown}; choose from {list(FIGURES)}")
+    if plant not in PLANT_CHOICES:
+        raise ValueError(f"plant must be one of {PLANT_CHOICES}, got {plant!r}")
+    pool = executor or ThreadPoolExecutor(max_workers=max(1, jobs))
+    futures = {}
+    for name in names:
+        results = Path(build_dir).resolve() / "reproduce" / name
+        params = {"figures_dir": str(Path(figures_dir).resolve()), "results_dir": str(results),
+                  "plant": plant, "check_claims": True}
+        futures[pool.submit(_run_one, name, NOTEBOOKS_DIR / FIGURES[name][0], results,
+                            params)] = name
+    outcomes = _progress(futures, "reproduce")
+    if executor is None:
+        pool.shutdown()
+    order = {n: i for i, n in enumerate(names)}
+    return sorted(outcomes, key=lambda o: order[o.name])
+
+
+def summary_table(outcomes: list[RunOutcome]) -> pd.DataFrame:
+    """One row per claim: figure, claim, reproduced (yes/no), wall time (s)."""
+    rows = []
+    for o in outcomes:
+        claims = o.claims or {o.error or "notebook did not run": False}
+        for claim, ok in claims.items():
+            rows.append({"figure": o.name, "claim": claim, "reproduced": "yes" if ok else "no",
+                         "wall time (s)": round(o.seconds, 1)})
+    return pd.DataFrame(rows)
+
+
+# -- sweeps -------------------------------------------------------------------------
+def parse_value(text: str) -> object:
+    """A command-line value: a Python literal if it parses as one, else the string."""
+    try:
+        return ast.literal_eval(text)
+    except (ValueError, SyntaxError):
+        return text
+
+
+def validate_parameters(notebook: Path, parameters: dict[str, list]) -> None:
+    """Fail before any run: unknown names, wrong types, non-positive times or gains."""
+    known = pm.inspect_notebook(str(notebook))
+    for name, values in parameters.items():
+        if name not in known:
+            raise ValueError(f"unknown parameter {name!r} for {notebook.name}; "
+                             f"known: {sorted(known)}")
+        default = parse_value(known[name]["default"])
+        for value in values:
+            _check_type(name, value, default)
+            if name in POSITIVE:
+                for v in value if isinstance(value, list) else [value]:
+                    if not (isinstance(v, (int, float)) and v > 0):
+                        raise ValueError(f"parameter {name!r} must be > 0, got {value!r}")
+            if name == "plant" and value not in PLANT_CHOICES:
+                raise ValueError(f"parameter 'plant' must be one of {PLANT_CHOICES}, "
+                                 f"got {value!r}")
+
+
+def _check_type(name: str, value: object, default: object) -> None:
+    if default is None:
+        return
+    if isinstance(default, bool) or isinstance(value, bool):
+        ok = isinstance(value, bool) and isinstance(default, bool)
+    elif isinstance(default, (int, float)):
+        ok = isinstance(value, (int, float))
+    else:
+        ok = isinstance(value, type(default))
+    if not ok:
+        raise ValueError(f"parameter {name!r} must be of type {type(default).__name__}, "
+                         f"got {value!r}")
+
+
+def run_id(point: dict) -> str:
+    """Folder name of one grid point, e.g. ``alpha=3__Ts=0.25``."""
+    return "__".join(re.sub(r"[^\w.=+-]", "_", f"{k}={v}") for k, v in point.items())
+
+
+def sweep(notebook: str | Path, grid: dict[str, list], out: Path | None = None,
+          jobs: int = 2, executor: Executor | None = None) -> pd.DataFrame:
+    """Run ``notebook`` over the Cartesian ``grid``; resume-safe; return the table.
+
+    Each run writes into ``out/<run_id>/`` (executed notebook, figures,
+    ``metrics.json``) and a ``done.json`` marker last, so an interrupted sweep
+    rerun skips finished runs and repeats nothing.  Claims are not asserted
+    (``check_claims=False``) unless the grid sets it.  The table, one row per
+    run and panel with the parameters as columns, is written to ``out/sweep.csv``.
+    """
+    notebook = Path(notebook).resolve()
+    if not notebook.exists():
+        raise ValueError(f"notebook not found: {notebook}")
+    validate_parameters(notebook, grid)
+    out = Path(out or ROOT / "build" / "sweeps" / notebook.stem).resolve()
+    points = [dict(zip(grid, combo)) for combo in itertools.product(*grid.values())]
+    pool = executor or ThreadPoolExecutor(max_workers=max(1, jobs))
+    futures = {}
+    for point in points:
+        folder = out / run_id(point)
+        if (folder / "done.json").exists():
+            continue
+        params = {"check_claims": False, **point, "figures_dir": str(folder),
+                  "results_dir": str(folder)}
+        futures[pool.submit(_sweep_one, notebook, folder, params, point)] = point
+    failures = [r for r in _progress(futures, f"sweep {notebook.stem}") if r]
+    if executor is None:
+        pool.shutdown()
+    table = collect(out, points)
+    table.to_csv(out / "sweep.csv", index=False)
+    if failures:
+        raise RuntimeError(f"{len(failures)} run(s) failed: " + "; ".join(failures))
+    return table
+
+
+def _sweep_one(notebook: Path, folder: Path, params: dict, point: dict) -> str:
+    try:
+        execute(notebook, folder / notebook.name, params)
+    except pm.PapermillExecutionError as err:
+        return f"{run_id(point)}: {err.ename}: {err.evalue}"
+    (folder / "done.json").write_text(json.dumps(point))
+    return ""
+
+
+def collect(out: Path, points: list[dict]) -> pd.DataFrame:
+    """One row per finished run and panel: parameters, panel name, flat metrics."""
+    rows = []
+    for point in points:
+        folder = out / run_id(point)
+        if not (folder / "done.json").exists():
+            continue
+        for panel, m in json.loads((folder / "metrics.json").read_text()).items():
+            trip = m.get("first_trip") or {}
+            flat = {k: v for k, v in m.items() if k not in ("first_trip", "parameters")}
+            rows.append({**{k: str(v) if isinstance(v, list) else v for k, v in point.items()},
+                         "run": run_id(point), "panel": panel, **flat,
+                         "first_trip_relay": trip.get("relay"),
+                         "first_trip_t": trip.get("t")})
+    return pd.DataFrame(rows)

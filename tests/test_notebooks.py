@@ -1,0 +1,90 @@
+"""Every notebook through papermill with short parameters; reproduce and sweep."""
+
+import json
+
+import pytest
+
+from lfc import runner
+from lfc.__main__ import main
+from lfc.simulate import METRIC_KEYS
+
+SHORT = {"duration": 3.0}
+PANELS = {"tutorial": {"no_scc", "scc"}, "fig4": {"a", "b", "c", "d"},
+          "fig5": {"no_scc", "scc"}, "fig6": {"no_scc", "scc"},
+          "kalman": {"no_scc", "scc_true", "scc_kalman"}}
+FIGURE_FILES = {"tutorial": "tutorial_attack", "fig4": "fig4_rocof_attack",
+                "fig5": "fig5_bias_attack", "fig6": "fig6_load_step", "kalman": "kalman_scc"}
+
+
+@pytest.mark.parametrize("name", list(runner.FIGURES))
+def test_notebook_runs_and_writes_figure_and_metrics(name, tmp_path):
+    nb = runner.NOTEBOOKS_DIR / runner.FIGURES[name][0]
+    runner.execute(nb, tmp_path / nb.name, {**SHORT, "check_claims": False,
+                                            "figures_dir": str(tmp_path / "fig"),
+                                            "results_dir": str(tmp_path / "res")})
+    for ext in ("png", "pdf"):
+        assert (tmp_path / "fig" / f"{FIGURE_FILES[name]}.{ext}").stat().st_size > 1000
+    metrics = json.loads((tmp_path / "res" / "metrics.json").read_text())
+    assert set(metrics) == PANELS[name]
+    for panel in metrics.values():
+        assert set(panel) == set(METRIC_KEYS) | {"parameters"}
+        assert panel["parameters"]["duration"] == 3.0
+    assert json.loads((tmp_path / "res" / "claims.json").read_text())
+
+
+def test_a_broken_claim_fails_the_notebook(tmp_path):
+    nb = runner.NOTEBOOKS_DIR / runner.FIGURES["fig4"][0]
+    with pytest.raises(runner.pm.PapermillExecutionError, match="claim"):
+        runner.execute(nb, tmp_path / nb.name, {"amplitude": 0.1, "duration": 3.0,
+                                                "figures_dir": str(tmp_path),
+                                                "results_dir": str(tmp_path)})
+
+
+def test_reproduce_only_fig4(tmp_path, capsys):
+    code = main(["reproduce", "--only", "fig4", "--figures-dir", str(tmp_path / "fig"),
+                 "--build-dir", str(tmp_path / "build")])
+    out = capsys.readouterr().out
+    assert code == 0 and "(a) attack trips ROCOF without SCC" in out
+    rows = [line for line in out.splitlines() if line.strip().startswith("fig4")]
+    assert len(rows) == 5 and all(line.split()[-2] == "yes" for line in rows)
+    assert (tmp_path / "fig" / "fig4_rocof_attack.png").exists()
+    assert (tmp_path / "build" / "reproduce" / "fig4" / "02_fig4_rocof_attack.ipynb").exists()
+
+
+def test_sweep_table_and_resume(tmp_path):
+    nb = runner.NOTEBOOKS_DIR / runner.FIGURES["fig4"][0]
+    out = tmp_path / "sweep"
+    grid = {"alpha": [3.0, 20.0], "duration": [2.0]}
+    table = runner.sweep(nb, grid, out)
+    assert len(table) == 8 and set(table.panel) == {"a", "b", "c", "d"}
+    assert set(table.alpha) == {3.0, 20.0}
+    assert {"first_trip_relay", "first_trip_t", "max_abs_rocof_meas"} <= set(table.columns)
+    assert (out / "sweep.csv").exists()
+    done = {p: p.stat().st_mtime_ns for p in out.glob("*/done.json")}
+    # interrupt: one run lost its marker; the rerun repeats only that one
+    lost = out / runner.run_id({"alpha": 3.0, "duration": 2.0}) / "done.json"
+    lost.unlink()
+    again = runner.sweep(nb, grid, out)
+    assert again.equals(table)
+    for path, mtime in done.items():
+        if path != lost:
+            assert path.stat().st_mtime_ns == mtime
+    assert lost.exists()
+
+
+@pytest.mark.parametrize("args, message", [
+    (["-p", "alpah", "3"], "unknown parameter 'alpah'"),
+    (["-p", "duration", "-1"], "'duration' must be > 0"),
+    (["-p", "amplitude", "big"], "'amplitude' must be of type float"),
+    (["-p", "plant", "simscape"], "'plant' must be one of"),
+])
+def test_sweep_rejects_bad_parameters_before_running(args, message, tmp_path, capsys):
+    nb = str(runner.NOTEBOOKS_DIR / runner.FIGURES["fig4"][0])
+    assert main(["sweep", nb, *args, "--out", str(tmp_path / "s")]) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "s").exists()
+
+
+def test_reproduce_rejects_unknown_figure():
+    with pytest.raises(ValueError, match="unknown figure"):
+        runner.reproduce(["fig9"])
