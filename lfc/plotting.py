@@ -33,6 +33,15 @@ def _command(ax, runs: dict[str, SimResult], labels: dict[str, str]) -> None:
     ax.set_ylabel("Governor command $\\Delta P_c$ (pu)")
 
 
+def _finish(top, bottom, title: str) -> None:
+    """Time axis label, grids, legends outside the axes, title."""
+    bottom.set_xlabel("Time (s)")
+    for ax in (top, bottom):
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1))
+    top.set_title(title)
+
+
 def rocof_figure(runs: dict[str, SimResult], labels: dict[str, str], relays: RelaySettings,
                  title: str) -> Figure:
     """Command (top) and measured ROCOF (bottom, pu/s) with the ROCOF setting dashed."""
@@ -44,11 +53,7 @@ def rocof_figure(runs: dict[str, SimResult], labels: dict[str, str], relays: Rel
     _limits(bot, [relays.rocof_limit, -relays.rocof_limit],
             f"ROCOF setting $\\pm${relays.rocof_limit:g} pu/s")
     bot.set_ylabel("Measured ROCOF $\\hat{\\dot\\omega}$ (pu/s)")
-    bot.set_xlabel("Time (s)")
-    for ax in (top, bot):
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1))
-    top.set_title(title)
+    _finish(top, bot, title)
     return fig
 
 
@@ -74,11 +79,7 @@ def frequency_figure(runs: dict[str, SimResult], labels: dict[str, str],
                                        ("UF2", relays.uf2, min(d.min() for d in dw) < 0)) if side]
     _limits(ax2, [v for _, v in shown], " / ".join(f"{n} {v:g} pu" for n, v in shown))
     ax2.set_ylabel(f"Measured frequency $\\hat\\omega$ (pu of {f_nominal:g} Hz)")
-    ax2.set_xlabel("Time (s)")
-    for ax in (ax1, ax2):
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1))
-    ax1.set_title(title)
+    _finish(ax1, ax2, title)
     return fig
 
 

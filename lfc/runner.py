@@ -20,6 +20,8 @@ import pandas as pd
 import papermill as pm
 from tqdm.auto import tqdm
 
+from lfc.notebook import PLANTS
+
 ROOT = Path(__file__).resolve().parent.parent
 NOTEBOOKS_DIR = ROOT / "notebooks"
 FIGURES = {  # name -> (notebook, what it reproduces)
@@ -30,7 +32,7 @@ FIGURES = {  # name -> (notebook, what it reproduces)
     "kalman": ("07_kalman.ipynb", "beyond: SCC on Kalman estimates vs true states"),
 }
 POSITIVE = {"duration", "Ts", "control_period", "alpha", "alphas", "dt"}
-PLANT_CHOICES = ("linear",)
+PLANT_CHOICES = PLANTS
 
 
 @dataclass

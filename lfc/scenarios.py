@@ -52,29 +52,33 @@ def fig4_rocof_attack(params: LFCParams | None = None, *, alphas: tuple[float, f
             for k, (atk, f) in runs.items()}
 
 
+def with_and_without_scc(params: LFCParams | None, *, alpha: float, Ts: float,
+                         duration: float, **sim) -> dict[str, SimResult]:
+    """Run one scenario without SCC (``"no_scc"``) and with it (``"scc"``).
+
+    ``sim`` is passed on to :func:`lfc.simulate` (signals, ``relays``, timing, ...).
+    """
+    params = params or LFCParams()
+    relays = sim.pop("relays", None) or RelaySettings()
+    scc = SafetyFilter(params, relays, alpha=alpha, Ts=Ts)
+    return {name: simulate(params, duration=duration, scc=f, relays=relays, **sim)
+            for name, f in (("no_scc", None), ("scc", scc))}
+
+
 def fig5_bias_attack(params: LFCParams | None = None, *, alpha: float = 20.0,
                      bias: float = FIG5_BIAS, Ts: float = 0.25,
                      duration: float = FIG5_DURATION, **sim) -> dict[str, SimResult]:
     """Fig. 5: a bias on dw_ref, without SCC (``"no_scc"``) and with it (``"scc"``)."""
-    params = params or LFCParams()
-    relays = sim.pop("relays", None) or RelaySettings()
-    attack = Step(bias, start=ATTACK_START)
-    scc = SafetyFilter(params, relays, alpha=alpha, Ts=Ts)
-    return {name: simulate(params, duration=duration, wref_attack=attack, scc=f,
-                           relays=relays, **sim)
-            for name, f in (("no_scc", None), ("scc", scc))}
+    return with_and_without_scc(params, alpha=alpha, Ts=Ts, duration=duration,
+                                wref_attack=Step(bias, start=ATTACK_START), **sim)
 
 
 def fig6_load_step(params: LFCParams | None = None, *, alpha: float = 20.0,
                    load_step: float = FIG6_LOAD, Ts: float = 0.25,
                    duration: float = FIG6_DURATION, **sim) -> dict[str, SimResult]:
     """Fig. 6: a sudden load addition, without SCC (``"no_scc"``) and with it (``"scc"``)."""
-    params = params or LFCParams()
-    relays = sim.pop("relays", None) or RelaySettings()
-    load = Step(load_step, start=ATTACK_START)
-    scc = SafetyFilter(params, relays, alpha=alpha, Ts=Ts)
-    return {name: simulate(params, duration=duration, load=load, scc=f, relays=relays, **sim)
-            for name, f in (("no_scc", None), ("scc", scc))}
+    return with_and_without_scc(params, alpha=alpha, Ts=Ts, duration=duration,
+                                load=Step(load_step, start=ATTACK_START), **sim)
 
 
 def rocof_limit_load_step(params: LFCParams, relays: RelaySettings) -> float:

@@ -33,7 +33,29 @@ class Signal:
 
 
 @dataclass(frozen=True)
-class Sinusoid(Signal):
+class _Periodic(Signal):
+    """A periodic wave of peak ``amplitude`` (pu) and ``freq_hz`` (Hz) on ``[start, stop)``."""
+
+    amplitude: float
+    freq_hz: float
+    start: float = 0.0
+    stop: float = math.inf
+
+    def __post_init__(self) -> None:
+        check_finite("amplitude", self.amplitude)
+        check_positive("freq_hz", self.freq_hz)
+        _check_window(self.start, self.stop)
+
+    def _eval(self, t: np.ndarray) -> np.ndarray:
+        on = (t >= self.start) & (t < self.stop)
+        return np.where(on, self._wave(t - self.start), 0.0)
+
+    def _wave(self, tau: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+@dataclass(frozen=True)
+class Sinusoid(_Periodic):
     """``amplitude * sin(2 pi freq_hz (t - start) + phase)`` on ``[start, stop)``.
 
     Parameters
@@ -48,27 +70,18 @@ class Sinusoid(Signal):
         Phase at ``start`` (rad).
     """
 
-    amplitude: float
-    freq_hz: float
-    start: float = 0.0
-    stop: float = math.inf
     phase: float = 0.0
 
     def __post_init__(self) -> None:
-        check_finite("amplitude", self.amplitude)
-        check_positive("freq_hz", self.freq_hz)
-        _check_window(self.start, self.stop)
+        super().__post_init__()
         check_finite("phase", self.phase)
 
-    def _eval(self, t: np.ndarray) -> np.ndarray:
-        on = (t >= self.start) & (t < self.stop)
-        wave = self.amplitude * np.sin(2 * np.pi * self.freq_hz * (t - self.start)
-                                       + self.phase)
-        return np.where(on, wave, 0.0)
+    def _wave(self, tau: np.ndarray) -> np.ndarray:
+        return self.amplitude * np.sin(2 * np.pi * self.freq_hz * tau + self.phase)
 
 
 @dataclass(frozen=True)
-class Square(Signal):
+class Square(_Periodic):
     """Square wave of peak ``amplitude`` (pu), +amplitude first, on ``[start, stop)``.
 
     Parameters
@@ -81,20 +94,9 @@ class Square(Signal):
         Active window (s); zero outside.
     """
 
-    amplitude: float
-    freq_hz: float
-    start: float = 0.0
-    stop: float = math.inf
-
-    def __post_init__(self) -> None:
-        check_finite("amplitude", self.amplitude)
-        check_positive("freq_hz", self.freq_hz)
-        _check_window(self.start, self.stop)
-
-    def _eval(self, t: np.ndarray) -> np.ndarray:
-        on = (t >= self.start) & (t < self.stop)
-        cycle = np.mod((t - self.start) * self.freq_hz, 1.0)
-        return np.where(on, np.where(cycle < 0.5, self.amplitude, -self.amplitude), 0.0)
+    def _wave(self, tau: np.ndarray) -> np.ndarray:
+        cycle = np.mod(tau * self.freq_hz, 1.0)
+        return np.where(cycle < 0.5, self.amplitude, -self.amplitude)
 
 
 @dataclass(frozen=True)
