@@ -74,6 +74,10 @@ class KalmanFilter:
         self.gain = P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
         self.reset()
 
+    def __repr__(self) -> str:
+        return (f"KalmanFilter(period={self.period}, meas_std={self.meas_std}, "
+                f"estimate_load={self.estimate_load})")
+
     def reset(self) -> None:
         """Start from the equilibrium (all deviations zero)."""
         self._x_prior = np.zeros(self.n)

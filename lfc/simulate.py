@@ -280,8 +280,7 @@ class _Loop:
         stopped = end < self.n_steps
         n_ctrl = min(end // self.ratio + 1, self.n_ctrl)
         ctrl = self.ctrl[:n_ctrl]
-        held = np.repeat(np.arange(self.n_ctrl), self.ratio)[: self.n_steps + 1]
-        held = np.append(held, self.n_ctrl - 1)[: end + 1]
+        held = np.minimum(np.arange(end + 1) // self.ratio, self.n_ctrl - 1)  # control sample
         trace = pd.DataFrame({"t": self.t[: end + 1]})
         trace["pc_ref"], trace["pc"] = self.ctrl[held, 0], self.ctrl[held, 1]
         for i, name in enumerate(STATES):
