@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from lfc import runner
+from lfc.notebook import PLANTS
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -15,7 +16,7 @@ def _parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("reproduce", help="regenerate the paper's figures (notebooks)")
     rep.add_argument("--only", nargs="+", choices=list(runner.FIGURES), metavar="NAME",
                      help=f"a subset of {list(runner.FIGURES)}")
-    rep.add_argument("--plant", default="linear", choices=runner.PLANT_CHOICES)
+    rep.add_argument("--plant", default="linear", choices=PLANTS)
     rep.add_argument("--jobs", type=int, default=2, help="notebooks run in parallel")
     rep.add_argument("--figures-dir", type=Path, default=runner.ROOT / "figures")
     rep.add_argument("--build-dir", type=Path, default=runner.ROOT / "build")

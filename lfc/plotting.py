@@ -27,7 +27,7 @@ def _command(ax, runs: dict[str, SimResult], labels: dict[str, str]) -> None:
     for key, label in labels.items():
         tr = runs[key].trace
         ax.plot(tr.t, tr.pc, color=COLORS[key], lw=1.2, label=f"{label}: $\\Delta P_c^*$")
-        if runs[key].metrics()["scc_active_fraction"] > 0:
+        if runs[key].controls.scc_active.any():
             ax.plot(tr.t, tr.pc_ref, color=COLORS[key], lw=0.8, ls=":",
                     label=f"{label}: incoming $\\Delta P_c$")
     ax.set_ylabel("Governor command $\\Delta P_c$ (pu)")
