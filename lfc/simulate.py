@@ -10,26 +10,22 @@ measured signals at every plant step.  Trips are recorded and the run goes on
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import pandas as pd
 
 from lfc._validate import check_nonnegative, check_positive
 from lfc.cbf import SafetyFilter
+from lfc.controller import (ALARM_COLUMNS, GeneratorSide, SignalLike, make_estimator,
+                            sample_signal)
 from lfc.estimation import KalmanFilter
 from lfc.model import STATES, LFCParams, block_propagator, discretize
 from lfc.relays import RelayBank, RelaySettings
 
-SignalLike = Callable[[np.ndarray], np.ndarray]
 METRIC_KEYS = ("tripped", "first_trip", "max_abs_dw_meas", "max_abs_rocof_meas",
                "scc_active_fraction", "max_abs_modification", "alarms")
-ALARM_COLUMNS = ("t", "u_ref", "u", "binding", "h_freq", "h_rocof", "margin_freq",
-                 "margin_rocof", "infeasible", "outside", "invalid_input", "solver_error",
-                 "reason")
 
 
 @dataclass
@@ -101,33 +97,6 @@ def _check_timing(duration: float, dt: float, control_period: float) -> int:
     return int(round(ratio))
 
 
-def _make_estimator(estimator: object, params: LFCParams, control_period: float,
-                    noise_std: tuple[float, float]) -> KalmanFilter | None:
-    if estimator is None:
-        return None
-    if estimator == "kalman":
-        meas = tuple(s if s > 0 else d for s, d in zip(noise_std, (1e-4, 1e-3)))
-        return KalmanFilter(params, control_period, meas_std=meas)
-    if isinstance(estimator, KalmanFilter):
-        if not math.isclose(estimator.period, control_period):
-            raise ValueError(f"estimator.period ({estimator.period}) must equal "
-                             f"control_period ({control_period})")
-        estimator.reset()
-        return estimator
-    raise ValueError(f"estimator must be None, 'kalman' or a KalmanFilter, got {estimator!r}")
-
-
-def _sample(signal: SignalLike | None, t: np.ndarray, name: str) -> np.ndarray:
-    if signal is None:
-        return np.zeros_like(t)
-    if not callable(signal):
-        raise ValueError(f"{name} must be a callable of time (see lfc.signals), got {signal!r}")
-    values = np.broadcast_to(np.asarray(signal(t), float), t.shape).copy()
-    if not np.all(np.isfinite(values)):
-        raise ValueError(f"{name} returned non-finite values")
-    return values
-
-
 def simulate(params: LFCParams, *, duration: float, pc_attack: SignalLike | None = None,
              wref_attack: SignalLike | None = None, load: SignalLike | None = None,
              scc: SafetyFilter | None = None, relays: RelaySettings | None = None,
@@ -182,57 +151,41 @@ def simulate(params: LFCParams, *, duration: float, pc_attack: SignalLike | None
     for i, s in enumerate(noise_std):
         check_nonnegative(f"noise_std[{i}]", s)
     relays = relays if relays is not None else RelaySettings()
-    kf = _make_estimator(estimator, params, control_period, noise_std)
-    loop = _Loop(params, scc, kf, ratio, dt, int(round(duration / dt)),
-                 np.random.default_rng(seed), np.asarray(noise_std, float), load_feedforward)
-    loop.run(pc_attack, wref_attack, load, RelayBank(relays), stop_on_trip)
+    kf = make_estimator(estimator, params, control_period, noise_std)
+    loop = _Loop(params, ratio, dt, int(round(duration / dt)))
+    noise = np.random.default_rng(seed).standard_normal((loop.n_ctrl, 2)) * noise_std
+    gen = GeneratorSide(params, scc, kf, loop.tc, sample_signal(pc_attack, loop.tc, "pc_attack"),
+                        sample_signal(wref_attack, loop.tc, "wref_attack"), noise,
+                        load_feedforward)
+    loop.run(gen, load, RelayBank(relays), stop_on_trip)
     settings = {"params": vars(params), "relays": vars(relays), "duration": duration,
                 "dt": dt, "control_period": control_period, "seed": seed,
                 "noise_std": list(noise_std), "scc": repr(scc), "estimator": repr(estimator),
                 "pc_attack": repr(pc_attack), "wref_attack": repr(wref_attack),
                 "load": repr(load), "stop_on_trip": stop_on_trip,
                 "load_feedforward": load_feedforward}
-    return loop.result(settings)
+    return loop.result(gen, settings)
 
 
 class _Loop:
-    """State of one closed-loop run (internal to :func:`simulate`)."""
+    """The linear plant of one closed-loop run (internal to :func:`simulate`)."""
 
-    def __init__(self, params: LFCParams, scc: SafetyFilter | None,
-                 kf: KalmanFilter | None, ratio: int, dt: float, n_steps: int,
-                 rng: np.random.Generator, noise_std: np.ndarray,
-                 load_feedforward: bool) -> None:
-        self.params, self.scc, self.kf, self.ratio, self.dt = params, scc, kf, ratio, dt
-        self.n_steps, self.load_feedforward = n_steps, load_feedforward
+    def __init__(self, params: LFCParams, ratio: int, dt: float, n_steps: int) -> None:
+        self.ratio, self.dt, self.n_steps = ratio, dt, n_steps
         self.n_ctrl = -(-n_steps // ratio)
         self.t = np.arange(n_steps + 1) * dt
         self.tc = np.arange(self.n_ctrl) * ratio * dt
         Ad, Bd = discretize(params, dt)
         self.Phi, self.Gu, self.Gl = block_propagator(Ad, Bd, ratio)
-        self.noise = rng.standard_normal((self.n_ctrl, 2)) * noise_std
         self.X = np.zeros((n_steps + 1, 5))
-        self.ctrl = np.full((self.n_ctrl, 6), np.nan)  # pc_ref, pc, active, dw^, rocof^, pL^
-        self.alarms: list[dict] = []
         self.trips: list[tuple[str, float]] = []
         self.end = n_steps  # last plant sample index kept
 
-    def run(self, pc_attack, wref_attack, load, bank: RelayBank, stop_on_trip: bool) -> None:
-        pc_att = _sample(pc_attack, self.tc, "pc_attack")
-        wref = _sample(wref_attack, self.tc, "wref_attack")
-        self.p_load = _sample(load, self.t, "load")
-        self.wref = wref
-        pc_int = 0.0
+    def run(self, gen: GeneratorSide, load, bank: RelayBank, stop_on_trip: bool) -> None:
+        self.p_load = sample_signal(load, self.t, "load")
         for j in range(self.n_ctrl):
             k0 = j * self.ratio
-            x = self.X[k0]
-            y = x[3:5] + self.noise[j]
-            x_hat, pl_hat = self._estimate(x, y, k0)
-            u_ref = pc_int + pc_att[j]
-            u, active = self._filter(self.tc[j], x_hat, u_ref, pl_hat)
-            pc_int += self.params.k_i * self.ratio * self.dt * (wref[j] - y[0])
-            if self.kf is not None:
-                self.kf.predict(u)
-            self.ctrl[j] = (u_ref, u, active, x_hat[3], x_hat[4], pl_hat)
+            u = gen.step(j, self.X[k0], self.p_load[k0])
             k1 = min(k0 + self.ratio, self.n_steps)
             self._advance(k0, k1, u)
             if stop_on_trip and self._check_relays(bank, k0 + (j > 0), k1 + 1):
@@ -240,26 +193,6 @@ class _Loop:
                 return
         if not stop_on_trip:
             self._check_relays(bank, 0, self.n_steps + 1)
-
-    def _estimate(self, x: np.ndarray, y: np.ndarray, k: int) -> tuple[np.ndarray, float]:
-        if self.kf is not None:
-            return self.kf.correct(y)
-        return x, (float(self.p_load[k]) if self.load_feedforward else 0.0)
-
-    def _filter(self, t: float, x_hat: np.ndarray, u_ref: float, pl_hat: float
-                ) -> tuple[float, bool]:
-        if self.scc is None:
-            return u_ref, False
-        u, info = self.scc.filter(x_hat, u_ref, pl_hat)
-        if info.alarm:
-            self.alarms.append({"t": t, "u_ref": u_ref, "u": u, "binding": ";".join(info.binding),
-                                "h_freq": info.h_freq, "h_rocof": info.h_rocof,
-                                "margin_freq": info.margin_freq,
-                                "margin_rocof": info.margin_rocof,
-                                "infeasible": info.infeasible, "outside": info.outside,
-                                "invalid_input": info.invalid_input,
-                                "solver_error": info.solver_error, "reason": info.reason})
-        return u, info.active
 
     def _advance(self, k0: int, k1: int, u: float) -> None:
         m = k1 - k0
@@ -275,23 +208,13 @@ class _Loop:
             self.trips.append((relay, float(self.t[k0 + k])))
         return bool(found)
 
-    def result(self, settings: dict) -> SimResult:
+    def result(self, gen: GeneratorSide, settings: dict) -> SimResult:
         end = self.end
-        stopped = end < self.n_steps
-        n_ctrl = min(end // self.ratio + 1, self.n_ctrl)
-        ctrl = self.ctrl[:n_ctrl]
-        held = np.minimum(np.arange(end + 1) // self.ratio, self.n_ctrl - 1)  # control sample
         trace = pd.DataFrame({"t": self.t[: end + 1]})
-        trace["pc_ref"], trace["pc"] = self.ctrl[held, 0], self.ctrl[held, 1]
         for i, name in enumerate(STATES):
             trace[name] = self.X[: end + 1, i]
-        trace["p_load"], trace["wref"] = self.p_load[: end + 1], self.wref[held]
-        trace["scc_active"] = self.ctrl[held, 2].astype(bool)
-        controls = pd.DataFrame({"t": self.tc[:n_ctrl], "pc_ref": ctrl[:, 0], "pc": ctrl[:, 1],
-                                 "scc_active": ctrl[:, 2].astype(bool), "dw_hat": ctrl[:, 3],
-                                 "rocof_hat": ctrl[:, 4], "p_load_hat": ctrl[:, 5]})
+        trace["p_load"] = self.p_load[: end + 1]
+        gen.add_to_trace(trace)
+        t_end = float(self.t[end])
         trips = pd.DataFrame(self.trips, columns=["relay", "t"])
-        alarms = pd.DataFrame(self.alarms, columns=list(ALARM_COLUMNS))
-        if stopped:
-            alarms = alarms[alarms["t"] <= self.t[end]]
-        return SimResult(trace, controls, trips, alarms, settings)
+        return SimResult(trace, gen.controls(t_end), trips, gen.alarm_log(t_end), settings)
