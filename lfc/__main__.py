@@ -16,7 +16,8 @@ def _parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("reproduce", help="regenerate the paper's figures (notebooks)")
     rep.add_argument("--only", nargs="+", choices=list(runner.FIGURES), metavar="NAME",
                      help=f"a subset of {list(runner.FIGURES)}")
-    rep.add_argument("--plant", default="linear", choices=PLANTS)
+    rep.add_argument("--plant", default="all", choices=(*PLANTS, "all"),
+                     help="'all' (default): every plant each figure supports")
     rep.add_argument("--jobs", type=int, default=2, help="notebooks run in parallel")
     rep.add_argument("--figures-dir", type=Path, default=runner.ROOT / "figures")
     rep.add_argument("--build-dir", type=Path, default=runner.ROOT / "build")

@@ -33,13 +33,24 @@ def _command(ax, runs: dict[str, SimResult], labels: dict[str, str]) -> None:
     ax.set_ylabel("Governor command $\\Delta P_c$ (pu)")
 
 
-def _finish(top, bottom, title: str) -> None:
+def _finish(axes, title: str) -> None:
     """Time axis label, grids, legends outside the axes, title."""
-    bottom.set_xlabel("Time (s)")
-    for ax in (top, bottom):
+    axes[-1].set_xlabel("Time (s)")
+    for ax in axes:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1))
-    top.set_title(title)
+    axes[0].set_title(title)
+
+
+def _rocof(ax, runs: dict[str, SimResult], labels: dict[str, str], relays: RelaySettings,
+           dashed: tuple[str, ...] = ()) -> None:
+    for key, label in labels.items():
+        tr = runs[key].trace
+        ax.plot(tr.t, tr.rocof_meas, color=COLORS[key], lw=1.2, label=label,
+                ls="--" if key in dashed else "-")
+    _limits(ax, [relays.rocof_limit, -relays.rocof_limit],
+            f"ROCOF setting $\\pm${relays.rocof_limit:g} pu/s")
+    ax.set_ylabel("Measured ROCOF $\\hat{\\dot\\omega}$ (pu/s)")
 
 
 def rocof_figure(runs: dict[str, SimResult], labels: dict[str, str], relays: RelaySettings,
@@ -47,13 +58,8 @@ def rocof_figure(runs: dict[str, SimResult], labels: dict[str, str], relays: Rel
     """Command (top) and measured ROCOF (bottom, pu/s) with the ROCOF setting dashed."""
     fig, (top, bot) = plt.subplots(2, 1, sharex=True, figsize=(10, 6.5), layout="constrained")
     _command(top, runs, labels)
-    for key, label in labels.items():
-        tr = runs[key].trace
-        bot.plot(tr.t, tr.rocof_meas, color=COLORS[key], lw=1.2, label=label)
-    _limits(bot, [relays.rocof_limit, -relays.rocof_limit],
-            f"ROCOF setting $\\pm${relays.rocof_limit:g} pu/s")
-    bot.set_ylabel("Measured ROCOF $\\hat{\\dot\\omega}$ (pu/s)")
-    _finish(top, bot, title)
+    _rocof(bot, runs, labels, relays)
+    _finish((top, bot), title)
     return fig
 
 
@@ -70,16 +76,53 @@ def frequency_figure(runs: dict[str, SimResult], labels: dict[str, str],
             ax1.plot(tr.t, tr.dPm, color=COLORS[key], lw=1.2, label=label,
                      ls="-" if key == "no_scc" else "--")
         ax1.set_ylabel("Mechanical power $\\Delta P_m$ (pu)")
+    _frequency(ax2, runs, labels, relays, f_nominal, () if top == "command" else ("scc",))
+    _finish((ax1, ax2), title)
+    return fig
+
+
+def _frequency(ax, runs: dict[str, SimResult], labels: dict[str, str], relays: RelaySettings,
+               f_nominal: float, dashed: tuple[str, ...]) -> None:
+    """Measured frequency (pu) with the OF2/UF2 settings on the side(s) it moves to."""
     for key, label in labels.items():
         tr = runs[key].trace
-        ax2.plot(tr.t, 1 + tr.dw_meas, color=COLORS[key], lw=1.2, label=label,
-                 ls="-" if key == "no_scc" or top == "command" else "--")
+        ax.plot(tr.t, 1 + tr.dw_meas, color=COLORS[key], lw=1.2, label=label,
+                ls="--" if key in dashed else "-")
     dw = [r.trace.dw_meas for r in runs.values()]
     shown = [(n, v) for n, v, side in (("OF2", relays.of2, max(d.max() for d in dw) > 0),
                                        ("UF2", relays.uf2, min(d.min() for d in dw) < 0)) if side]
-    _limits(ax2, [v for _, v in shown], " / ".join(f"{n} {v:g} pu" for n, v in shown))
-    ax2.set_ylabel(f"Measured frequency $\\hat\\omega$ (pu of {f_nominal:g} Hz)")
-    _finish(ax1, ax2, title)
+    _limits(ax, [v for _, v in shown], " / ".join(f"{n} {v:g} pu" for n, v in shown))
+    ax.set_ylabel(f"Measured frequency $\\hat\\omega$ (pu of {f_nominal:g} Hz)")
+
+
+def fault_figure(runs: dict[str, SimResult], labels: dict[str, str], relays: RelaySettings,
+                 title: str, *, f_nominal: float, i_base: float, line_label: str) -> Figure:
+    """Fig. 7: phase-A current of the protected line (A) with the over-current
+    trip and breaker opening marked, measured frequency (pu) with OF2/UF2, and
+    measured ROCOF (pu/s) with its setting.  Runs after the first are dashed; the
+    current panel zooms on the fault (its own time axis)."""
+    from lfc.testbed.protection import phase_a_current
+
+    fig, axes = plt.subplots(3, 1, figsize=(10, 9), layout="constrained")
+    axes[2].sharex(axes[1])
+    dashed = tuple(labels)[1:]
+    for key, label in labels.items():
+        tr = runs[key].trace
+        t, i_a = phase_a_current(tr.t.to_numpy(), tr.i_line_re.to_numpy()
+                                 + 1j * tr.i_line_im.to_numpy(), f_nominal=f_nominal,
+                                 i_base=i_base)
+        axes[0].plot(t, i_a, color=COLORS[key], lw=0.6, label=label,
+                     ls="--" if key in dashed else "-")
+    first = runs[next(iter(labels))].line_trips
+    for row in first.itertuples():
+        axes[0].axvline(row.trip_t, color="k", ls=":", lw=1, label=f"{row.line} relay trips")
+        axes[0].axvline(row.open_t, color="k", ls="-.", lw=1, label="breaker opens")
+        axes[0].set_xlim(row.trip_t - 0.15, row.open_t + 0.15)
+    axes[0].set_ylabel(f"Phase-A current, line {line_label} (A)")
+    axes[0].set_xlabel("Time (s)")
+    _frequency(axes[1], runs, labels, relays, f_nominal, dashed)
+    _rocof(axes[2], runs, labels, relays, dashed)
+    _finish(axes, title)
     return fig
 
 

@@ -11,15 +11,24 @@ is clear, not marginal (reproduction notes section 4):
   integrator drives dw toward 0.04 pu > F = 0.03 pu (OF2 at ~15 s).
 * Fig. 6: a 0.1 pu load step, half the E12 limit ``M * rocof_limit`` = 0.2 pu.
 Attacks and disturbances start at 1 s so each plot shows the steady state first.
+
+Every scenario runs on either plant (``plant="linear"``: :func:`lfc.simulate`;
+``plant="testbed"``: the ANDES microgrid, :func:`lfc.testbed.simulate_testbed`)
+with the same defaults.  On the testbed the design model is the one fitted to
+it (:func:`lfc.testbed.fit.design_model`).
 """
 
 from __future__ import annotations
+
+from typing import Callable
 
 from lfc.cbf import SafetyFilter
 from lfc.model import LFCParams
 from lfc.relays import RelaySettings
 from lfc.signals import Sinusoid, Step
 from lfc.simulate import SimResult, simulate
+
+PLANTS = ("linear", "testbed")
 
 ATTACK_START = 1.0      # s
 FIG4_AMPLITUDE = 0.5    # pu, trips ROCOF without SCC
@@ -30,38 +39,67 @@ FIG5_BIAS = 0.04        # pu on dw_ref
 FIG5_DURATION = 30.0    # s
 FIG6_LOAD = 0.1         # pu load step
 FIG6_DURATION = 30.0    # s
+FIG7_DURATION = 5.0     # s, fault at ATTACK_START, testbed only
+
+
+def check_plant(plant: str) -> None:
+    """Raise ``ValueError`` unless ``plant`` is one of ``PLANTS``."""
+    if plant not in PLANTS:
+        raise ValueError(f"plant must be one of {PLANTS}, got {plant!r}")
+
+
+def simulator(plant: str) -> Callable[..., SimResult]:
+    """The simulation function of ``plant``."""
+    check_plant(plant)
+    if plant == "linear":
+        return simulate
+    from lfc.testbed import simulate_testbed
+    return simulate_testbed
+
+
+def design_params(plant: str) -> LFCParams:
+    """Default design model: ``LFCParams()``, or the one fitted to the testbed."""
+    check_plant(plant)
+    if plant == "linear":
+        return LFCParams()
+    from lfc.testbed.fit import design_model
+    return design_model()
 
 
 def fig4_rocof_attack(params: LFCParams | None = None, *, alphas: tuple[float, float] = (3.0, 20.0),
                       amplitude: float = FIG4_AMPLITUDE, weak_amplitude: float = FIG4_WEAK,
                       freq_hz: float = FIG4_FREQ, Ts: float = 0.25,
-                      duration: float = FIG4_DURATION, **sim) -> dict[str, SimResult]:
+                      duration: float = FIG4_DURATION, plant: str = "linear",
+                      **sim) -> dict[str, SimResult]:
     """Fig. 4 panels: (a) no SCC, (b) SCC alphas[0], (c) SCC alphas[1], (d) weak attack, SCC alphas[1].
 
-    ``sim`` is passed on to :func:`lfc.simulate` (``relays``, ``control_period``,
+    ``sim`` is passed on to the plant's simulator (``relays``, ``control_period``,
     ``estimator``, ``noise_std``, ``seed``, ...).
     """
-    params = params or LFCParams()
+    run = simulator(plant)
+    params = params or design_params(plant)
     relays = sim.pop("relays", None) or RelaySettings()
     strong = Sinusoid(amplitude, freq_hz, start=ATTACK_START)
     weak = Sinusoid(weak_amplitude, freq_hz, start=ATTACK_START)
     scc = [SafetyFilter(params, relays, alpha=a, Ts=Ts) for a in alphas]
     runs = {"a": (strong, None), "b": (strong, scc[0]), "c": (strong, scc[1]),
             "d": (weak, scc[1])}
-    return {k: simulate(params, duration=duration, pc_attack=atk, scc=f, relays=relays, **sim)
+    return {k: run(params, duration=duration, pc_attack=atk, scc=f, relays=relays, **sim)
             for k, (atk, f) in runs.items()}
 
 
 def with_and_without_scc(params: LFCParams | None, *, alpha: float, Ts: float,
-                         duration: float, **sim) -> dict[str, SimResult]:
+                         duration: float, plant: str = "linear",
+                         **sim) -> dict[str, SimResult]:
     """Run one scenario without SCC (``"no_scc"``) and with it (``"scc"``).
 
-    ``sim`` is passed on to :func:`lfc.simulate` (signals, ``relays``, timing, ...).
+    ``sim`` is passed on to the plant's simulator (signals, ``relays``, timing, ...).
     """
-    params = params or LFCParams()
+    run = simulator(plant)
+    params = params or design_params(plant)
     relays = sim.pop("relays", None) or RelaySettings()
     scc = SafetyFilter(params, relays, alpha=alpha, Ts=Ts)
-    return {name: simulate(params, duration=duration, scc=f, relays=relays, **sim)
+    return {name: run(params, duration=duration, scc=f, relays=relays, **sim)
             for name, f in (("no_scc", None), ("scc", scc))}
 
 
@@ -79,6 +117,16 @@ def fig6_load_step(params: LFCParams | None = None, *, alpha: float = 20.0,
     """Fig. 6: a sudden load addition, without SCC (``"no_scc"``) and with it (``"scc"``)."""
     return with_and_without_scc(params, alpha=alpha, Ts=Ts, duration=duration,
                                 load=Step(load_step, start=ATTACK_START), **sim)
+
+
+def fig7_fault(params: LFCParams | None = None, *, alpha: float = 20.0, Ts: float = 0.25,
+               duration: float = FIG7_DURATION, fault=None, **sim) -> dict[str, SimResult]:
+    """Fig. 7 (testbed only): a three-phase fault at B5 at ``ATTACK_START``,
+    cleared by the over-current relay, without SCC (``"no_scc"``) and with it."""
+    from lfc.testbed import FaultSpec
+    fault = fault or FaultSpec(bus=5, t=ATTACK_START)
+    return with_and_without_scc(params, alpha=alpha, Ts=Ts, duration=duration,
+                                plant="testbed", fault=fault, **sim)
 
 
 def rocof_limit_load_step(params: LFCParams, relays: RelaySettings) -> float:

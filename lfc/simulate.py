@@ -49,6 +49,9 @@ class SimResult:
         ``ALARM_COLUMNS``: the paper's log for learning attacker strategies.
     settings : dict
         What the run was called with (JSON-serializable).
+    line_trips : DataFrame
+        Line protection operations (ANDES testbed only): ``line``, ``trip_t``
+        (relay decision, s) and ``open_t`` (breaker open, s).
     """
 
     trace: pd.DataFrame
@@ -56,6 +59,8 @@ class SimResult:
     trips: pd.DataFrame
     alarms: pd.DataFrame
     settings: dict = field(default_factory=dict)
+    line_trips: pd.DataFrame = field(
+        default_factory=lambda: pd.DataFrame(columns=["line", "trip_t", "open_t"]))
 
     def metrics(self) -> dict:
         """Summary numbers (JSON-serializable), keys ``METRIC_KEYS``."""
@@ -76,10 +81,11 @@ class SimResult:
 
     def save(self, directory: str | Path) -> Path:
         """Write ``trace.csv``, ``controls.csv``, ``trips.csv``, ``alarms.csv``,
-        ``metrics.json`` and ``settings.json`` into ``directory`` (created)."""
+        ``line_trips.csv``, ``metrics.json`` and ``settings.json`` into
+        ``directory`` (created)."""
         out = Path(directory)
         out.mkdir(parents=True, exist_ok=True)
-        for name in ("trace", "controls", "trips", "alarms"):
+        for name in ("trace", "controls", "trips", "alarms", "line_trips"):
             getattr(self, name).to_csv(out / f"{name}.csv", index=False)
         (out / "metrics.json").write_text(json.dumps(self.metrics(), indent=2))
         (out / "settings.json").write_text(json.dumps(self.settings, indent=2, default=str))

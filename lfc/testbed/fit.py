@@ -1,0 +1,129 @@
+"""The linear design model that best describes the ANDES testbed.
+
+Two small experiments on the testbed, a governor-command step and a load step
+(``FIT_STEP`` pu each, separately, no SCC), record the applied command, the
+load and the outputs ``dPm, dw, dw_meas, rocof_meas``.  The linear model
+(python-control, :func:`lfc.model.lfc_model`) is driven by the same recorded
+inputs, and its seven parameters (M, D, τ_G, τ_T, R, τ_ω, τ_ν) are fitted by
+least squares on the outputs, each scaled by its peak.  The fit error is the
+RMS of those scaled residuals per output.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from functools import lru_cache
+
+import control as ct
+import numpy as np
+from scipy.optimize import least_squares
+
+from lfc.model import LFCParams, lfc_model
+from lfc.signals import Step
+from lfc.testbed.case import MicrogridCase
+
+FIT_STEP = 0.02      # pu, small enough to stay linear
+FIT_DURATION = 8.0   # s
+FITTED = ("M", "D", "tau_g", "tau_t", "droop", "tau_w", "tau_rocof")
+OUTPUTS = ("dPm", "dw", "dw_meas", "rocof_meas")
+
+
+@dataclass(frozen=True)
+class FitReport:
+    """Result of :func:`fit_design_model`.
+
+    Attributes
+    ----------
+    params : LFCParams
+        The fitted design model.
+    initial : LFCParams
+        The model the case's data imply (the starting point).
+    error : dict
+        Output name -> RMS residual / peak of the testbed response, fitted model.
+    initial_error : dict
+        The same for ``initial``.
+    """
+
+    params: LFCParams
+    initial: LFCParams
+    error: dict
+    initial_error: dict
+
+    def table(self) -> str:
+        """Markdown table: parameters (initial, fitted) and errors."""
+        lines = ["| parameter | from case data | fitted |", "|---|---|---|"]
+        lines += [f"| {n} | {getattr(self.initial, n):.4g} | {getattr(self.params, n):.4g} |"
+                  for n in FITTED]
+        lines += ["", "| output | error, case data | error, fitted |", "|---|---|---|"]
+        lines += [f"| {n} | {100 * self.initial_error[n]:.2f} % | {100 * self.error[n]:.2f} % |"
+                  for n in OUTPUTS]
+        return "\n".join(lines)
+
+
+def record_experiments(case: MicrogridCase) -> list[dict[str, np.ndarray]]:
+    """Run the two small-step experiments on the testbed.
+
+    Returns a list of dicts with ``t`` (s), ``u`` (applied command, pu),
+    ``p_load`` (pu) and the ``OUTPUTS`` on a uniform grid.
+    """
+    from lfc.testbed.plant import simulate_testbed
+
+    params = case.design_params()
+    runs = [simulate_testbed(params, duration=FIT_DURATION, case=case,
+                             pc_attack=Step(FIT_STEP, 1.0)),
+            simulate_testbed(params, duration=FIT_DURATION, case=case,
+                             load=Step(FIT_STEP, 1.0))]
+    out = []
+    for r in runs:
+        tr = r.trace
+        t = np.round(tr["t"].to_numpy(), 9)
+        data = {"t": t, "u": tr["pc"].to_numpy(), "p_load": tr["p_load"].to_numpy()}
+        data.update({k: tr[k].to_numpy() for k in OUTPUTS})
+        out.append(data)
+    return out
+
+
+def _respond(params: LFCParams, exp: dict[str, np.ndarray]) -> np.ndarray:
+    """Linear-model outputs (rows ``OUTPUTS``) for the experiment's inputs."""
+    sys = lfc_model(params)
+    resp = ct.forced_response(sys, exp["t"], np.vstack([exp["u"], exp["p_load"]]))
+    states = resp.states  # dPg, dPm, dw, dw_meas, rocof_meas
+    return states[1:5]
+
+
+def _errors(params: LFCParams, exps: list[dict]) -> np.ndarray:
+    """Scaled residuals per output, stacked over experiments: shape (4, n)."""
+    res = []
+    for exp in exps:
+        model = _respond(params, exp)
+        data = np.vstack([exp[k] for k in OUTPUTS])
+        scale = np.abs(data).max(axis=1, keepdims=True)
+        res.append((model - data) / scale)
+    return np.hstack(res)
+
+
+def fit_design_model(case: MicrogridCase | None = None) -> FitReport:
+    """Fit the linear LFC parameters to the testbed (see the module docstring)."""
+    case = case or MicrogridCase()
+    exps = record_experiments(case)
+    initial = case.design_params()
+
+    def with_values(log_theta: np.ndarray) -> LFCParams:
+        return replace(initial, **dict(zip(FITTED, np.exp(log_theta))))
+
+    theta0 = np.log([getattr(initial, n) for n in FITTED])
+    sol = least_squares(lambda th: _errors(with_values(th), exps).ravel(), theta0,
+                        x_scale=1.0, xtol=1e-10, ftol=1e-10)
+    fitted = with_values(sol.x)
+
+    def rms(p: LFCParams) -> dict:
+        e = _errors(p, exps)
+        return {k: float(np.sqrt(np.mean(e[i] ** 2))) for i, k in enumerate(OUTPUTS)}
+
+    return FitReport(fitted, initial, rms(fitted), rms(initial))
+
+
+@lru_cache(maxsize=4)
+def design_model(case: MicrogridCase | None = None) -> LFCParams:
+    """The fitted design model of ``case`` (computed once per process)."""
+    return fit_design_model(case).params
