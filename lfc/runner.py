@@ -102,8 +102,7 @@ def reproduce(only: list[str] | None = None, plant: str = "all", jobs: int = 2,
     if not runs:
         raise ValueError(f"none of {names} runs on plant {plant!r} (see FIGURE_PLANTS)")
     if any(p == "testbed" for _, p in runs):
-        from lfc.testbed import prepare_andes
-        prepare_andes()  # once, here, not in parallel kernels
+        _prepare_testbed()
     pool = executor or ThreadPoolExecutor(max_workers=max(1, jobs))
     futures = {}
     for name, run_plant in runs:
@@ -118,6 +117,12 @@ def reproduce(only: list[str] | None = None, plant: str = "all", jobs: int = 2,
         pool.shutdown()
     order = {n if p == "linear" else f"{n}_{p}": i for i, (n, p) in enumerate(runs)}
     return sorted(outcomes, key=lambda o: order[o.name])
+
+
+def _prepare_testbed() -> None:
+    """Generate ANDES' code once in this process, not in parallel kernels."""
+    from lfc.testbed import prepare_andes
+    prepare_andes()
 
 
 def summary_table(outcomes: list[RunOutcome]) -> pd.DataFrame:
@@ -192,6 +197,9 @@ def sweep(notebook: str | Path, grid: dict[str, list], out: Path | None = None,
     if not notebook.exists():
         raise ValueError(f"notebook not found: {notebook}")
     validate_parameters(notebook, grid)
+    if "testbed" in grid.get("plant", []) or pm.inspect_notebook(str(notebook)).get(
+            "plant", {}).get("default") == '"testbed"':
+        _prepare_testbed()
     out = Path(out or ROOT / "build" / "sweeps" / notebook.stem).resolve()
     points = [dict(zip(grid, combo)) for combo in itertools.product(*grid.values())]
     pool = executor or ThreadPoolExecutor(max_workers=max(1, jobs))

@@ -6,30 +6,54 @@ import pytest
 
 from lfc import runner
 from lfc.__main__ import main
+from lfc.notebook import figure_name, record_claims
 from lfc.simulate import METRIC_KEYS
 
 SHORT = {"duration": 3.0}
 PANELS = {"tutorial": {"no_scc", "scc"}, "fig4": {"a", "b", "c", "d"},
-          "fig5": {"no_scc", "scc"}, "fig6": {"no_scc", "scc"},
+          "fig5": {"no_scc", "scc"}, "fig6": {"no_scc", "scc"}, "fig7": {"no_scc", "scc"},
           "kalman": {"no_scc", "scc_true", "scc_kalman"}}
 FIGURE_FILES = {"tutorial": "tutorial_attack", "fig4": "fig4_rocof_attack",
-                "fig5": "fig5_bias_attack", "fig6": "fig6_load_step", "kalman": "kalman_scc"}
+                "fig5": "fig5_bias_attack", "fig6": "fig6_load_step", "fig7": "fig7_fault",
+                "kalman": "kalman_scc"}
+EXTRA_METRICS = {"fig7": {"oc_trip_t"}}
+RUNS = [(name, plant) for name, plants in runner.FIGURE_PLANTS.items() for plant in plants]
 
 
-@pytest.mark.parametrize("name", list(runner.FIGURES))
-def test_notebook_runs_and_writes_figure_and_metrics(name, tmp_path):
+@pytest.mark.parametrize("name, plant", RUNS)
+def test_notebook_runs_and_writes_figure_and_metrics(name, plant, tmp_path):
     nb = runner.NOTEBOOKS_DIR / runner.FIGURES[name]
-    runner.execute(nb, tmp_path / nb.name, {**SHORT, "check_claims": False,
+    runner.execute(nb, tmp_path / nb.name, {**SHORT, "check_claims": False, "plant": plant,
                                             "figures_dir": str(tmp_path / "fig"),
                                             "results_dir": str(tmp_path / "res")})
     for ext in ("png", "pdf"):
-        assert (tmp_path / "fig" / f"{FIGURE_FILES[name]}.{ext}").stat().st_size > 1000
+        path = tmp_path / "fig" / f"{figure_name(FIGURE_FILES[name], plant)}.{ext}"
+        assert path.stat().st_size > 1000
     metrics = json.loads((tmp_path / "res" / "metrics.json").read_text())
     assert set(metrics) == PANELS[name]
     for panel in metrics.values():
-        assert set(panel) == set(METRIC_KEYS) | {"parameters"}
+        assert set(panel) == set(METRIC_KEYS) | {"parameters"} | EXTRA_METRICS.get(name, set())
         assert panel["parameters"]["duration"] == 3.0
+        assert panel["parameters"]["plant"] == plant
     assert json.loads((tmp_path / "res" / "claims.json").read_text())
+
+
+@pytest.mark.parametrize("name", ["tutorial", "kalman"])
+def test_linear_only_notebooks_refuse_the_testbed(name, tmp_path):
+    nb = runner.NOTEBOOKS_DIR / runner.FIGURES[name]
+    with pytest.raises(runner.pm.PapermillExecutionError, match="for this notebook"):
+        runner.execute(nb, tmp_path / nb.name, {"plant": "testbed", "results_dir": str(tmp_path),
+                                                "figures_dir": str(tmp_path)})
+
+
+def test_documented_deviations_pass_and_stale_ones_fail(tmp_path):
+    claim = "with SCC no relay trips"  # a documented deviation on the testbed
+    record_claims(tmp_path, {claim: False}, check=True, plant="testbed")
+    assert claim in json.loads((tmp_path / "deviations.json").read_text())
+    with pytest.raises(AssertionError, match="claim"):
+        record_claims(tmp_path, {claim: False}, check=True, plant="linear")
+    with pytest.raises(AssertionError, match="no longer observed"):
+        record_claims(tmp_path, {claim: True}, check=True, plant="testbed")
 
 
 def test_a_broken_claim_fails_the_notebook(tmp_path):
@@ -41,7 +65,8 @@ def test_a_broken_claim_fails_the_notebook(tmp_path):
 
 
 def test_reproduce_only_fig4(tmp_path, capsys):
-    code = main(["reproduce", "--only", "fig4", "--figures-dir", str(tmp_path / "fig"),
+    code = main(["reproduce", "--only", "fig4", "--plant", "linear",
+                 "--figures-dir", str(tmp_path / "fig"),
                  "--build-dir", str(tmp_path / "build")])
     out = capsys.readouterr().out
     assert code == 0 and "(a) attack trips ROCOF without SCC" in out
@@ -77,6 +102,7 @@ def test_sweep_table_and_resume(tmp_path):
     (["-p", "duration", "-1"], "'duration' must be > 0"),
     (["-p", "amplitude", "big"], "'amplitude' must be of type float"),
     (["-p", "plant", "simscape"], "plant must be one of"),
+    (["-p", "plant", "linear", "testbed", "simscape"], "plant must be one of"),
 ])
 def test_sweep_rejects_bad_parameters_before_running(args, message, tmp_path, capsys):
     nb = str(runner.NOTEBOOKS_DIR / runner.FIGURES["fig4"])

@@ -69,6 +69,8 @@ class FaultSpec:
 class TestbedError(RuntimeError):
     """ANDES failed during a run (the message says when and why)."""
 
+    __test__ = False  # not a pytest test class
+
 
 def simulate_testbed(params: LFCParams, *, duration: float,
                      pc_attack: SignalLike | None = None,

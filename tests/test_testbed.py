@@ -1,0 +1,145 @@
+"""The ANDES microgrid testbed: build, paper claims on it, the fault and the
+over-current relay, the fitted design model, and bad scenarios."""
+
+import math
+
+import numpy as np
+import pytest
+
+import lfc
+from lfc.model import STATES
+from lfc.scenarios import FIG4_AMPLITUDE, fig7_fault
+from lfc.simulate import METRIC_KEYS
+from lfc.testbed import (FaultSpec, MicrogridCase, OvercurrentSettings, TestbedError,
+                         build_system, phase_a_current, simulate_testbed)
+from lfc.testbed.fit import OUTPUTS, design_model, fit_design_model
+
+CASE = MicrogridCase()
+
+
+@pytest.fixture(scope="module")
+def fit():
+    return fit_design_model(CASE)
+
+
+@pytest.fixture(scope="module")
+def params():
+    return design_model(CASE)
+
+
+def test_builds_power_flow_converges_and_starts_at_nominal():
+    ss = build_system(CASE)
+    assert ss.PFlow.converged and ss.config.mva == 2.5
+    assert np.all((ss.Bus.v.v > 0.98) & (ss.Bus.v.v < 1.01))
+    r = simulate_testbed(CASE.design_params(), duration=0.5)
+    assert set(STATES) <= set(r.trace.columns)
+    assert r.trace.dw_meas.abs().max() < 1e-6 and r.trace.dw.abs().max() < 1e-6
+    assert not r.metrics()["tripped"] and set(r.metrics()) == set(METRIC_KEYS)
+
+
+def test_fitted_model_small_signal_error_is_small_and_reported(fit):
+    assert set(fit.error) == set(OUTPUTS)
+    assert max(fit.error.values()) < 0.05
+    assert all(fit.error[k] <= fit.initial_error[k] + 1e-9 for k in OUTPUTS)
+    assert "| M |" in fit.table()
+
+
+def test_testbed_matches_fitted_model_on_a_new_small_signal(fit):
+    """A different input from the fit's (a 0.5 Hz, 0.01 pu command oscillation):
+    the fitted linear model tracks the testbed within twice the fit error."""
+    attack = lfc.Sinusoid(0.01, 0.5, start=0.5)
+    bed = simulate_testbed(fit.params, duration=6.0, pc_attack=attack).trace
+    lin = lfc.simulate(fit.params, duration=6.0, pc_attack=attack, dt=0.005).trace
+    for name in ("dw", "dw_meas", "rocof_meas"):
+        model = np.interp(bed.t, lin.t, lin[name])
+        err = np.sqrt(np.mean((model - bed[name]) ** 2)) / bed[name].abs().max()
+        assert err < 2 * max(fit.error.values()), name
+
+
+def test_rocof_attack_trips_without_scc_and_not_with_it(params):
+    attack = lfc.Sinusoid(FIG4_AMPLITUDE, 1.0, start=0.5)
+    bare = simulate_testbed(params, duration=3.0, pc_attack=attack)
+    safe = simulate_testbed(params, duration=3.0, pc_attack=attack,
+                            scc=lfc.SafetyFilter(params, alpha=20.0))
+    assert bare.metrics()["first_trip"]["relay"] == "ROCOF"
+    assert not safe.metrics()["tripped"] and len(safe.alarms) > 0
+    assert safe.metrics()["max_abs_rocof_meas"] < 0.05
+
+
+def test_stop_on_trip_ends_the_run_at_the_trip(params):
+    r = simulate_testbed(params, duration=3.0, stop_on_trip=True,
+                         pc_attack=lfc.Sinusoid(FIG4_AMPLITUDE, 1.0, start=0.5))
+    assert len(r.trips) == 1 and r.trace.t.iloc[-1] == pytest.approx(r.trips.t.iloc[0])
+
+
+@pytest.mark.parametrize("xf", [1e-3, 0.3])
+def test_fault_trips_over_current_relay_within_its_curve_and_recovers(params, xf):
+    """A bolted fault operates the instantaneous element; a 0.3 pu fault the
+    inverse-time one, between the curve's times for the largest and smallest
+    fault current seen (the current decays as the machine's flux does)."""
+    oc = OvercurrentSettings()
+    r = simulate_testbed(params, duration=3.0, fault=FaultSpec(5, 1.0, xf))
+    trip = r.line_trips.iloc[0]
+    tr = r.trace
+    during = tr[(tr.t > 1.0) & (tr.t <= trip.trip_t)]
+    current = np.abs(during.i_line_re + 1j * during.i_line_im)
+    fastest, slowest = oc.operate_time(current.max()), oc.operate_time(current.min())
+    step = 0.005
+    assert fastest - step <= trip.trip_t - 1.0 <= slowest + step
+    assert trip.open_t == pytest.approx(trip.trip_t + oc.breaker_time)
+    after = tr[tr.t > trip.open_t]
+    assert np.all(after.i_line_re == 0) and np.all(after.i_line_im == 0)
+    assert 0.95 < after.v_gen.iloc[-1] < 1.05
+    assert after.dw_meas.abs().iloc[-1] < 0.5 * after.dw_meas.abs().max()
+
+
+def test_scc_leaves_fault_protection_unchanged(params):
+    runs = fig7_fault(params, duration=2.0)
+    assert (runs["scc"].line_trips.trip_t.iloc[0]
+            == runs["no_scc"].line_trips.trip_t.iloc[0])
+
+
+def test_iec_standard_inverse_curve():
+    s = OvercurrentSettings(pickup=1.0, tms=1.0, instantaneous=50.0)
+    assert float(s.operate_time(10.0)) == pytest.approx(0.14 / (10 ** 0.02 - 1))
+    assert float(s.operate_time(10.0)) == pytest.approx(2.97, abs=0.01)
+    assert math.isinf(float(s.operate_time(0.9)))
+    assert float(s.operate_time(60.0)) == s.instantaneous_delay
+
+
+def test_phase_a_waveform_from_a_constant_phasor():
+    t = np.linspace(0.0, 0.1, 21)
+    tt, ia = phase_a_current(t, np.full(t.shape, 2.0 + 0j), f_nominal=60.0, i_base=52.3)
+    assert ia.max() == pytest.approx(math.sqrt(2) * 2.0 * 52.3, rel=1e-3)
+    assert ia[0] == pytest.approx(math.sqrt(2) * 2.0 * 52.3)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"fault": FaultSpec(bus=9)}, "fault.bus must be one of the buses"),
+    ({"fault": FaultSpec(bus=6)}, "must not be the generator bus"),
+    ({"fault": FaultSpec(bus=3)}, "beyond the protected line"),
+    ({"fault": FaultSpec(t=5.0)}, "fault.t must be in"),
+    ({"load": lfc.Step(0.5, 1.0)}, "more than the machine can carry"),
+    ({"control_period": 0.012}, "multiple of step"),
+])
+def test_unrepresentable_scenarios_fail_before_running(params, kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        simulate_testbed(params, duration=2.0, **kwargs)
+
+
+def test_bad_case_and_fault_parameters():
+    with pytest.raises(ValueError, match="xf must be in"):
+        FaultSpec(xf=1e-6)
+    with pytest.raises(ValueError, match="load_bus must be one of"):
+        MicrogridCase(load_bus=7)
+    with pytest.raises(ValueError, match="protected_line"):
+        MicrogridCase(protected_line="L99")
+    with pytest.raises(ValueError, match="instantaneous must be > pickup"):
+        OvercurrentSettings(pickup=3.0, instantaneous=2.0)
+
+
+def test_non_convergence_raises_with_time_and_reason(params):
+    fault = FaultSpec()
+    object.__setattr__(fault, "xf", 1e-7)  # below what ANDES can solve (bypasses the check)
+    with pytest.raises(TestbedError, match=r"did not converge at t = 1\.\d+ s"):
+        simulate_testbed(params, duration=2.0, fault=fault)
