@@ -329,6 +329,7 @@ class _Testbed:
     def result(self, relays: RelaySettings, settings: dict) -> SimResult:
         cols = ("t", *STATES, "p_load", *TESTBED_COLUMNS)
         trace = pd.DataFrame(self.rows, columns=list(cols))
+        trace["t"] = trace["t"].round(9)  # ANDES accumulates its time in floating point
         if self.bank is None:
             found = RelayBank(relays).update(trace["t"].to_numpy(), trace["dw_meas"].to_numpy(),
                                              trace["rocof_meas"].to_numpy())
@@ -340,7 +341,7 @@ class _Testbed:
         t_end = float(trace["t"].iat[-1])
         trips = pd.DataFrame(self.trips, columns=["relay", "t"])
         line_trips = pd.DataFrame(
-            [(self.case.protected_line, self.oc.trip_t, self.oc.open_t)]
+            [(self.case.protected_line, round(self.oc.trip_t, 9), round(self.oc.open_t, 9))]
             if self.oc.trip_t is not None and self.oc.trip_t <= t_end else [],
             columns=["line", "trip_t", "open_t"])
         return SimResult(trace, self.gen.controls(t_end), trips, self.gen.alarm_log(t_end),
