@@ -1,0 +1,175 @@
+"""The batched simulator: equal to lfc.simulate, maps, resume, executors, bad input."""
+
+import subprocess
+import sys
+import time
+from concurrent.futures import Executor, Future
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import lfc
+from lfc.batch import BATCH_METRICS, scenario_signal, simulate_batch
+
+P = lfc.LFCParams()
+CHANNEL_ARG = {"pc": "pc_attack", "wref": "wref_attack", "load": "load"}
+SCALE = {"pc": 1.0, "wref": 0.08, "load": 0.25}  # amplitudes that trip some, not all
+
+
+def random_scenarios(n: int, seed: int) -> pd.DataFrame:
+    rng = np.random.default_rng(seed)
+    channel = rng.choice(list(SCALE), n)
+    waveform = rng.choice(["sinusoid", "square", "chirp", "step", "ramp", "none"], n)
+    amplitude = rng.uniform(0.05, 1.0, n) * np.vectorize(SCALE.get)(channel)
+    amplitude = np.where(waveform == "ramp", amplitude * 0.05, amplitude)
+    return pd.DataFrame({"waveform": waveform, "channel": channel, "amplitude": amplitude,
+                         "freq_hz": rng.uniform(0.1, 2.0, n), "start": rng.uniform(0, 2, n),
+                         "alpha": rng.choice([np.nan, 3.0, 20.0], n),
+                         "Ts": rng.choice([0.1, 0.25], n)})
+
+
+def direct(row: pd.Series, duration: float) -> dict:
+    """lfc.simulate on one scenario row."""
+    sig = scenario_signal(row, duration)
+    kw = {} if sig is None else {CHANNEL_ARG[row["channel"]]: sig}
+    scc = None if np.isnan(row["alpha"]) else lfc.SafetyFilter(P, alpha=row["alpha"],
+                                                                   Ts=row["Ts"])
+    return lfc.simulate(P, duration=duration, scc=scc, **kw).metrics()
+
+
+def test_batch_equals_simulate_on_a_random_sample():
+    scenarios = random_scenarios(60, seed=1)
+    res = simulate_batch(P, scenarios, duration=8.0, chunk_size=25, progress=False)
+    assert list(res.columns) == list(scenarios.columns) + list(BATCH_METRICS)
+    assert 5 <= res.tripped.sum() <= 55  # the sample exercises both outcomes
+    for i, row in scenarios.iterrows():
+        m, r = direct(row, 8.0), res.loc[i]
+        assert m["tripped"] == r.tripped
+        if m["tripped"]:
+            assert m["first_trip"] == {"relay": r.first_trip_relay, "t": r.first_trip_t}
+        else:
+            assert r.first_trip_relay is None and np.isnan(r.first_trip_t)
+        for key in ("max_abs_dw_meas", "max_abs_rocof_meas", "max_abs_modification",
+                    "scc_active_fraction"):
+            assert abs(m[key] - r[key]) <= 1e-9, key
+        assert m["alarms"] == r.alarms
+
+
+def test_small_map_matches_simulate_at_its_corners():
+    amps, freqs = [0.1, 0.3, 0.6], [0.3, 1.0, 1.5]
+    grid = pd.DataFrame([{"waveform": "sinusoid", "channel": "pc", "amplitude": a,
+                          "freq_hz": f, "start": 1.0, "alpha": al, "Ts": 0.25}
+                         for al in (np.nan, 20.0) for a in amps for f in freqs])
+    res = simulate_batch(P, grid, duration=10.0, progress=False)
+    assert res.tripped.any() and not res.tripped.all()
+    corners = res[res.amplitude.isin([amps[0], amps[-1]]) & res.freq_hz.isin([freqs[0],
+                                                                                 freqs[-1]])]
+    assert len(corners) == 8
+    for _, row in corners.iterrows():
+        m = direct(row, 10.0)
+        assert m["tripped"] == row.tripped
+        assert (m["first_trip"] or {}).get("relay") == row.first_trip_relay
+
+
+@settings(max_examples=8, deadline=None)
+@given(chunk=st.integers(1, 12), seed=st.integers(0, 2**16))
+def test_chunking_and_row_order_do_not_change_results(chunk, seed):
+    scenarios = random_scenarios(12, seed)
+    whole = simulate_batch(P, scenarios, duration=2.0, progress=False)
+    shuffled = scenarios.sample(frac=1.0, random_state=seed % 1000)
+    parts = simulate_batch(P, shuffled, duration=2.0, chunk_size=chunk, progress=False)
+    pd.testing.assert_frame_equal(parts.loc[whole.index], whole)
+
+
+class InlineExecutor(Executor):
+    """Runs each task at submission and records how many it ran."""
+
+    def __init__(self):
+        self.ran = 0
+
+    def submit(self, fn, *args, **kwargs):
+        fut = Future()
+        fut.set_result(fn(*args, **kwargs))
+        self.ran += 1
+        return fut
+
+
+KILLED_RUN = """
+import sys, pandas as pd, lfc
+from concurrent.futures import ThreadPoolExecutor
+lfc.simulate_batch(lfc.LFCParams(), pd.read_csv(sys.argv[2], index_col=0), duration=20.0,
+                   chunk_size=5, out=sys.argv[1], executor=ThreadPoolExecutor(1),
+                   progress=False)
+"""
+
+
+def test_killed_run_resumes_without_recomputing_chunks(tmp_path):
+    out, table = tmp_path / "chunks", tmp_path / "scenarios.csv"
+    scenarios = random_scenarios(40, 3)
+    scenarios.to_csv(table)
+    scenarios = pd.read_csv(table, index_col=0)
+    proc = subprocess.Popen([sys.executable, "-c", KILLED_RUN, str(out), str(table)])
+    try:
+        deadline = time.time() + 120
+        while not list(out.glob("chunk_*.csv")) and time.time() < deadline:
+            assert proc.poll() is None, "the run ended before it could be killed"
+            time.sleep(0.05)
+    finally:
+        proc.kill()
+        proc.wait()
+    done = {p.name: p.stat().st_mtime_ns for p in out.glob("chunk_*.csv")}
+    assert 1 <= len(done) < 8
+    inline = InlineExecutor()
+    resumed = simulate_batch(P, scenarios, duration=20.0, chunk_size=5, out=out,
+                             executor=inline, progress=False)
+    assert inline.ran == 8 - len(done)
+    for name, mtime in done.items():
+        assert (out / name).stat().st_mtime_ns == mtime
+    assert len(list(out.glob("chunk_*.csv"))) == 8 and not list(out.glob("*.tmp"))
+    fresh = simulate_batch(P, scenarios, duration=20.0, chunk_size=5, progress=False)
+    pd.testing.assert_frame_equal(resumed, fresh)
+
+
+def test_changed_settings_do_not_reuse_old_chunks(tmp_path):
+    scenarios = random_scenarios(6, 4)
+    simulate_batch(P, scenarios, duration=2.0, chunk_size=3, out=tmp_path, progress=False)
+    inline = InlineExecutor()
+    simulate_batch(P, scenarios, duration=3.0, chunk_size=3, out=tmp_path, executor=inline,
+                   progress=False)
+    assert inline.ran == 2
+
+
+def test_dask_local_cluster_gives_the_same_table_as_the_process_pool():
+    distributed = pytest.importorskip("distributed")
+    scenarios = random_scenarios(16, 5)
+    pool = simulate_batch(P, scenarios, duration=3.0, chunk_size=4, progress=False)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        dask = simulate_batch(P, scenarios, duration=3.0, chunk_size=4,
+                              executor=client.get_executor(), progress=False)
+    pd.testing.assert_frame_equal(dask, pool)
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda d: d.drop(columns="Ts"), "missing column"),
+    (lambda d: d.assign(waveform="triangle"), "column 'waveform' must be one of"),
+    (lambda d: d.assign(channel="ace"), "column 'channel' must be one of"),
+    (lambda d: d.assign(alpha=-1.0), "column 'alpha' must be > 0 or NaN"),
+    (lambda d: d.assign(amplitude=np.inf), "column 'amplitude' must be finite"),
+    (lambda d: d.assign(start=-1.0), "column 'start' must be finite and >= 0"),
+    (lambda d: d.assign(Ts=0.0), "column 'Ts' must be finite and > 0"),
+])
+def test_bad_scenarios_name_the_column(change, message):
+    with pytest.raises(ValueError, match=message):
+        simulate_batch(P, change(random_scenarios(3, 0)), duration=1.0, progress=False)
+
+
+def test_bad_settings_raise():
+    with pytest.raises(ValueError, match="chunk_size"):
+        simulate_batch(P, random_scenarios(3, 0), duration=1.0, chunk_size=0)
+    with pytest.raises(ValueError, match="control_period"):
+        simulate_batch(P, random_scenarios(3, 0), duration=1.0, control_period=0.0015)
