@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import matplotlib
+import numpy as np
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -134,3 +136,137 @@ def save_figure(fig: Figure, directory: str | Path, name: str) -> list[Path]:
     fig.savefig(paths[0], dpi=150, metadata={"Software": None})
     fig.savefig(paths[1], metadata={"CreationDate": None, "Creator": None, "Producer": None})
     return paths
+
+
+TRIP_COLORS = {"none": "#eeeeee", "OF2": "tab:red", "UF2": "tab:blue", "ROCOF": "tab:orange"}
+
+
+def _trip_codes(results) -> np.ndarray:
+    relay = results["first_trip_relay"].fillna("none").to_numpy()
+    return np.array([list(TRIP_COLORS).index(r) for r in relay])
+
+
+def _trip_legend(fig: Figure) -> None:
+    from matplotlib.patches import Patch
+    handles = [Patch(color=c, label="no trip" if k == "none" else f"first trip: {k}")
+               for k, c in TRIP_COLORS.items()]
+    fig.legend(handles=handles, loc="outside right upper", fontsize=8)
+
+
+def surface_figure(results, title: str, marks: list[tuple[str, float, float, str]]) -> Figure:
+    """Attack-surface maps: one panel per waveform (rows) and SCC setting
+    (columns) over amplitude (pu) × frequency (Hz), each cell coloured by the
+    first relay to trip.  ``marks``: (waveform, amplitude, freq_hz, label)."""
+    from matplotlib.colors import ListedColormap
+
+    from lfc.surface import scc_label
+    results = results.assign(code=_trip_codes(results))
+    waves = list(dict.fromkeys(results.waveform))
+    alphas = list(dict.fromkeys(results.alpha.fillna(-1.0)))
+    fig, axes = plt.subplots(len(waves), len(alphas), figsize=(4 * len(alphas) + 1.5,
+                                                                3.4 * len(waves)),
+                             sharex=True, sharey=True, squeeze=False, layout="constrained")
+    cmap = ListedColormap(list(TRIP_COLORS.values()))
+    amps, freqs = np.unique(results.amplitude), np.unique(results.freq_hz)
+    for (i, w), (j, a) in itertools.product(enumerate(waves), enumerate(alphas)):
+        ax = axes[i, j]
+        sel = results[(results.waveform == w) & (results.alpha.fillna(-1.0) == a)]
+        grid = sel.pivot_table(index="amplitude", columns="freq_hz", values="code",
+                               aggfunc="first").reindex(index=amps, columns=freqs)
+        ax.pcolormesh(_edges(freqs), _edges(amps), grid.to_numpy(), cmap=cmap, vmin=-0.5,
+                      vmax=len(TRIP_COLORS) - 0.5)
+        for mw, ma, mf, label in marks:
+            if mw == w:
+                ax.plot(mf, ma, "k*", ms=11, mfc="white")
+                ax.annotate(label, (mf, ma), xytext=(5, 5), textcoords="offset points",
+                            fontsize=8)
+        ax.set_title(f"{w} on $P_c$, {scc_label(np.nan if a < 0 else a)}", fontsize=9)
+        if i == len(waves) - 1:
+            ax.set_xlabel("Attack frequency (Hz)")
+        if j == 0:
+            ax.set_ylabel("Attack amplitude (pu)")
+    _trip_legend(fig)
+    fig.suptitle(title)
+    return fig
+
+
+def _edges(centers: np.ndarray) -> np.ndarray:
+    """Cell edges around sorted centres (for pcolormesh)."""
+    c = np.asarray(centers, float)
+    if len(c) == 1:
+        return np.array([c[0] - 0.5, c[0] + 0.5])
+    mid = (c[1:] + c[:-1]) / 2
+    return np.concatenate([[c[0] - (mid[0] - c[0])], mid, [c[-1] + (c[-1] - mid[-1])]])
+
+
+def bias_figure(results, relays: RelaySettings, title: str) -> Figure:
+    """Bias attacks on ω_ref: first relay to trip (colour) and its time, per SCC
+    setting; the bias that moves the frequency to OF2/UF2 dashed."""
+    from lfc.surface import scc_label
+    results = results.assign(code=_trip_codes(results))
+    alphas = list(dict.fromkeys(results.alpha.fillna(-1.0)))
+    fig, ax = plt.subplots(figsize=(10, 1.2 + 0.9 * len(alphas)), layout="constrained")
+    for row, a in enumerate(alphas):
+        sel = results[results.alpha.fillna(-1.0) == a]
+        colors = [list(TRIP_COLORS.values())[c] for c in sel.code]
+        ax.scatter(sel.amplitude, np.full(len(sel), row), c=colors, s=140, marker="s",
+                   edgecolors="k", linewidths=0.3)
+        for b, t in zip(sel.amplitude, sel.first_trip_t):
+            if np.isfinite(t):
+                ax.annotate(f"{t:.0f}", (b, row), xytext=(0, 9), textcoords="offset points",
+                            ha="center", fontsize=6)
+    ax.set_yticks(range(len(alphas)), [scc_label(np.nan if a < 0 else a) for a in alphas])
+    ax.set_ylim(-0.7, len(alphas) - 0.3)
+    _limits_v(ax, [relays.of2 - 1, relays.uf2 - 1], f"bias = OF2 − 1 / UF2 − 1 "
+              f"({relays.of2 - 1:+.3g} / {relays.uf2 - 1:+.3g} pu)")
+    ax.set_xlabel("Bias on the frequency reference $\\omega_{ref}$ (pu); numbers: first trip time (s)")
+    _trip_legend(fig)
+    ax.legend(fontsize=8, loc="lower left")
+    ax.set_title(title)
+    return fig
+
+
+def _limits_v(ax, values: list[float], label: str) -> None:
+    for i, v in enumerate(values):
+        ax.axvline(v, color="k", ls="--", lw=1, label=label if i == 0 else None)
+
+
+def tradeoff_figure(summary, baseline, title: str) -> Figure:
+    """The α–T_s trade-off.  ``summary``: one row per (event, alpha, Ts) with
+    ``rocof_ratio`` and ``dw_ratio`` (peak / relay setting), ``active`` (SCC
+    active fraction) and ``mean_mod`` (pu); ``baseline``: the same per event
+    without SCC (dotted).  Rows: the attack, the legitimate load steps."""
+    events = list(dict.fromkeys(summary.event))
+    fig, axes = plt.subplots(len(events), 3, figsize=(14, 3.6 * len(events)), squeeze=False,
+                             layout="constrained")
+    ts_values = sorted(summary.Ts.unique())
+    markers = dict(zip(ts_values, "osD^v<>"))
+    cmap = plt.get_cmap("viridis")
+    alphas = sorted(summary.alpha.unique())
+    colors = {a: cmap(i / max(len(alphas) - 1, 1)) for i, a in enumerate(alphas)}
+    cols = (("active", "rocof_ratio", "SCC active fraction", "Peak |ROCOF| / ROCOF setting"),
+            ("active", "dw_ratio", "SCC active fraction", "Peak |Δω̂| / F"),
+            ("mean_mod", "worst_ratio", "Mean |modification| of $\\Delta P_c$ (pu)",
+             "Worst peak / relay setting"))
+    for i, ev in enumerate(events):
+        sel = summary[summary.event == ev]
+        for j, (x, y, xl, yl) in enumerate(cols):
+            ax = axes[i, j]
+            for _, r in sel.iterrows():
+                ax.scatter(r[x], r[y], color=colors[r.alpha], marker=markers[r.Ts], s=40,
+                           edgecolors="k", linewidths=0.3)
+            ax.axhline(1.0, color="k", ls="--", lw=1, label="relay setting")
+            ax.axhline(baseline.loc[ev, y], color="gray", ls=":", lw=1, label="no SCC")
+            ax.set_xlabel(xl)
+            ax.set_ylabel(yl)
+            ax.set_title(f"{ev}", fontsize=9)
+            ax.grid(alpha=0.3)
+    handles = [plt.Line2D([], [], color=colors[a], marker="o", ls="", label=f"α={a:g}")
+               for a in alphas]
+    handles += [plt.Line2D([], [], color="k", marker=markers[t], ls="", mfc="none",
+                           label=f"$T_s$={t:g} s") for t in ts_values]
+    handles += [plt.Line2D([], [], color="k", ls="--", label="relay setting"),
+                plt.Line2D([], [], color="gray", ls=":", label="no SCC")]
+    fig.legend(handles=handles, loc="outside right upper", fontsize=8)
+    fig.suptitle(title)
+    return fig

@@ -30,10 +30,11 @@ FIGURES = {  # name -> notebook
     "fig5": "03_fig5_bias_attack.ipynb",       # bias attack on the frequency reference
     "fig6": "04_fig6_load_step.ipynb",         # large load step
     "fig7": "05_fig7_fault.ipynb",             # fault at B5 and over-current trip
+    "surface": "06_attack_surface.ipynb",      # attack-surface maps, alpha-Ts trade-off
     "kalman": "07_kalman.ipynb",               # SCC on Kalman estimates vs true states
 }
 FIGURE_PLANTS = {"tutorial": ("linear",), "fig4": PLANTS, "fig5": PLANTS, "fig6": PLANTS,
-                 "fig7": ("testbed",), "kalman": ("linear",)}
+                 "fig7": ("testbed",), "surface": ("linear",), "kalman": ("linear",)}
 POSITIVE = {"duration", "Ts", "control_period", "alpha", "alphas", "dt"}
 
 

@@ -2,6 +2,7 @@
 
 import json
 
+import pandas as pd
 import pytest
 
 from lfc import runner
@@ -17,7 +18,11 @@ FIGURE_FILES = {"tutorial": "tutorial_attack", "fig4": "fig4_rocof_attack",
                 "fig5": "fig5_bias_attack", "fig6": "fig6_load_step", "fig7": "fig7_fault",
                 "kalman": "kalman_scc"}
 EXTRA_METRICS = {"fig7": {"oc_trip_t"}}
-RUNS = [(name, plant) for name, plants in runner.FIGURE_PLANTS.items() for plant in plants]
+RUNS = [(name, plant) for name, plants in runner.FIGURE_PLANTS.items() for plant in plants
+        if name != "surface"]
+SMALL_SURFACE = {"amplitudes": [0.1, 0.5], "freqs": [0.5, 1.0], "biases": [0.02, 0.04],
+                 "tradeoff_alphas": [20.0], "tradeoff_Ts": [0.25], "load_steps": [0.1, 0.25],
+                 "duration": 10.0, "jobs": 1}
 
 
 @pytest.mark.parametrize("name, plant", RUNS)
@@ -36,6 +41,20 @@ def test_notebook_runs_and_writes_figure_and_metrics(name, plant, tmp_path):
         assert panel["parameters"]["duration"] == 3.0
         assert panel["parameters"]["plant"] == plant
     assert json.loads((tmp_path / "res" / "claims.json").read_text())
+
+
+def test_attack_surface_notebook_writes_maps_tables_and_claims(tmp_path):
+    nb = runner.NOTEBOOKS_DIR / runner.FIGURES["surface"]
+    runner.execute(nb, tmp_path / nb.name, {**SMALL_SURFACE, "figures_dir": str(tmp_path / "fig"),
+                                            "results_dir": str(tmp_path / "res")})
+    for name in ("attack_surface", "bias_surface", "alpha_ts_tradeoff"):
+        assert (tmp_path / "fig" / f"{name}.png").stat().st_size > 1000
+    surface = pd.read_csv(tmp_path / "res" / "surface.csv")
+    assert len(surface) == 2 * 3 * 2 * 2  # waveforms x (no SCC, 2 alphas) x amplitudes x freqs
+    assert len(pd.read_csv(tmp_path / "res" / "bias.csv")) == 3 * 2
+    assert len(pd.read_csv(tmp_path / "res" / "tradeoff.csv")) == 2 * 3
+    claims = json.loads((tmp_path / "res" / "claims.json").read_text())
+    assert claims and all(claims.values())
 
 
 @pytest.mark.parametrize("name", ["tutorial", "kalman"])

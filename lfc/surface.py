@@ -1,0 +1,97 @@
+"""Scenario tables for the attack-surface maps and the α–T_s trade-off.
+
+Each function returns a table for :func:`lfc.simulate_batch` (one row per
+scenario; ``alpha`` NaN means no SCC).  All attacks and load steps start at
+``lfc.scenarios.ATTACK_START``.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pandas as pd
+
+from lfc.scenarios import ATTACK_START
+
+NO_SCC = float("nan")
+
+
+def _table(rows: list[dict]) -> pd.DataFrame:
+    cols = ["waveform", "channel", "amplitude", "freq_hz", "start", "alpha", "Ts"]
+    return pd.DataFrame(rows, columns=cols + [c for c in rows[0] if c not in cols])
+
+
+def attack_map(waveforms: list[str], amplitudes: list[float], freqs: list[float],
+               alphas: list[float], Ts: float = 0.25) -> pd.DataFrame:
+    """Periodic attacks on P_c: every waveform × amplitude (pu) × frequency (Hz),
+    without SCC and with the SCC for each alpha (1/s)."""
+    return _table([{"waveform": w, "channel": "pc", "amplitude": a, "freq_hz": f,
+                    "start": ATTACK_START, "alpha": al, "Ts": Ts}
+                   for w, al, a, f in itertools.product(waveforms, [NO_SCC, *alphas],
+                                                        amplitudes, freqs)])
+
+
+def bias_map(biases: list[float], alphas: list[float], Ts: float = 0.25) -> pd.DataFrame:
+    """Bias (step) attacks on the frequency reference ω_ref (pu), without SCC and
+    with the SCC for each alpha."""
+    return _table([{"waveform": "step", "channel": "wref", "amplitude": b, "freq_hz": 0.0,
+                    "start": ATTACK_START, "alpha": al, "Ts": Ts}
+                   for al, b in itertools.product([NO_SCC, *alphas], biases)])
+
+
+def tradeoff(alphas: list[float], Ts_values: list[float], attack_amplitude: float,
+             attack_freq: float, load_steps: list[float]) -> pd.DataFrame:
+    """For every (alpha, T_s), and once without SCC: the Fig. 4 sinusoid on P_c
+    (``event="attack"``) and load steps (``event="load"``, where every
+    intervention is a false alarm)."""
+    settings = [(NO_SCC, float("nan"))] + list(itertools.product(alphas, Ts_values))
+    events = [("attack", "sinusoid", "pc", attack_amplitude, attack_freq)]
+    events += [("load", "step", "load", s, 0.0) for s in load_steps]
+    return _table([{"waveform": w, "channel": ch, "amplitude": a, "freq_hz": f,
+                    "start": ATTACK_START, "alpha": al, "Ts": ts, "event": ev}
+                   for (al, ts), (ev, w, ch, a, f) in itertools.product(settings, events)])
+
+
+def scc_label(alpha: float) -> str:
+    """"no SCC" or "SCC α=<alpha>"."""
+    return "no SCC" if np.isnan(alpha) else f"SCC α={alpha:g}"
+
+
+def stopped_summary(results: pd.DataFrame) -> pd.DataFrame:
+    """Per waveform and SCC setting: attacks that trip without SCC, and how many
+    of those the SCC stops."""
+    base = results[results.alpha.isna()].set_index(["waveform", "amplitude", "freq_hz"])
+    rows = []
+    for (w, al), grp in results[results.alpha.notna()].groupby(["waveform", "alpha"]):
+        g = grp.set_index(["waveform", "amplitude", "freq_hz"])
+        tripping = base.loc[g.index, "tripped"].to_numpy()
+        rows.append({"waveform": w, "SCC": scc_label(al), "trip without SCC": int(tripping.sum()),
+                     "stopped": int((tripping & ~g.tripped.to_numpy()).sum()),
+                     "caused by SCC": int((~tripping & g.tripped.to_numpy()).sum())})
+    return pd.DataFrame(rows)
+
+
+def tradeoff_summary(results: pd.DataFrame, relays, e12_limit: float
+                     ) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Per event and (alpha, T_s): peak |ROCOF| and |Δω̂| over the relay settings,
+    SCC active fraction and mean |modification|.  Load steps are aggregated over
+    the sizes below ``e12_limit`` (worst ratio, mean intervention): legitimate
+    events, where every intervention is a false alarm.
+
+    Returns
+    -------
+    (summary, baseline) : the SCC settings, and the no-SCC values indexed by event.
+    """
+    legit = results[(results.event == "attack") | (results.amplitude < e12_limit)]
+    table = legit.assign(rocof_ratio=legit.max_abs_rocof_meas / relays.rocof_limit,
+                         dw_ratio=legit.max_abs_dw_meas / relays.F)
+    table = table.assign(worst_ratio=table[["rocof_ratio", "dw_ratio"]].max(axis=1),
+                         event=table.event.map({"attack": "attack on P_c",
+                                                "load": "load steps below E12 (false alarms)"}))
+    agg = {"rocof_ratio": "max", "dw_ratio": "max", "worst_ratio": "max",
+           "scc_active_fraction": "mean", "mean_abs_modification": "mean"}
+    names = {"scc_active_fraction": "active", "mean_abs_modification": "mean_mod"}
+    scc = table[table.alpha.notna()].groupby(["event", "alpha", "Ts"], as_index=False)
+    baseline = table[table.alpha.isna()].groupby("event").agg(agg).rename(columns=names)
+    return scc.agg(agg).rename(columns=names), baseline
