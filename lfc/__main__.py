@@ -1,4 +1,5 @@
-"""Command line: ``python -m lfc reproduce`` and ``python -m lfc sweep``."""
+"""Command line: ``python -m lfc reproduce``, ``sweep`` (notebooks over a grid) and
+``batch`` (a scenario table through the batched simulator)."""
 
 from __future__ import annotations
 
@@ -25,10 +26,42 @@ def _parser() -> argparse.ArgumentParser:
     sw.add_argument("notebook", type=Path)
     sw.add_argument("-p", "--param", nargs="+", action="append", default=[],
                     metavar=("NAME", "VALUE"), help="a parameter and its values")
-    sw.add_argument("--jobs", type=int, default=2)
+    sw.add_argument("--jobs", type=int, default=None, help="worker processes (default: cores)")
     sw.add_argument("--out", type=Path, default=None,
                     help="default build/sweeps/<notebook name>")
+    sw.add_argument("--dask", metavar="ADDRESS", help="run on a Dask scheduler at ADDRESS")
+    bt = sub.add_parser("batch", help="simulate a scenario table (CSV) with simulate_batch")
+    bt.add_argument("scenarios", type=Path, help="CSV, one row per scenario (see lfc.batch)")
+    bt.add_argument("--duration", type=float, required=True, help="simulated time (s)")
+    bt.add_argument("--out", type=Path, required=True,
+                    help="folder: per-chunk files (resume) and results.csv")
+    bt.add_argument("--chunk-size", type=int, default=500)
+    bt.add_argument("--dask", metavar="ADDRESS", help="run on a Dask scheduler at ADDRESS")
     return ap
+
+
+def _executor(address: str | None):
+    """A Dask cluster's executor for ``--dask ADDRESS``, else None (the default pool)."""
+    if not address:
+        return None
+    from distributed import Client
+    return Client(address).get_executor()
+
+
+def _batch(args) -> int:
+    import pandas as pd
+
+    from lfc.batch import simulate_batch
+    from lfc.model import LFCParams
+    if not args.scenarios.exists():
+        raise ValueError(f"scenario table not found: {args.scenarios}")
+    table = simulate_batch(LFCParams(), pd.read_csv(args.scenarios), duration=args.duration,
+                           chunk_size=args.chunk_size, out=args.out / "chunks",
+                           executor=_executor(args.dask))
+    table.to_csv(args.out / "results.csv", index=False)
+    print(f"{len(table)} scenarios, {int(table.tripped.sum())} tripped -> "
+          f"{args.out / 'results.csv'}")
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -39,12 +72,15 @@ def main(argv: list[str] | None = None) -> int:
                                         args.build_dir)
             print(runner.summary_table(outcomes).to_string(index=False))
             return 0 if all(o.ok for o in outcomes) else 1
+        if args.command == "batch":
+            return _batch(args)
         grid = {}
         for name, *values in args.param:
             if not values:
                 raise ValueError(f"parameter {name!r} has no values")
             grid[name] = [runner.parse_value(v) for v in values]
-        table = runner.sweep(args.notebook, grid, args.out, args.jobs)
+        table = runner.sweep(args.notebook, grid, args.out, args.jobs,
+                             executor=_executor(args.dask))
         print(table.to_string(index=False))
         return 0
     except (ValueError, RuntimeError) as err:

@@ -1,8 +1,10 @@
 """Execute the notebooks with papermill: reproduce every figure, or sweep parameters.
 
-Runs go to an executor (default: a thread pool; each papermill run drives its
-own kernel process, so threads give real parallelism).  Any
-``concurrent.futures.Executor`` can be passed.
+Runs go to an executor: ``reproduce`` uses a thread pool (each papermill run
+drives its own kernel process, so threads give real parallelism); ``sweep``
+defaults to a local process pool with one worker per core.  Any
+``concurrent.futures.Executor`` can be passed, e.g. a Dask cluster's
+``distributed.Client(address).get_executor()``.
 """
 
 from __future__ import annotations
@@ -10,9 +12,11 @@ from __future__ import annotations
 import ast
 import itertools
 import json
+import os
 import re
 import time
-from concurrent.futures import Executor, ThreadPoolExecutor, as_completed
+from concurrent.futures import (Executor, ProcessPoolExecutor, ThreadPoolExecutor,
+                                as_completed)
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -185,8 +189,11 @@ def run_id(point: dict) -> str:
 
 
 def sweep(notebook: str | Path, grid: dict[str, list], out: Path | None = None,
-          jobs: int = 2, executor: Executor | None = None) -> pd.DataFrame:
+          jobs: int | None = None, executor: Executor | None = None) -> pd.DataFrame:
     """Run ``notebook`` over the Cartesian ``grid``; resume-safe; return the table.
+
+    Runs go to ``executor`` (default: a process pool of ``jobs`` workers, one
+    per core if None).
 
     Each run writes into ``out/<run_id>/`` (executed notebook, figures,
     ``metrics.json``) and a ``done.json`` marker last, so an interrupted sweep
@@ -203,7 +210,7 @@ def sweep(notebook: str | Path, grid: dict[str, list], out: Path | None = None,
         _prepare_testbed()
     out = Path(out or ROOT / "build" / "sweeps" / notebook.stem).resolve()
     points = [dict(zip(grid, combo)) for combo in itertools.product(*grid.values())]
-    pool = executor or ThreadPoolExecutor(max_workers=max(1, jobs))
+    pool = executor or ProcessPoolExecutor(max_workers=max(1, jobs or os.cpu_count() or 1))
     futures = {}
     for point in points:
         folder = out / run_id(point)
