@@ -50,6 +50,7 @@ from lfc.model import STATES, LFCParams, discretize, lfc_matrices, output_matrix
 from lfc.relays import RelaySettings
 
 SOLVERS = ("exact", "cvxpy")
+METHODS = ("paper", "certified")
 CONSTRAINTS = ("frequency", "rocof")
 _G_EPS = 1e-12      # |coefficient on u| below which a constraint cannot be influenced
 _BIND_TOL = 1e-7    # relative tolerance to report a bound as binding
@@ -157,12 +158,22 @@ class SafetyFilter:
     slack_weight : float
         Penalty ``rho`` on squared constraint violations (pu^-2) in the
         relaxed QP used when the constraints conflict, > 0. Default 1e4.
+    method : {"paper", "certified"}
+        The paper's CBF-QP (default), or the filter with a guarantee of
+        :mod:`lfc.certified` (``alpha``, ``Ts`` and ``slack_weight`` unused;
+        ``solver`` must be ``"exact"``; ``cvxpy_certified`` is its cvxpy check).
+    period, horizon, load_bound, margin : float
+        Options of ``method="certified"`` (see :class:`lfc.certified.CertifiedSet`):
+        time between calls (s, default 0.01), look-ahead before the terminal
+        set (s, default 4), load deviation covered (pu, default 0) and extra
+        fractional tightening of the limits (default 0).
     """
 
     def __init__(self, params: LFCParams, relays: RelaySettings | None = None, *,
                  alpha: float = 20.0, Ts: float = 0.25, solver: str = "exact",
                  u_min: float = -math.inf, u_max: float = math.inf,
-                 slack_weight: float = 1e4) -> None:
+                 slack_weight: float = 1e4, method: str = "paper", period: float = 0.01,
+                 horizon: float = 4.0, load_bound: float = 0.0, margin: float = 0.0) -> None:
         check_positive("alpha", alpha)
         check_positive("Ts", Ts)
         check_positive("slack_weight", slack_weight)
@@ -178,8 +189,33 @@ class SafetyFilter:
         self._build_prediction()
         self._cvx = _CvxpyQP(self.u_min, self.u_max, self.slack_weight) \
             if solver == "cvxpy" else None
+        self.method, self._certified = self._make_method(method, period, horizon, load_bound,
+                                                         margin)
+
+    def _make_method(self, method: str, period: float, horizon: float, load_bound: float,
+                     margin: float):
+        if method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+        if method == "paper":
+            return method, None
+        if self.solver != "exact":
+            raise ValueError("solver must be 'exact' with method='certified' "
+                             "(lfc.certified.cvxpy_certified is its cvxpy reference)")
+        from lfc.certified import CertifiedFilter, CertifiedSet
+        return method, CertifiedFilter(CertifiedSet(
+            self.params, self.relays, period=period, horizon=horizon, load_bound=load_bound,
+            margin=margin, u_min=self.u_min, u_max=self.u_max))
+
+    def reset(self) -> None:
+        """Forget any state between runs (the certified filter's held command)."""
+        if self._certified is not None:
+            self._certified.reset()
 
     def __repr__(self) -> str:
+        if self._certified is not None:
+            c = self._certified.cert
+            return (f"SafetyFilter(method='certified', load_bound={c.load_bound}, "
+                    f"u_min={self.u_min}, u_max={self.u_max})")
         return (f"SafetyFilter(alpha={self.alpha}, Ts={self.Ts}, solver={self.solver!r}, "
                 f"u_min={self.u_min}, u_max={self.u_max})")
 
@@ -231,6 +267,8 @@ class SafetyFilter:
             ``h`` (N, 2), ``y`` (N, 2), ``margin`` (N, 2), and the constraint
             rows ``kind`` and ``bound`` (N, 2) as in :func:`solve_interval_qp`.
         """
+        if self._certified is not None:
+            return self._certified.filter_batch(x, u_ref, p_load)
         x = np.asarray(x, float).reshape(-1, 5)
         u_ref = np.asarray(u_ref, float).reshape(-1)
         p_load = np.zeros_like(u_ref) if p_load is None else np.asarray(p_load, float).reshape(-1)
@@ -294,6 +332,8 @@ class SafetyFilter:
         xs = np.asarray(x, float).ravel().tolist()
         if len(xs) != 5:
             raise ValueError(f"x must have 5 entries {STATES}, got {len(xs)}")
+        if self._certified is not None:
+            return self._certified.filter(xs, u_ref, p_load)
         u_ref, p_load = float(u_ref), float(p_load)
         rows = None
         if all(map(math.isfinite, xs)) and math.isfinite(u_ref) and math.isfinite(p_load):

@@ -1,0 +1,269 @@
+"""A safety filter with a guarantee: no command on P_c or ω_ref trips the relays.
+
+``SafetyFilter(params, relays, method="certified")`` uses this module.  The
+idea is an implicit control-invariant set with a *hold* backup law:
+
+* A command ``u`` is **certified** at state ``x`` if applying it and holding it
+  for ever keeps both measured outputs (``dw_meas``, ``rocof_meas``) inside the
+  relay limits at every relay sample (``resolution``, the plant step) for all
+  future time.  On the design model that is checkable exactly: the trajectory
+  is affine in ``u``; over a finite ``horizon`` every sample is a pair of
+  affine constraints, and at the end the deviation from the held command's
+  equilibrium ``e = x_N − x_eq(u)`` must lie in an ellipsoid
+  ``eᵀ P e ≤ ρ²`` that the dynamics never leave (``P`` a discrete Lyapunov
+  matrix of the model) and on which the outputs stay inside the limits.  The
+  equilibrium itself must sit inside the frequency limit.  Each condition is an
+  interval in ``u`` (the ellipsoid a convex quadratic), so the admissible set
+  is one interval and the filter is ``u_ref`` clipped to it — exact, no QP
+  solver, microseconds.
+* If no command is certified from the current state (only possible when an
+  assumption below is broken), the filter keeps the last certified command: its
+  certificate, issued when it was applied, still covers holding it.  Flagged
+  ``outside`` with the reason.
+
+**Guarantee.**  On the design model (plant = ``params``), with the exact state,
+a command held between calls spaced ``period`` apart, a load deviation
+``|ΔP_L(t) − p_load| ≤ load_bound`` (``p_load`` as given to the filter when
+the active command was certified) and a start from a state where some command
+is certified (e.g. equilibrium): the measured frequency and ROCOF never leave
+``|Δω̂| ≤ F`` and ``|ROCOF| ≤ rocof_limit`` at any plant sample, whatever the
+incoming commands are (OF2, UF2 and ROCOF never trip).  The load bound is
+covered by tightening every limit by ``load_bound`` times the ℓ1 norm of the
+load-to-output impulse response; a ``load_bound`` for which nothing is left
+(near E12: a load step ΔP_L gives ROCOF ≈ ΔP_L/M whatever the governor does)
+is rejected at construction.  ``margin`` tightens both limits further, by a
+fraction, for estimation error and plant–model mismatch (no guarantee then).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.linalg import solve_discrete_lyapunov
+
+from lfc._validate import check_nonnegative, check_positive
+from lfc.model import LFCParams, discretize, lfc_matrices, output_matrix
+from lfc.relays import RelaySettings
+
+L1_HORIZON = 60.0  # s over which the load-to-output impulse response is summed
+NUMERIC_MARGIN = 1e-6  # relative tightening that absorbs floating-point differences
+
+
+class CertifiedSet:
+    """The certified-command interval for a design model (see module docstring).
+
+    Parameters
+    ----------
+    params : LFCParams
+    relays : RelaySettings
+    period : float
+        Time between filter calls (s); the command is held in between.
+    resolution : float
+        Relay sampling step the limits are checked at (s); ``period`` must be a
+        multiple of it.  Default 1 ms (the plant step of ``lfc.simulate``).
+    horizon : float
+        Look-ahead before the terminal ellipsoid (s), > 0. Default 4 s: on the
+        defaults a longer one certifies no more commands (measured on states of
+        attacked runs; the slowest mode decays as exp(−0.93 t)).
+    load_bound : float
+        Bound on the load deviation from ``p_load`` (pu), >= 0.
+    margin : float
+        Extra fractional tightening of both limits, in [0, 1).
+    u_min, u_max : float
+        Actuator limits (pu).
+    """
+
+    def __init__(self, params: LFCParams, relays: RelaySettings, *, period: float = 0.01,
+                 resolution: float = 1e-3, horizon: float = 4.0, load_bound: float = 0.0,
+                 margin: float = 0.0, u_min: float = -math.inf, u_max: float = math.inf) -> None:
+        check_positive("period", period)
+        check_positive("resolution", resolution)
+        check_positive("horizon", horizon)
+        check_nonnegative("load_bound", load_bound)
+        if not 0.0 <= margin < 1.0:
+            raise ValueError(f"margin must be in [0, 1), got {margin!r}")
+        ratio = period / resolution
+        if abs(ratio - round(ratio)) > 1e-9 * ratio or round(ratio) < 1:
+            raise ValueError(f"period must be a positive integer multiple of resolution "
+                             f"({resolution}), got {period}")
+        self.params, self.relays, self.load_bound = params, relays, float(load_bound)
+        self.u_min, self.u_max = float(u_min), float(u_max)
+        Ad, Bd = discretize(params, resolution)
+        C = output_matrix()
+        l1 = _l1_norms(Ad, Bd[:, 1], C, int(round(L1_HORIZON / resolution)))
+        base = np.array([relays.F, relays.rocof_limit]) * (1 - margin) * (1 - NUMERIC_MARGIN)
+        self.limits = base - self.load_bound * l1
+        if np.any(self.limits <= 0):
+            most = float(np.min(base / l1))
+            raise ValueError(f"load_bound must be < {most:.4g} pu for these relays: a larger "
+                             "load deviation can trip a relay whatever the governor does "
+                             f"(E12); got {load_bound}")
+        self._horizon_rows(Ad, Bd, C, int(math.ceil(horizon / resolution)))
+        self._terminal(params, Ad, C)
+
+    def _horizon_rows(self, Ad: np.ndarray, Bd: np.ndarray, C: np.ndarray, n: int) -> None:
+        """Outputs at samples 1..n under a held u: ``y = G x + hu u + hl p`` per row."""
+        G, hu, hl = np.empty((n, 2, 5)), np.empty((n, 2)), np.empty((n, 2))
+        Ak, S = np.eye(5), np.zeros((5, 5))  # Ad^k and sum_{i<k} Ad^i
+        for k in range(n):
+            S = S + Ak
+            Ak = Ad @ Ak
+            G[k], hu[k], hl[k] = C @ Ak, C @ S @ Bd[:, 0], C @ S @ Bd[:, 1]
+        self._Phi_n, self._S_n = Ak, S
+        G, hu, hl = G.reshape(-1, 5), hu.ravel(), hl.ravel()
+        lim = np.tile(self.limits, n)
+        if np.any(np.abs(hu) < 1e-15):
+            raise ValueError("horizon too short: the command has no effect on some sample")
+        # -lim <= G x + hu u + hl p <= lim  <=>  u in [lo_i, hi_i] (sign of hu decides)
+        inv = 1.0 / hu
+        up, dn = (lim * inv), (-lim * inv)
+        self._row_a = np.minimum(up, dn)  # lo_i = a_i - (G x + hl p)/hu
+        self._row_b = np.maximum(up, dn)  # hi_i = b_i - (G x + hl p)/hu
+        self._row_G = G * inv[:, None]
+        self._row_l = hl * inv
+        self.n_rows = len(hu)
+        self._Bd = Bd
+
+    def _terminal(self, params: LFCParams, Ad: np.ndarray, C: np.ndarray) -> None:
+        """Terminal ellipsoid around the held command's equilibrium."""
+        A, B = lfc_matrices(params)
+        self._q = -np.linalg.solve(A, B)            # x_eq = q[:, 0] u + q[:, 1] p
+        # Lyapunov weight: each state scaled by its size at the limits (1 pu of power,
+        # F for the frequencies, the ROCOF limit) so the ellipsoid fits the outputs' box
+        scale = np.array([1.0, 1.0, self.limits[0], self.limits[0], self.limits[1]])
+        self._P = solve_discrete_lyapunov(Ad.T, np.diag(scale ** -2.0))
+        sigma = np.sqrt(np.einsum("ij,jk,ik->i", C, np.linalg.inv(self._P), C))
+        self.rho = float(min(0.5 * self.limits[0] / sigma[0], self.limits[1] / sigma[1]))
+        self._eq_room = self.limits[0] - self.rho * sigma[0]   # |dw_eq| allowed
+        self._dw_eq = (C @ self._q)[0]                          # dw_eq per (u, p)
+        # e = x_N - x_eq = E x + eu u + el p
+        self._E = self._Phi_n
+        self._eu = self._S_n @ self._Bd[:, 0] - self._q[:, 0]
+        self._el = self._S_n @ self._Bd[:, 1] - self._q[:, 1]
+
+    def interval(self, x: np.ndarray, p_load: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Certified interval [lo, hi] of commands for states ``x`` (N, 5) and
+        assumed loads (N,); ``lo > hi`` where none is certified."""
+        s = x @ self._row_G.T + p_load[:, None] * self._row_l      # (N, rows)
+        lo = np.max(self._row_a - s, axis=1)
+        hi = np.min(self._row_b - s, axis=1)
+        lo, hi = self._equilibrium(lo, hi, p_load)
+        lo, hi = self._ellipsoid(lo, hi, x, p_load)
+        return np.maximum(lo, self.u_min), np.minimum(hi, self.u_max)
+
+    def _equilibrium(self, lo, hi, p_load):
+        g_u, g_p = self._dw_eq
+        half = self._eq_room / abs(g_u)
+        centre = -g_p * p_load / g_u
+        return np.maximum(lo, centre - half), np.minimum(hi, centre + half)
+
+    def _ellipsoid(self, lo, hi, x, p_load):
+        """(e0 + eu u)ᵀ P (e0 + eu u) <= rho²: a u² + b u + c <= 0."""
+        e0 = x @ self._E.T + p_load[:, None] * self._el
+        Pe0 = e0 @ self._P
+        a = float(self._eu @ self._P @ self._eu)
+        b = 2 * Pe0 @ self._eu
+        c = np.einsum("ij,ij->i", Pe0, e0) - self.rho ** 2
+        disc = b * b - 4 * a * c
+        root = np.sqrt(np.maximum(disc, 0.0))
+        ok = disc >= 0
+        return (np.where(ok, np.maximum(lo, (-b - root) / (2 * a)), np.inf),
+                np.where(ok, np.minimum(hi, (-b + root) / (2 * a)), -np.inf))
+
+
+def _l1_norms(Ad: np.ndarray, bl: np.ndarray, C: np.ndarray, n: int) -> np.ndarray:
+    """Sum over k of |C Ad^k bl|: the worst output deviation per pu of load deviation."""
+    total, v = np.zeros(2), bl.copy()
+    for _ in range(n):
+        total += np.abs(C @ v)
+        v = Ad @ v
+    return total
+
+
+class CertifiedFilter:
+    """The filter around :class:`CertifiedSet`: clip to the certified interval,
+    or hold the last certified command.  Used through
+    ``SafetyFilter(..., method="certified")``; stateful (the held command),
+    :meth:`reset` before a new run.
+
+    ``FilterInfo`` fields: ``y_*`` and ``h_*`` describe the current measured
+    outputs; ``margin_freq``/``margin_rocof`` are ``u − lo`` and ``hi − u``, the
+    distances (pu) from the applied command to the certified interval's ends;
+    ``binding`` is ``("certified",)`` (plus ``u_min``/``u_max``) when clipped;
+    ``outside`` means no command was certified and the last one is held.
+    """
+
+    def __init__(self, cert: CertifiedSet) -> None:
+        self.cert = cert
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the held command (a run starts at equilibrium with u = 0)."""
+        self._u_prev = 0.0
+        self._u_prev_batch = None
+
+    def filter(self, x: np.ndarray, u_ref: float, p_load: float = 0.0):
+        from lfc.cbf import FilterInfo
+        x = np.asarray(x, float).reshape(1, 5)
+        u, flags = self._decide(x, np.array([float(u_ref)]), np.array([float(p_load)]),
+                                np.array([self._u_prev]))
+        self._u_prev = float(u[0])
+        (h_w, h_v), (m_lo, m_hi) = flags["h"][0], flags["margin"][0]
+        return float(u[0]), FilterInfo(
+            u_ref=float(u_ref), u=float(u[0]), active=bool(flags["active"][0]),
+            infeasible=False, outside=bool(flags["outside"][0]),
+            invalid_input=bool(flags["invalid_input"][0]), solver_error=False,
+            h_freq=float(h_w), h_rocof=float(h_v), margin_freq=float(m_lo),
+            margin_rocof=float(m_hi), y_freq=float(x[0, 3]), y_rocof=float(x[0, 4]),
+            binding=flags["binding"], reason=flags["reason"])
+
+    def filter_batch(self, x: np.ndarray, u_ref: np.ndarray, p_load: np.ndarray | None = None
+                     ) -> tuple[np.ndarray, dict]:
+        x = np.asarray(x, float).reshape(-1, 5)
+        u_ref = np.asarray(u_ref, float).reshape(-1)
+        p_load = np.zeros_like(u_ref) if p_load is None else np.asarray(p_load, float)
+        if self._u_prev_batch is None or len(self._u_prev_batch) != len(u_ref):
+            self._u_prev_batch = np.zeros(len(u_ref))
+        u, flags = self._decide(x, u_ref, p_load, self._u_prev_batch)
+        self._u_prev_batch = u.copy()
+        flags["infeasible"] = np.zeros(len(u), bool)
+        return u, flags
+
+    def _decide(self, x, u_ref, p_load, u_prev):
+        cert = self.cert
+        valid = np.isfinite(x).all(axis=1) & np.isfinite(u_ref) & np.isfinite(p_load)
+        xs, ps = np.where(valid[:, None], x, 0.0), np.where(valid, p_load, 0.0)
+        lo, hi = cert.interval(xs, ps)
+        certified = valid & (lo <= hi)
+        ref = np.where(np.isfinite(u_ref), u_ref, u_prev)
+        u = np.where(certified, np.clip(ref, lo, np.maximum(lo, hi)), u_prev)
+        active = u != u_ref
+        lims = np.array([cert.relays.F, cert.relays.rocof_limit])
+        flags = {"active": active, "outside": valid & ~certified, "invalid_input": ~valid,
+                 "h": np.where(valid[:, None], lims ** 2 - xs[:, 3:5] ** 2, np.nan),
+                 "margin": np.where(certified[:, None], np.column_stack([u - lo, hi - u]),
+                                    np.nan)}
+        if len(u) == 1:
+            flags["binding"] = self._binding(float(u[0]), lo[0], hi[0], bool(active[0]),
+                                             bool(certified[0]))
+            flags["reason"] = self._reason(bool(active[0]), bool(certified[0]),
+                                           bool(valid[0]))
+        return u, flags
+
+    def _binding(self, u, lo, hi, active, certified) -> tuple[str, ...]:
+        if not (active and certified):
+            return ()
+        names = ["certified"]
+        names += [n for n, lim in (("u_min", self.cert.u_min), ("u_max", self.cert.u_max))
+                  if math.isfinite(lim) and abs(u - lim) <= 1e-9 * (1 + abs(lim))]
+        return tuple(names)
+
+    @staticmethod
+    def _reason(active: bool, certified: bool, valid: bool) -> str:
+        if not valid:
+            return "invalid input (non-finite state, command or load); last certified command held"
+        if not certified:
+            return ("no command is certified from this state (load beyond load_bound, model "
+                    "or estimation error); last certified command held")
+        return "command clipped to the certified interval" if active else ""
