@@ -26,14 +26,14 @@ import numpy as np
 import pandas as pd
 from tqdm.auto import tqdm
 
-from lfc.cbf import SafetyFilter
+from lfc.cbf import METHODS, SafetyFilter
 from lfc.controller import sample_signal
 from lfc.model import LFCParams, block_propagator, discretize
 from lfc.relays import RELAY_NAMES, RelayBank, RelaySettings
-from lfc.signals import Chirp, Ramp, Signal, Sinusoid, Square, Step
+from lfc.signals import Chirp, Ramp, Samples, Signal, Sinusoid, Square, Step
 from lfc.simulate import _check_timing
 
-WAVEFORMS = ("sinusoid", "square", "chirp", "step", "ramp", "none")
+WAVEFORMS = ("sinusoid", "square", "chirp", "step", "ramp", "samples", "none")
 CHANNELS = ("pc", "wref", "load")
 REQUIRED = ("waveform", "channel", "amplitude", "freq_hz", "start", "alpha", "Ts")
 CHIRP_F0 = 0.1  # Hz, where every chirp starts
@@ -47,7 +47,10 @@ def scenario_signal(row: pd.Series, duration: float) -> Signal | None:
 
     ``amplitude`` is in pu (pu/s for a ramp), ``freq_hz`` the frequency (the
     end frequency of a chirp, which starts at ``CHIRP_F0``), ``start`` and the
-    optional ``stop`` in s (a chirp's default stop is ``duration``).
+    optional ``stop`` in s (a chirp's default stop is ``duration``).  A
+    ``"samples"`` row (free-form attacks) carries a sequence ``values`` (pu),
+    one every ``sample_period`` s from ``start``, interpolated linearly (so a
+    sequence on the control grid is applied exactly as given).
     """
     w, a, f, start = row["waveform"], row["amplitude"], row["freq_hz"], row["start"]
     stop = row.get("stop", math.inf)
@@ -62,6 +65,9 @@ def scenario_signal(row: pd.Series, duration: float) -> Signal | None:
         return Step(a, start=start)
     if w == "ramp":
         return Ramp(a, start=start, stop=stop)
+    if w == "samples":  # free-form: one value per sample_period from start, held after
+        values = np.asarray(row["values"], float)
+        return Samples(start + row["sample_period"] * np.arange(len(values)), values)
     return None
 
 
@@ -87,6 +93,11 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
             raise ValueError(f"column {col!r} must be finite{' and > 0' if col == 'Ts' else ''}"
                              f"{' and >= 0' if col in ('freq_hz', 'start') else ''}; row "
                              f"{scenarios.index[bad][0]!r} has {scenarios[col][bad].iloc[0]!r}")
+    if "method" in scenarios.columns:
+        bad = ~scenarios["method"].isin(METHODS)
+        if bad.any():
+            raise ValueError(f"column 'method' must be one of {METHODS}; row "
+                             f"{scenarios.index[bad][0]!r} has {scenarios['method'][bad].iloc[0]!r}")
     alpha = pd.to_numeric(scenarios["alpha"], errors="coerce")
     bad = scenarios["alpha"].notna() & ~(alpha > 0)
     if bad.any():
@@ -143,10 +154,17 @@ class _Batch:
     def _filters(self, scenarios: pd.DataFrame, relays: RelaySettings) -> None:
         alpha = pd.to_numeric(scenarios["alpha"]).to_numpy(float)
         ts = pd.to_numeric(scenarios["Ts"]).to_numpy(float)
+        method = scenarios.get("method", pd.Series("paper", index=scenarios.index)).to_numpy()
+        period = self.period if self.n_ctrl > 1 else self.ratio * float(self.t[1])
         self.groups = []
-        for a, t in sorted({(a, t) for a, t in zip(alpha, ts) if np.isfinite(a)}):
-            rows = np.flatnonzero((alpha == a) & (ts == t))
-            self.groups.append((rows, SafetyFilter(self.params, relays, alpha=a, Ts=t)))
+        keys = {(m, a, t) if m == "paper" else (m, 0.0, 0.0)
+                for m, a, t in zip(method, alpha, ts) if np.isfinite(a)}
+        for m, a, t in sorted(keys):
+            sel = (method == m) & np.isfinite(alpha)
+            rows = np.flatnonzero(sel & (alpha == a) & (ts == t) if m == "paper" else sel)
+            filt = SafetyFilter(self.params, relays, alpha=a, Ts=t) if m == "paper" else \
+                SafetyFilter(self.params, relays, method=m, period=period)
+            self.groups.append((rows, filt))
 
     def run(self) -> pd.DataFrame:
         X = np.zeros((self.n, 5))
@@ -222,7 +240,10 @@ def simulate_batch(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
         reference, ``"load"``), ``amplitude`` (pu; pu/s for a ramp), ``freq_hz``
         (Hz; a chirp's end frequency, from ``CHIRP_F0``), ``start`` (s),
         ``alpha`` (1/s; NaN runs without SCC) and ``Ts`` (s); optionally
-        ``stop`` (s).  Other columns are carried through.
+        ``stop`` (s), ``values`` and ``sample_period`` (``"samples"`` rows)
+        and ``method`` (``"paper"``, the default, or
+        ``"certified"``; the certified filter ignores ``alpha`` and ``Ts`` but
+        runs only where ``alpha`` is not NaN).  Other columns are carried through.
     duration, dt, control_period : float
         As in :func:`lfc.simulate` (s).
     relays : RelaySettings, optional
@@ -246,6 +267,8 @@ def simulate_batch(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
     """
     check_scenarios(scenarios)
     _check_timing(duration, dt, control_period)
+    if out is not None and (scenarios["waveform"] == "samples").any():
+        raise ValueError("out (chunk files) cannot hold 'samples' rows; run them without out")
     if not (isinstance(chunk_size, int) and chunk_size >= 1):
         raise ValueError(f"chunk_size must be an integer >= 1, got {chunk_size!r}")
     relays = relays or RelaySettings()

@@ -99,7 +99,8 @@ class CertifiedSet:
             raise ValueError(f"load_bound must be < {most:.4g} pu for these relays: a larger "
                              "load deviation can trip a relay whatever the governor does "
                              f"(E12); got {load_bound}")
-        self._horizon_rows(Ad, Bd, C, int(math.ceil(horizon / resolution)))
+        self._Ad, self.n_steps = Ad, int(math.ceil(horizon / resolution))
+        self._horizon_rows(Ad, Bd, C, self.n_steps)
         self._terminal(params, Ad, C)
 
     def _horizon_rows(self, Ad: np.ndarray, Bd: np.ndarray, C: np.ndarray, n: int) -> None:
@@ -120,7 +121,7 @@ class CertifiedSet:
         up, dn = (lim * inv), (-lim * inv)
         self._row_a = np.minimum(up, dn)  # lo_i = a_i - (G x + hl p)/hu
         self._row_b = np.maximum(up, dn)  # hi_i = b_i - (G x + hl p)/hu
-        self._row_G = G * inv[:, None]
+        self._row_GT = np.ascontiguousarray((G * inv[:, None]).T)  # (5, rows): fast x @ GT
         self._row_l = hl * inv
         self.n_rows = len(hu)
         self._Bd = Bd
@@ -135,22 +136,43 @@ class CertifiedSet:
         self._P = solve_discrete_lyapunov(Ad.T, np.diag(scale ** -2.0))
         sigma = np.sqrt(np.einsum("ij,jk,ik->i", C, np.linalg.inv(self._P), C))
         self.rho = float(min(0.5 * self.limits[0] / sigma[0], self.limits[1] / sigma[1]))
-        self._eq_room = self.limits[0] - self.rho * sigma[0]   # |dw_eq| allowed
-        self._dw_eq = (C @ self._q)[0]                          # dw_eq per (u, p)
+        self._eq_room = float(self.limits[0] - self.rho * sigma[0])  # |dw_eq| allowed
+        self._dw_eq = tuple(map(float, (C @ self._q)[0]))            # dw_eq per (u, p)
         # e = x_N - x_eq = E x + eu u + el p
         self._E = self._Phi_n
         self._eu = self._S_n @ self._Bd[:, 0] - self._q[:, 0]
         self._el = self._S_n @ self._Bd[:, 1] - self._q[:, 1]
+        self._a_quad = float(self._eu @ self._P @ self._eu)
 
     def interval(self, x: np.ndarray, p_load: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Certified interval [lo, hi] of commands for states ``x`` (N, 5) and
         assumed loads (N,); ``lo > hi`` where none is certified."""
-        s = x @ self._row_G.T + p_load[:, None] * self._row_l      # (N, rows)
+        s = x @ self._row_GT + p_load[:, None] * self._row_l       # (N, rows)
         lo = np.max(self._row_a - s, axis=1)
         hi = np.min(self._row_b - s, axis=1)
         lo, hi = self._equilibrium(lo, hi, p_load)
         lo, hi = self._ellipsoid(lo, hi, x, p_load)
         return np.maximum(lo, self.u_min), np.minimum(hi, self.u_max)
+
+    def interval_one(self, x: np.ndarray, p_load: float) -> tuple[float, float]:
+        """:meth:`interval` for one state ``x`` (5,), with less numpy overhead."""
+        s = x @ self._row_GT
+        if p_load:
+            s = s + p_load * self._row_l
+        lo, hi = float(np.max(self._row_a - s)), float(np.min(self._row_b - s))
+        g_u, g_p = self._dw_eq
+        half, centre = self._eq_room / abs(g_u), -g_p * p_load / g_u
+        lo, hi = max(lo, centre - half, self.u_min), min(hi, centre + half, self.u_max)
+        e0 = self._E @ x + p_load * self._el
+        Pe0 = self._P @ e0
+        a = self._a_quad
+        b = 2.0 * float(Pe0 @ self._eu)
+        c = float(Pe0 @ e0) - self.rho ** 2
+        disc = b * b - 4 * a * c
+        if disc < 0:
+            return math.inf, -math.inf
+        root = math.sqrt(disc)
+        return max(lo, (-b - root) / (2 * a)), min(hi, (-b + root) / (2 * a))
 
     def _equilibrium(self, lo, hi, p_load):
         g_u, g_p = self._dw_eq
@@ -162,7 +184,7 @@ class CertifiedSet:
         """(e0 + eu u)ᵀ P (e0 + eu u) <= rho²: a u² + b u + c <= 0."""
         e0 = x @ self._E.T + p_load[:, None] * self._el
         Pe0 = e0 @ self._P
-        a = float(self._eu @ self._P @ self._eu)
+        a = self._a_quad
         b = 2 * Pe0 @ self._eu
         c = np.einsum("ij,ij->i", Pe0, e0) - self.rho ** 2
         disc = b * b - 4 * a * c
@@ -170,6 +192,40 @@ class CertifiedSet:
         ok = disc >= 0
         return (np.where(ok, np.maximum(lo, (-b - root) / (2 * a)), np.inf),
                 np.where(ok, np.minimum(hi, (-b + root) / (2 * a)), -np.inf))
+
+
+def cvxpy_certified(cert: CertifiedSet, x: np.ndarray, u_ref: float,
+                    p_load: float = 0.0) -> float | None:
+    """The certified command as a cvxpy problem (Clarabel): the readable reference.
+
+    Written from the definition, independently of :class:`CertifiedSet`'s
+    precomputed rows: simulate the model's free and unit-command responses
+    sample by sample, then ``min (u − u_ref)²`` subject to both outputs within
+    the limits at every sample, the held command's equilibrium within its
+    room, the terminal deviation in the ellipsoid and the actuator limits.
+    Returns None when no command is certified.  Slow (a problem per call).
+    """
+    import cvxpy as cp
+
+    C, Bd = output_matrix(), cert._Bd
+    free, unit = np.empty((cert.n_steps, 5)), np.empty((cert.n_steps, 5))
+    xf, xu = np.asarray(x, float), np.zeros(5)
+    for k in range(cert.n_steps):
+        xf = cert._Ad @ xf + Bd[:, 1] * p_load
+        xu = cert._Ad @ xu + Bd[:, 0]
+        free[k], unit[k] = xf, xu
+    u = cp.Variable()
+    y = free @ C.T + cp.reshape(u * (unit @ C.T).ravel(), (cert.n_steps, 2), order="C")
+    e = xf + u * xu - (cert._q[:, 0] * u + cert._q[:, 1] * p_load)
+    g_u, g_p = cert._dw_eq
+    cons = [cp.abs(y) <= np.tile(cert.limits, (cert.n_steps, 1)),
+            cp.abs(g_u * u + g_p * p_load) <= cert._eq_room,
+            cp.quad_form(e, cert._P) <= cert.rho ** 2]
+    cons += [u >= cert.u_min] if math.isfinite(cert.u_min) else []
+    cons += [u <= cert.u_max] if math.isfinite(cert.u_max) else []
+    prob = cp.Problem(cp.Minimize(cp.square(u - u_ref)), cons)
+    prob.solve(solver=cp.CLARABEL, tol_gap_abs=1e-10, tol_gap_rel=1e-12, tol_feas=1e-10)
+    return float(u.value) if prob.status == cp.OPTIMAL else None
 
 
 def _l1_norms(Ad: np.ndarray, bl: np.ndarray, C: np.ndarray, n: int) -> np.ndarray:
@@ -203,20 +259,28 @@ class CertifiedFilter:
         self._u_prev = 0.0
         self._u_prev_batch = None
 
-    def filter(self, x: np.ndarray, u_ref: float, p_load: float = 0.0):
+    def filter(self, x: list[float], u_ref: float, p_load: float = 0.0):
+        """One command (see ``SafetyFilter.filter``); ``x`` has 5 entries."""
         from lfc.cbf import FilterInfo
-        x = np.asarray(x, float).reshape(1, 5)
-        u, flags = self._decide(x, np.array([float(u_ref)]), np.array([float(p_load)]),
-                                np.array([self._u_prev]))
-        self._u_prev = float(u[0])
-        (h_w, h_v), (m_lo, m_hi) = flags["h"][0], flags["margin"][0]
-        return float(u[0]), FilterInfo(
-            u_ref=float(u_ref), u=float(u[0]), active=bool(flags["active"][0]),
-            infeasible=False, outside=bool(flags["outside"][0]),
-            invalid_input=bool(flags["invalid_input"][0]), solver_error=False,
-            h_freq=float(h_w), h_rocof=float(h_v), margin_freq=float(m_lo),
-            margin_rocof=float(m_hi), y_freq=float(x[0, 3]), y_rocof=float(x[0, 4]),
-            binding=flags["binding"], reason=flags["reason"])
+        u_ref, p_load = float(u_ref), float(p_load)
+        valid = all(map(math.isfinite, x)) and math.isfinite(u_ref) and math.isfinite(p_load)
+        lo, hi = self.cert.interval_one(np.asarray(x, float), p_load) if valid \
+            else (math.inf, -math.inf)
+        certified = lo <= hi
+        u = min(max(u_ref, lo), hi) if certified else self._u_prev
+        self._u_prev = u
+        active = u != u_ref
+        lims = (self.cert.relays.F, self.cert.relays.rocof_limit)
+        nan = math.nan
+        h = (lims[0] ** 2 - x[3] ** 2, lims[1] ** 2 - x[4] ** 2) if valid else (nan, nan)
+        return u, FilterInfo(
+            u_ref=u_ref, u=u, active=active, infeasible=False,
+            outside=valid and not certified, invalid_input=not valid, solver_error=False,
+            h_freq=h[0], h_rocof=h[1], margin_freq=u - lo if certified else nan,
+            margin_rocof=hi - u if certified else nan,
+            y_freq=x[3] if valid else nan, y_rocof=x[4] if valid else nan,
+            binding=self._binding(u, active, certified),
+            reason=self._reason(active, certified, valid))
 
     def filter_batch(self, x: np.ndarray, u_ref: np.ndarray, p_load: np.ndarray | None = None
                      ) -> tuple[np.ndarray, dict]:
@@ -238,20 +302,13 @@ class CertifiedFilter:
         certified = valid & (lo <= hi)
         ref = np.where(np.isfinite(u_ref), u_ref, u_prev)
         u = np.where(certified, np.clip(ref, lo, np.maximum(lo, hi)), u_prev)
-        active = u != u_ref
         lims = np.array([cert.relays.F, cert.relays.rocof_limit])
-        flags = {"active": active, "outside": valid & ~certified, "invalid_input": ~valid,
-                 "h": np.where(valid[:, None], lims ** 2 - xs[:, 3:5] ** 2, np.nan),
-                 "margin": np.where(certified[:, None], np.column_stack([u - lo, hi - u]),
-                                    np.nan)}
-        if len(u) == 1:
-            flags["binding"] = self._binding(float(u[0]), lo[0], hi[0], bool(active[0]),
-                                             bool(certified[0]))
-            flags["reason"] = self._reason(bool(active[0]), bool(certified[0]),
-                                           bool(valid[0]))
-        return u, flags
+        return u, {"active": u != u_ref, "outside": valid & ~certified, "invalid_input": ~valid,
+                   "h": np.where(valid[:, None], lims ** 2 - xs[:, 3:5] ** 2, np.nan),
+                   "margin": np.where(certified[:, None], np.column_stack([u - lo, hi - u]),
+                                      np.nan)}
 
-    def _binding(self, u, lo, hi, active, certified) -> tuple[str, ...]:
+    def _binding(self, u: float, active: bool, certified: bool) -> tuple[str, ...]:
         if not (active and certified):
             return ()
         names = ["certified"]

@@ -83,6 +83,8 @@ class GeneratorSide:
                  tc: np.ndarray, pc_attack: np.ndarray, wref_attack: np.ndarray,
                  noise: np.ndarray, load_feedforward: bool) -> None:
         self.params, self.scc, self.kf = params, scc, kf
+        if scc is not None:
+            scc.reset()  # a filter with memory (method="certified") starts afresh
         self.tc, self.pc_attack, self.wref = tc, pc_attack, wref_attack
         self.noise, self.load_feedforward = noise, load_feedforward
         self.period = float(tc[1] - tc[0]) if len(tc) > 1 else 0.0

@@ -1,0 +1,137 @@
+"""A red team against the safety filters: search for the attack that comes
+closest to tripping a relay.
+
+Severity of a run: ``max(peak |ROCOF| / rocof_limit, peak |Δω̂| / F)`` (≥ 1
+means a measured output reached a relay setting; ROCOF trips at once, OF2/UF2
+after 160 ms).  Both searches evaluate a whole population of attacks per
+generation with :func:`lfc.simulate_batch` (``vectorized=True`` in scipy's
+``differential_evolution``):
+
+* :func:`family_search`: over the parameters of one waveform family
+  (amplitude and frequency of sinusoids, squares, chirps on P_c; size of a bias
+  or slope of a ramp on ω_ref);
+* :func:`freeform_search`: a free-form attack on P_c, one value per control
+  period, bounded by ``±amplitude``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from scipy.optimize import differential_evolution
+
+from lfc.batch import simulate_batch
+from lfc.model import LFCParams
+from lfc.relays import RelaySettings
+from lfc.scenarios import ATTACK_START
+
+# family -> (channel, waveform, bounds of (amplitude, freq_hz)); one bound: freq unused
+FAMILIES = {
+    "sinusoid on P_c": ("pc", "sinusoid", [(0.0, 3.0), (0.05, 3.0)]),
+    "square on P_c": ("pc", "square", [(0.0, 3.0), (0.05, 3.0)]),
+    "chirp on P_c": ("pc", "chirp", [(0.0, 3.0), (0.2, 3.0)]),
+    "bias on ω_ref": ("wref", "step", [(-0.2, 0.2)]),
+    "ramp on ω_ref": ("wref", "ramp", [(-0.05, 0.05)]),
+}
+
+
+@dataclass(frozen=True)
+class Defender:
+    """A filter setting to attack: ``method`` "none", "paper" (with ``alpha``,
+    ``Ts``) or "certified"."""
+
+    name: str
+    method: str = "paper"
+    alpha: float = 20.0
+    Ts: float = 0.25
+
+    def columns(self) -> dict:
+        """The scenario-table columns that select this filter."""
+        if self.method == "none":
+            return {"alpha": np.nan, "Ts": self.Ts, "method": "paper"}
+        return {"alpha": self.alpha, "Ts": self.Ts, "method": self.method}
+
+
+def severity(results: pd.DataFrame, relays: RelaySettings) -> np.ndarray:
+    """Per run: max(peak |ROCOF| / rocof_limit, peak |Δω̂| / F)."""
+    return np.maximum(results.max_abs_rocof_meas.to_numpy() / relays.rocof_limit,
+                      results.max_abs_dw_meas.to_numpy() / relays.F)
+
+
+def _family_table(family: str, theta: np.ndarray, defender: Defender) -> pd.DataFrame:
+    channel, waveform, bounds = FAMILIES[family]
+    amp = theta[0]
+    freq = theta[1] if len(bounds) > 1 else np.zeros_like(amp)
+    return pd.DataFrame({"waveform": waveform, "channel": channel, "amplitude": amp,
+                         "freq_hz": freq, "start": ATTACK_START, **defender.columns()})
+
+
+def _search(table_of, bounds, params, relays, duration, seed, maxiter, popsize, x0=None):
+    """Differential evolution maximizing severity; returns (best theta, severity, row)."""
+    def objective(theta: np.ndarray) -> np.ndarray:
+        res = simulate_batch(params, table_of(theta), duration=duration,
+                             relays=relays, chunk_size=10_000, progress=False)
+        return -severity(res, relays)
+
+    sol = differential_evolution(objective, bounds, seed=seed, maxiter=maxiter,
+                                 popsize=popsize, vectorized=True, updating="deferred",
+                                 polish=False, tol=0, x0=x0)
+    best = simulate_batch(params, table_of(sol.x[:, None]), duration=duration, relays=relays,
+                          progress=False)
+    return sol.x, float(severity(best, relays)[0]), best.iloc[0]
+
+
+def family_search(params: LFCParams, defender: Defender, family: str, *,
+                  relays: RelaySettings | None = None, duration: float = 10.0,
+                  seed: int = 0, maxiter: int = 15, popsize: int = 10) -> dict:
+    """Worst attack of one family against ``defender`` (see module docstring)."""
+    relays = relays or RelaySettings()
+    bounds = FAMILIES[family][2]
+    theta, sev, row = _search(lambda th: _family_table(family, th, defender), bounds, params,
+                              relays, duration, seed, maxiter, popsize)
+    return {"defender": defender.name, "search": family, "severity": sev,
+            "tripped": bool(row.tripped), "first_trip": row.first_trip_relay,
+            "attack": ", ".join(f"{v:.4g}" for v in theta)}
+
+
+def _samples_table(values: np.ndarray, period: float, defender: Defender) -> pd.DataFrame:
+    """One ``"samples"`` scenario per column of ``values`` (n_values, S)."""
+    return pd.DataFrame({"waveform": "samples", "channel": "pc", "amplitude": 1.0,
+                         "freq_hz": 0.0, "start": ATTACK_START,
+                         "values": [tuple(v) for v in values.T], "sample_period": period,
+                         **defender.columns()})
+
+
+def freeform_search(params: LFCParams, defender: Defender, *, amplitude: float = 2.0,
+                    relays: RelaySettings | None = None, attack_duration: float = 2.0,
+                    duration: float = 6.0, control_period: float = 0.01, seed: int = 0,
+                    maxiter: int = 20, popsize: int = 1) -> dict:
+    """Worst free-form attack on P_c: one value in ``±amplitude`` per control
+    period for ``attack_duration`` s (then held), run for ``duration`` s."""
+    relays = relays or RelaySettings()
+    n = int(round(attack_duration / control_period))
+    theta, sev, row = _search(lambda v: _samples_table(v, control_period, defender),
+                              [(-amplitude, amplitude)] * n, params, relays, duration, seed,
+                              maxiter, popsize)
+    return {"defender": defender.name, "search": f"free-form on P_c (±{amplitude:g} pu)",
+            "severity": sev, "tripped": bool(row.tripped), "first_trip": row.first_trip_relay,
+            "attack": f"{n} values, max |value| {np.abs(theta).max():.3g} pu"}
+
+
+def piecewise_attack_table(*, n: int, amplitude: float, duration: float, seed: int,
+                           control_period: float = 0.01) -> pd.DataFrame:
+    """``n`` seeded random piecewise-constant attacks on P_c (values in
+    ``±amplitude`` held for 0.05–2 s), paper filter α = 20 — a reproducible
+    batch of red-team attacks for tests."""
+    rng = np.random.default_rng(seed)
+    steps = int(round((duration - ATTACK_START) / control_period))
+    values = np.empty((steps, n))
+    for j in range(n):
+        k = 0
+        while k < steps:
+            hold = int(rng.integers(5, 200))
+            values[k:k + hold, j] = rng.uniform(-amplitude, amplitude)
+            k += hold
+    return _samples_table(values, control_period, Defender("paper α=20"))

@@ -1,0 +1,140 @@
+"""The certified filter: its guarantee on the design model, its cvxpy reference,
+its assumptions' edges, and bad input."""
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import lfc
+from lfc.certified import CertifiedSet, cvxpy_certified
+from lfc.model import block_propagator, discretize
+from lfc.redteam import piecewise_attack_table
+from lfc.surface import attack_map, bias_map
+
+P, RELAYS = lfc.LFCParams(), lfc.RelaySettings()
+CERT = lfc.SafetyFilter(P, RELAYS, method="certified")
+STATE_SCALE = np.array([0.2, 0.2, 0.01, 0.01, 0.02])
+
+
+AD, BD = discretize(P, 1e-3)
+AD100 = np.linalg.matrix_power(AD, 100)
+
+
+def held_outputs(x: np.ndarray, u: float, seconds: float = 30.0) -> np.ndarray:
+    """Measured outputs at every 1 ms sample when ``u`` is held from state ``x``:
+    blocks of 100 samples, each from its block's start state."""
+    Phi, Gu, _ = block_propagator(AD, BD, 100)
+    out = []
+    for _ in range(int(seconds / 0.1)):
+        block = (Phi @ x + Gu * u).reshape(100, 5)
+        out.append(block[:, 3:5])
+        x = block[-1]
+    return np.vstack(out)
+
+
+@settings(max_examples=60, deadline=None)
+@given(z=st.lists(st.floats(-3, 3), min_size=5, max_size=5), u_ref=st.floats(-2, 2))
+def test_a_certified_command_held_forever_keeps_the_relays_quiet(z, u_ref):
+    x = np.array(z) * STATE_SCALE
+    u, info = CERT.filter(x, u_ref)
+    if info.outside:
+        return  # nothing certified from this state: covered by the next test
+    y = held_outputs(x, u)
+    assert np.all(np.abs(y[:, 0]) <= RELAYS.F) and np.all(np.abs(y[:, 1]) <= RELAYS.rocof_limit)
+    assert u == pytest.approx(min(max(u_ref, u - info.margin_freq), u + info.margin_rocof))
+
+
+def test_from_equilibrium_every_run_keeps_a_certificate():
+    r = lfc.simulate(P, duration=20.0, pc_attack=lfc.Square(2.0, 0.3, start=1.0), scc=CERT)
+    assert not r.metrics()["tripped"] and not r.alarms.outside.any()
+
+
+def test_exact_answer_equals_the_cvxpy_formulation():
+    filt = lfc.SafetyFilter(P, RELAYS, method="certified", u_min=-1.0, u_max=1.5)
+    cert = filt._certified.cert
+    rng = np.random.default_rng(7)
+    states = rng.normal(size=(25, 5)) * STATE_SCALE
+    refs = rng.normal(scale=0.8, size=25)
+    n_certified = 0
+    for x, u_ref in zip(states, refs):
+        lo, hi = cert.interval_one(x, 0.0)
+        reference = cvxpy_certified(cert, x, u_ref)
+        if lo > hi:
+            assert reference is None
+            continue
+        n_certified += 1
+        assert min(max(u_ref, lo), hi) == pytest.approx(reference, abs=1e-7)
+    assert n_certified >= 15
+
+
+def test_scalar_and_batch_agree():
+    rng = np.random.default_rng(3)
+    states, refs = rng.normal(size=(200, 5)) * STATE_SCALE, rng.normal(size=200)
+    batch = lfc.SafetyFilter(P, RELAYS, method="certified")
+    u_b, flags = batch.filter_batch(states, refs)
+    for i in range(200):
+        scalar = lfc.SafetyFilter(P, RELAYS, method="certified")
+        u, info = scalar.filter(states[i], refs[i])
+        assert u == pytest.approx(u_b[i], abs=1e-12)
+        assert info.outside == flags["outside"][i] and info.active == flags["active"][i]
+
+
+def test_no_trip_over_the_attack_surface_grid():
+    grid = attack_map(["sinusoid", "square"], [0.1, 0.3, 0.5, 1.0, 1.5, 3.0],
+                      [0.1, 0.2, 0.3, 0.5, 0.8, 1.0, 1.5, 2.0], alphas=[1.0])
+    grid = pd.concat([grid, bias_map([-0.08, -0.05, 0.04, 0.08], [1.0])], ignore_index=True)
+    grid = grid[grid.alpha.notna()].assign(method="certified")
+    res = lfc.simulate_batch(P, grid, duration=30.0, progress=False)
+    assert not res.tripped.any()
+    assert res.max_abs_rocof_meas.max() <= RELAYS.rocof_limit
+    assert res.max_abs_dw_meas.max() <= RELAYS.F
+
+
+def test_no_trip_on_seeded_red_team_attacks():
+    table = piecewise_attack_table(n=40, amplitude=3.0, duration=15.0, seed=11)
+    paper = lfc.simulate_batch(P, table, duration=15.0, progress=False)
+    certified = lfc.simulate_batch(P, table.assign(method="certified"), duration=15.0,
+                                   progress=False)
+    assert paper.tripped.any()            # the attacks are strong enough to matter
+    assert not certified.tripped.any()
+
+
+def test_a_load_step_beyond_the_assumption_is_flagged_not_silent():
+    e12 = P.M * RELAYS.rocof_limit
+    r = lfc.simulate(P, duration=5.0, load=lfc.Step(1.25 * e12, 1.0), scc=CERT)
+    assert r.metrics()["tripped"]                # physics: E12
+    assert r.alarms.outside.any()                # and the filter says it lost its guarantee
+    assert "no command is certified" in r.alarms.reason[r.alarms.outside].iloc[0]
+
+
+def test_load_bound_covers_load_steps_and_rejects_impossible_bounds():
+    covered = lfc.SafetyFilter(P, RELAYS, method="certified", load_bound=0.05)
+    r = lfc.simulate(P, duration=10.0, load=lfc.Step(0.05, 1.0),
+                     pc_attack=lfc.Square(1.0, 0.3, start=1.0), scc=covered)
+    assert not r.metrics()["tripped"]
+    with pytest.raises(ValueError, match="load_bound must be <"):
+        CertifiedSet(P, RELAYS, load_bound=P.M * RELAYS.rocof_limit)
+
+
+def test_invalid_input_holds_the_last_certified_command():
+    filt = lfc.SafetyFilter(P, RELAYS, method="certified")
+    u0, _ = filt.filter(np.zeros(5), 0.2)
+    u, info = filt.filter(np.array([np.nan, 0, 0, 0, 0]), 0.9)
+    assert info.invalid_input and u == u0 and math.isfinite(u)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"method": "robust"}, "method must be one of"),
+    ({"method": "certified", "solver": "cvxpy"}, "solver must be 'exact'"),
+    ({"method": "certified", "margin": 1.0}, "margin must be in"),
+    ({"method": "certified", "load_bound": -0.1}, "load_bound"),
+    ({"method": "certified", "period": 0.0105}, "period must be a positive integer multiple"),
+    ({"method": "certified", "horizon": 0.0}, "horizon"),
+])
+def test_bad_parameters(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        lfc.SafetyFilter(P, RELAYS, **kwargs)
