@@ -11,7 +11,7 @@ from lfc.scenarios import PLANTS, check_plant, design_params
 from lfc.simulate import SimResult
 
 __all__ = ["PLANTS", "PLANT_LABELS", "check_plant", "figure_name", "record_claims", "setup",
-           "write_metrics"]
+           "update_markdown_section", "write_metrics"]
 PLANT_LABELS = {"linear": "linear model", "testbed": "ANDES testbed"}
 
 
@@ -79,3 +79,16 @@ def record_claims(results_dir: str | Path, claims: dict[str, bool], check: bool,
         raise AssertionError("claim(s) not reproduced: " + "; ".join(failed) if failed else
                              "documented deviation(s) no longer observed, update DEVIATIONS "
                              "and the README: " + "; ".join(stale))
+
+
+def update_markdown_section(path: str | Path, name: str, text: str) -> None:
+    """Replace what lies between ``<!-- name:start -->`` and ``<!-- name:end -->``
+    in the markdown file ``path`` with ``text`` (how notebooks regenerate the
+    README's tables).  Raises ``ValueError`` if the markers are missing."""
+    path = Path(path)
+    start, end = f"<!-- {name}:start -->", f"<!-- {name}:end -->"
+    doc = path.read_text()
+    if start not in doc or end not in doc:
+        raise ValueError(f"{path} has no {start} ... {end} section")
+    head, rest = doc.split(start, 1)
+    path.write_text(f"{head}{start}\n{text.strip()}\n{end}{rest.split(end, 1)[1]}")

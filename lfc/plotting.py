@@ -270,3 +270,24 @@ def tradeoff_figure(summary, baseline, title: str) -> Figure:
     fig.legend(handles=handles, loc="outside right upper", fontsize=8)
     fig.suptitle(title)
     return fig
+
+
+def severity_figure(red, title: str) -> Figure:
+    """Red-team results: worst severity found per search (groups) and defender
+    (bars), log scale, the relay setting (severity 1) dashed."""
+    searches = list(dict.fromkeys(red.search))
+    defenders = list(dict.fromkeys(red.defender))
+    fig, ax = plt.subplots(figsize=(12, 4.8), layout="constrained")
+    width = 0.8 / len(defenders)
+    x = np.arange(len(searches))
+    for i, d in enumerate(defenders):
+        sel = red[red.defender == d].set_index("search").reindex(searches)
+        ax.bar(x + (i - (len(defenders) - 1) / 2) * width, sel.severity, width, label=d)
+    ax.axhline(1.0, color="k", ls="--", lw=1, label="relay setting (severity 1)")
+    ax.set_yscale("log")
+    ax.set_xticks(x, searches, rotation=15, ha="right", fontsize=8)
+    ax.set_ylabel("Severity: max(|ROCOF| / setting, |Δω̂| / F)")
+    ax.grid(alpha=0.3, axis="y")
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1))
+    ax.set_title(title)
+    return fig

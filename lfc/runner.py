@@ -35,10 +35,12 @@ FIGURES = {  # name -> notebook
     "fig6": "04_fig6_load_step.ipynb",         # large load step
     "fig7": "05_fig7_fault.ipynb",             # fault at B5 and over-current trip
     "surface": "06_attack_surface.ipynb",      # attack-surface maps, alpha-Ts trade-off
+    "redteam": "08_red_team.ipynb",            # certified filter vs red team; README table
     "kalman": "07_kalman.ipynb",               # SCC on Kalman estimates vs true states
 }
 FIGURE_PLANTS = {"tutorial": ("linear",), "fig4": PLANTS, "fig5": PLANTS, "fig6": PLANTS,
-                 "fig7": ("testbed",), "surface": ("linear",), "kalman": ("linear",)}
+                 "fig7": ("testbed",), "surface": ("linear",), "redteam": ("linear",),
+                 "kalman": ("linear",)}
 POSITIVE = {"duration", "Ts", "control_period", "alpha", "alphas", "dt"}
 
 

@@ -19,7 +19,7 @@ FIGURE_FILES = {"tutorial": "tutorial_attack", "fig4": "fig4_rocof_attack",
                 "kalman": "kalman_scc"}
 EXTRA_METRICS = {"fig7": {"oc_trip_t"}}
 RUNS = [(name, plant) for name, plants in runner.FIGURE_PLANTS.items() for plant in plants
-        if name != "surface"]
+        if name not in ("surface", "redteam")]
 SMALL_SURFACE = {"amplitudes": [0.1, 0.5], "freqs": [0.5, 1.0], "biases": [0.02, 0.04],
                  "tradeoff_alphas": [20.0], "tradeoff_Ts": [0.25], "load_steps": [0.1, 0.25],
                  "duration": 10.0, "jobs": 1}
@@ -53,6 +53,30 @@ def test_attack_surface_notebook_writes_maps_tables_and_claims(tmp_path):
     assert len(surface) == 2 * 3 * 2 * 2  # waveforms x (no SCC, 2 alphas) x amplitudes x freqs
     assert len(pd.read_csv(tmp_path / "res" / "bias.csv")) == 3 * 2
     assert len(pd.read_csv(tmp_path / "res" / "tradeoff.csv")) == 2 * 3
+    claims = json.loads((tmp_path / "res" / "claims.json").read_text())
+    assert claims and all(claims.values())
+
+
+SMALL_RED_TEAM = {"families": ["square on P_c"], "family_maxiter": 2, "family_popsize": 3,
+                  "search_duration": 4.0, "freeform_attack_duration": 0.2,
+                  "freeform_duration": 2.0, "freeform_maxiter": 1, "map_amplitudes": [0.5, 1.0],
+                  "map_freqs": [0.3, 1.0], "margins": [0.0, 0.2], "n_plants": 1,
+                  "robust_duration": 4.0, "load_steps": [0.1], "testbed": False}
+
+
+def test_red_team_notebook_writes_results_figures_and_the_readme_table(tmp_path):
+    readme = tmp_path / "README.md"
+    readme.write_text("intro\n<!-- comparison:start -->\nold\n<!-- comparison:end -->\nrest\n")
+    nb = runner.NOTEBOOKS_DIR / runner.FIGURES["redteam"]
+    runner.execute(nb, tmp_path / nb.name, {**SMALL_RED_TEAM, "readme": str(readme),
+                                            "figures_dir": str(tmp_path / "fig"),
+                                            "results_dir": str(tmp_path / "res")})
+    for name in ("red_team", "certified_vs_paper"):
+        assert (tmp_path / "fig" / f"{name}.png").stat().st_size > 1000
+    red = pd.read_csv(tmp_path / "res" / "red_team.csv")
+    assert set(red.defender) == {"no SCC", "paper α=3", "paper α=20", "certified"}
+    text = readme.read_text()
+    assert "old" not in text and "| certified filter |" in text and text.endswith("rest\n")
     claims = json.loads((tmp_path / "res" / "claims.json").read_text())
     assert claims and all(claims.values())
 

@@ -1,0 +1,39 @@
+"""The red team's searches, severity, and the README-section writer."""
+
+import pandas as pd
+import pytest
+
+import lfc
+from lfc.notebook import update_markdown_section
+from lfc.redteam import Defender, family_search, freeform_search, severity
+
+P, RELAYS = lfc.LFCParams(), lfc.RelaySettings()
+
+
+def test_severity_is_the_worst_ratio_to_the_settings():
+    res = pd.DataFrame({"max_abs_rocof_meas": [0.025, 0.1], "max_abs_dw_meas": [0.03, 0.003]})
+    assert list(severity(res, RELAYS)) == pytest.approx([1.0, 2.0])
+
+
+def test_family_search_beats_the_paper_filter_and_not_the_certified_one():
+    paper = family_search(P, Defender("paper α=20"), "square on P_c", relays=RELAYS,
+                          duration=6.0, maxiter=3, popsize=4, seed=1)
+    cert = family_search(P, Defender("certified", method="certified"), "square on P_c",
+                         relays=RELAYS, duration=6.0, maxiter=3, popsize=4, seed=1)
+    assert paper["tripped"] and paper["severity"] > 1
+    assert not cert["tripped"] and cert["severity"] <= 1
+
+
+def test_freeform_search_is_seeded_and_bounded():
+    kw = dict(relays=RELAYS, amplitude=1.0, attack_duration=0.2, duration=2.0, maxiter=1,
+              seed=3)
+    a = freeform_search(P, Defender("paper α=20"), **kw)
+    b = freeform_search(P, Defender("paper α=20"), **kw)
+    assert a == b and "max |value|" in a["attack"]
+
+
+def test_markdown_section_needs_its_markers(tmp_path):
+    path = tmp_path / "doc.md"
+    path.write_text("no markers here\n")
+    with pytest.raises(ValueError, match="no <!-- table:start -->"):
+        update_markdown_section(path, "table", "x")
