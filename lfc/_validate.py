@@ -27,3 +27,15 @@ def check_range(name: str, value: float, low: float, high: float) -> None:
     """Raise ``ValueError`` unless ``low < value < high`` (open interval)."""
     if not (isinstance(value, (int, float)) and low < value < high):
         raise ValueError(f"{name} must lie in ({low}, {high}), got {value!r}")
+
+
+def check_multiple(name: str, value: float, of_name: str, of: float) -> int:
+    """Raise ``ValueError`` unless ``value`` is a positive integer multiple of
+    ``of`` (both > 0); return the integer ratio."""
+    check_positive(name, value)
+    check_positive(of_name, of)
+    ratio = value / of
+    if abs(ratio - round(ratio)) > 1e-9 * ratio or round(ratio) < 1:
+        raise ValueError(f"{name} must be a positive integer multiple of {of_name} ({of}), "
+                         f"got {value}")
+    return int(round(ratio))

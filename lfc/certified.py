@@ -42,7 +42,7 @@ import math
 import numpy as np
 from scipy.linalg import solve_discrete_lyapunov
 
-from lfc._validate import check_nonnegative, check_positive
+from lfc._validate import check_multiple, check_nonnegative, check_positive
 from lfc.model import LFCParams, discretize, lfc_matrices, output_matrix
 from lfc.relays import RelaySettings
 
@@ -77,16 +77,11 @@ class CertifiedSet:
     def __init__(self, params: LFCParams, relays: RelaySettings, *, period: float = 0.01,
                  resolution: float = 1e-3, horizon: float = 4.0, load_bound: float = 0.0,
                  margin: float = 0.0, u_min: float = -math.inf, u_max: float = math.inf) -> None:
-        check_positive("period", period)
-        check_positive("resolution", resolution)
+        check_multiple("period", period, "resolution", resolution)
         check_positive("horizon", horizon)
         check_nonnegative("load_bound", load_bound)
         if not 0.0 <= margin < 1.0:
             raise ValueError(f"margin must be in [0, 1), got {margin!r}")
-        ratio = period / resolution
-        if abs(ratio - round(ratio)) > 1e-9 * ratio or round(ratio) < 1:
-            raise ValueError(f"period must be a positive integer multiple of resolution "
-                             f"({resolution}), got {period}")
         self.params, self.relays, self.load_bound = params, relays, float(load_bound)
         self.u_min, self.u_max = float(u_min), float(u_max)
         Ad, Bd = discretize(params, resolution)

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lfc._validate import check_nonnegative, check_positive
+from lfc._validate import check_multiple, check_nonnegative, check_positive
 from lfc.cbf import SafetyFilter
 from lfc.controller import (ALARM_COLUMNS, GeneratorSide, SignalLike, make_estimator,
                             sample_signal)
@@ -24,6 +24,7 @@ from lfc.estimation import KalmanFilter
 from lfc.model import STATES, LFCParams, block_propagator, discretize
 from lfc.relays import RelayBank, RelaySettings
 
+__all__ = ["ALARM_COLUMNS", "METRIC_KEYS", "SimResult", "simulate"]
 METRIC_KEYS = ("tripped", "first_trip", "max_abs_dw_meas", "max_abs_rocof_meas",
                "scc_active_fraction", "max_abs_modification", "alarms")
 
@@ -94,13 +95,7 @@ class SimResult:
 
 def _check_timing(duration: float, dt: float, control_period: float) -> int:
     check_positive("duration", duration)
-    check_positive("dt", dt)
-    check_positive("control_period", control_period)
-    ratio = control_period / dt
-    if abs(ratio - round(ratio)) > 1e-9 * ratio or round(ratio) < 1:
-        raise ValueError(f"control_period must be a positive integer multiple of dt "
-                         f"({dt}), got {control_period}")
-    return int(round(ratio))
+    return check_multiple("control_period", control_period, "dt", dt)
 
 
 def simulate(params: LFCParams, *, duration: float, pc_attack: SignalLike | None = None,

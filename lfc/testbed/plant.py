@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from lfc._validate import check_nonnegative, check_positive
+from lfc._validate import check_multiple, check_nonnegative, check_positive
 from lfc.cbf import SafetyFilter
 from lfc.controller import (GeneratorSide, SignalLike, make_estimator, sample_signal)
 from lfc.estimation import KalmanFilter
@@ -156,12 +156,7 @@ def _check_scenario(case: MicrogridCase, duration: float, step: float, control_p
                     fault: FaultSpec | None, load: SignalLike | None,
                     noise_std: tuple[float, float]) -> int:
     check_positive("duration", duration)
-    check_positive("step", step)
-    check_positive("control_period", control_period)
-    ratio = control_period / step
-    if abs(ratio - round(ratio)) > 1e-9 * ratio or round(ratio) < 1:
-        raise ValueError(f"control_period must be a positive integer multiple of step ({step}),"
-                         f" got {control_period}")
+    check_multiple("control_period", control_period, "step", step)
     if len(noise_std) != 2 or min(noise_std) < 0:
         raise ValueError(f"noise_std must be a pair of values >= 0, got {noise_std!r}")
     if fault is not None:
