@@ -31,7 +31,7 @@ from lfc.controller import sample_signal
 from lfc.model import LFCParams, block_propagator, discretize
 from lfc.relays import RELAY_NAMES, RelayBank, RelaySettings
 from lfc.signals import Chirp, Ramp, Samples, Signal, Sinusoid, Square, Step
-from lfc.simulate import _check_timing
+from lfc.simulate import check_timing
 
 WAVEFORMS = ("sinusoid", "square", "chirp", "step", "ramp", "samples", "none")
 CHANNELS = ("pc", "wref", "load")
@@ -109,7 +109,7 @@ def run_chunk(params: LFCParams, scenarios: pd.DataFrame, duration: float,
               relays: RelaySettings, dt: float, control_period: float) -> pd.DataFrame:
     """Simulate every row of ``scenarios`` (vectorized); return the metric columns
     ``BATCH_METRICS`` with the same index."""
-    ratio = _check_timing(duration, dt, control_period)
+    ratio = check_timing(duration, dt, control_period)
     return _Batch(params, scenarios, duration, relays, dt, ratio).run()
 
 
@@ -266,7 +266,7 @@ def simulate_batch(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
         ``first_trip_t`` NaN without a trip).
     """
     check_scenarios(scenarios)
-    _check_timing(duration, dt, control_period)
+    check_timing(duration, dt, control_period)
     if out is not None and (scenarios["waveform"] == "samples").any():
         raise ValueError("out (chunk files) cannot hold 'samples' rows; run them without out")
     if not (isinstance(chunk_size, int) and chunk_size >= 1):

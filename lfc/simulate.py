@@ -24,7 +24,7 @@ from lfc.estimation import KalmanFilter
 from lfc.model import STATES, LFCParams, block_propagator, discretize
 from lfc.relays import RelayBank, RelaySettings
 
-__all__ = ["ALARM_COLUMNS", "METRIC_KEYS", "SimResult", "simulate"]
+__all__ = ["ALARM_COLUMNS", "METRIC_KEYS", "SimResult", "check_timing", "simulate"]
 METRIC_KEYS = ("tripped", "first_trip", "max_abs_dw_meas", "max_abs_rocof_meas",
                "scc_active_fraction", "max_abs_modification", "alarms")
 
@@ -93,7 +93,8 @@ class SimResult:
         return out
 
 
-def _check_timing(duration: float, dt: float, control_period: float) -> int:
+def check_timing(duration: float, dt: float, control_period: float) -> int:
+    """Validate a run's timing (s); return plant steps per control period."""
     check_positive("duration", duration)
     return check_multiple("control_period", control_period, "dt", dt)
 
@@ -146,7 +147,7 @@ def simulate(params: LFCParams, *, duration: float, pc_attack: SignalLike | None
     -------
     SimResult
     """
-    ratio = _check_timing(duration, dt, control_period)
+    ratio = check_timing(duration, dt, control_period)
     if len(noise_std) != 2:
         raise ValueError(f"noise_std must be a pair (dw_meas, rocof_meas), got {noise_std!r}")
     for i, s in enumerate(noise_std):

@@ -1,15 +1,18 @@
 """The certified filter: its guarantee on the design model, its cvxpy reference,
 its assumptions' edges, and bad input."""
 
+import ast
 import math
 
 import numpy as np
 import pandas as pd
+import papermill
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import lfc
+from lfc import runner
 from lfc.certified import CertifiedSet, cvxpy_certified
 from lfc.model import block_propagator, discretize
 from lfc.redteam import piecewise_attack_table
@@ -83,12 +86,22 @@ def test_scalar_and_batch_agree():
         assert info.outside == flags["outside"][i] and info.active == flags["active"][i]
 
 
-def test_no_trip_over_the_attack_surface_grid():
-    grid = attack_map(["sinusoid", "square"], [0.1, 0.3, 0.5, 1.0, 1.5, 3.0],
-                      [0.1, 0.2, 0.3, 0.5, 0.8, 1.0, 1.5, 2.0], alphas=[1.0])
-    grid = pd.concat([grid, bias_map([-0.08, -0.05, 0.04, 0.08], [1.0])], ignore_index=True)
+def surface_defaults() -> dict:
+    """The default grid of notebooks/06_attack_surface.ipynb (its parameters cell)."""
+    found = papermill.inspect_notebook(str(runner.NOTEBOOKS_DIR / runner.FIGURES["surface"]))
+    return {k: ast.literal_eval(v["default"]) for k, v in found.items()}
+
+
+def test_no_trip_over_the_whole_attack_surface_grid():
+    """Every attack of the sweeps issue's maps (periodic attacks on P_c and biases on
+    ω_ref, 30 s each, the notebook's defaults) plus amplitudes up to 3 pu."""
+    d = surface_defaults()
+    grid = pd.concat([attack_map(d["waveforms"], d["amplitudes"] + [2.0, 3.0], d["freqs"],
+                                 alphas=[1.0]),
+                      bias_map(d["biases"], [1.0])], ignore_index=True)
     grid = grid[grid.alpha.notna()].assign(method="certified")
-    res = lfc.simulate_batch(P, grid, duration=30.0, progress=False)
+    res = lfc.simulate_batch(P, grid, duration=d["duration"], chunk_size=200, progress=False)
+    assert len(res) == 2 * 16 * 11 + 15
     assert not res.tripped.any()
     assert res.max_abs_rocof_meas.max() <= RELAYS.rocof_limit
     assert res.max_abs_dw_meas.max() <= RELAYS.F
