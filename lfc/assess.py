@@ -33,10 +33,8 @@ def mismatched_plants(params: LFCParams, n: int, spread: float = 0.2,
 
 def _row(result, relays: RelaySettings) -> dict:
     m = result.metrics()
-    frame = pd.DataFrame([{"max_abs_rocof_meas": m["max_abs_rocof_meas"],
-                           "max_abs_dw_meas": m["max_abs_dw_meas"]}])
     mod = (result.controls.pc - result.controls.pc_ref).abs()
-    return {"tripped": m["tripped"], "severity": float(severity(frame, relays)[0]),
+    return {"tripped": m["tripped"], "severity": float(severity(m, relays)),
             "active": m["scc_active_fraction"], "mean_mod": float(mod.mean()),
             "alarms": m["alarms"], "outside": int(result.alarms.outside.sum())}
 

@@ -26,7 +26,7 @@ import numpy as np
 import pandas as pd
 from tqdm.auto import tqdm
 
-from lfc.cbf import METHODS, SafetyFilter
+from lfc.cbf import METHODS, SafetyFilter, alarm_mask
 from lfc.controller import sample_signal
 from lfc.model import LFCParams, block_propagator, discretize
 from lfc.relays import RELAY_NAMES, RelayBank, RelaySettings
@@ -183,8 +183,7 @@ class _Batch:
         for rows, filt in self.groups:
             u[rows], flags = filt.filter_batch(X[rows], u_ref[rows])
             self.active[rows] += flags["active"]
-            self.alarms[rows] += (flags["active"] | flags["infeasible"] | flags["outside"]
-                                  | flags["invalid_input"])
+            self.alarms[rows] += alarm_mask(flags)
         mod = np.abs(u - u_ref)
         self.max_mod = np.maximum(self.max_mod, mod)
         self.sum_mod += mod

@@ -52,6 +52,7 @@ from lfc.relays import RelaySettings
 SOLVERS = ("exact", "cvxpy")
 METHODS = ("paper", "certified")
 CONSTRAINTS = ("frequency", "rocof")
+ALARM_FLAGS = ("active", "infeasible", "outside", "invalid_input", "solver_error")
 _G_EPS = 1e-12      # |coefficient on u| below which a constraint cannot be influenced
 _BIND_TOL = 1e-7    # relative tolerance to report a bound as binding
 # Clarabel's default gap tolerances (1e-8) leave up to ~1e-4 error in u on these QPs
@@ -111,8 +112,12 @@ class FilterInfo:
     @property
     def alarm(self) -> bool:
         """True when the operator should be told (anything but a pass-through)."""
-        return (self.active or self.infeasible or self.outside or self.invalid_input
-                or self.solver_error)
+        return any(getattr(self, flag) for flag in ALARM_FLAGS)
+
+
+def alarm_mask(flags: dict[str, np.ndarray]) -> np.ndarray:
+    """:attr:`FilterInfo.alarm` for the flags of :meth:`SafetyFilter.filter_batch`."""
+    return np.logical_or.reduce([flags[f] for f in ALARM_FLAGS if f in flags])
 
 
 def barrier_gamma(h: np.ndarray, alpha: float) -> np.ndarray:

@@ -94,19 +94,20 @@ class CertifiedSet:
             raise ValueError(f"load_bound must be < {most:.4g} pu for these relays: a larger "
                              "load deviation can trip a relay whatever the governor does "
                              f"(E12); got {load_bound}")
-        self._Ad, self.n_steps = Ad, int(math.ceil(horizon / resolution))
-        self._horizon_rows(Ad, Bd, C, self.n_steps)
-        self._terminal(params, Ad, C)
+        self._Ad, self._Bd, self.n_steps = Ad, Bd, int(math.ceil(horizon / resolution))
+        Phi_n, S_n = self._horizon_rows(Ad, Bd, C, self.n_steps)
+        self._terminal(params, Ad, C, Phi_n, S_n)
 
-    def _horizon_rows(self, Ad: np.ndarray, Bd: np.ndarray, C: np.ndarray, n: int) -> None:
-        """Outputs at samples 1..n under a held u: ``y = G x + hu u + hl p`` per row."""
+    def _horizon_rows(self, Ad: np.ndarray, Bd: np.ndarray, C: np.ndarray, n: int
+                      ) -> tuple[np.ndarray, np.ndarray]:
+        """Outputs at samples 1..n under a held u: ``y = G x + hu u + hl p`` per row.
+        Returns ``Ad^n`` and ``sum_{i<n} Ad^i`` for the terminal condition."""
         G, hu, hl = np.empty((n, 2, 5)), np.empty((n, 2)), np.empty((n, 2))
         Ak, S = np.eye(5), np.zeros((5, 5))  # Ad^k and sum_{i<k} Ad^i
         for k in range(n):
             S = S + Ak
             Ak = Ad @ Ak
             G[k], hu[k], hl[k] = C @ Ak, C @ S @ Bd[:, 0], C @ S @ Bd[:, 1]
-        self._Phi_n, self._S_n = Ak, S
         G, hu, hl = G.reshape(-1, 5), hu.ravel(), hl.ravel()
         lim = np.tile(self.limits, n)
         if np.any(np.abs(hu) < 1e-15):
@@ -119,10 +120,12 @@ class CertifiedSet:
         self._row_GT = np.ascontiguousarray((G * inv[:, None]).T)  # (5, rows): fast x @ GT
         self._row_l = hl * inv
         self.n_rows = len(hu)
-        self._Bd = Bd
+        return Ak, S
 
-    def _terminal(self, params: LFCParams, Ad: np.ndarray, C: np.ndarray) -> None:
-        """Terminal ellipsoid around the held command's equilibrium."""
+    def _terminal(self, params: LFCParams, Ad: np.ndarray, C: np.ndarray, Phi_n: np.ndarray,
+                  S_n: np.ndarray) -> None:
+        """Terminal ellipsoid around the held command's equilibrium, and the room
+        that leaves the equilibrium: ``|u - eq_per_p * p| <= eq_half``."""
         A, B = lfc_matrices(params)
         self._q = -np.linalg.solve(A, B)            # x_eq = q[:, 0] u + q[:, 1] p
         # Lyapunov weight: each state scaled by its size at the limits (1 pu of power,
@@ -133,10 +136,12 @@ class CertifiedSet:
         self.rho = float(min(0.5 * self.limits[0] / sigma[0], self.limits[1] / sigma[1]))
         self._eq_room = float(self.limits[0] - self.rho * sigma[0])  # |dw_eq| allowed
         self._dw_eq = tuple(map(float, (C @ self._q)[0]))            # dw_eq per (u, p)
+        g_u, g_p = self._dw_eq
+        self._eq_half, self._eq_per_p = self._eq_room / abs(g_u), -g_p / g_u
         # e = x_N - x_eq = E x + eu u + el p
-        self._E = self._Phi_n
-        self._eu = self._S_n @ self._Bd[:, 0] - self._q[:, 0]
-        self._el = self._S_n @ self._Bd[:, 1] - self._q[:, 1]
+        self._E = Phi_n
+        self._eu = S_n @ self._Bd[:, 0] - self._q[:, 0]
+        self._el = S_n @ self._Bd[:, 1] - self._q[:, 1]
         self._a_quad = float(self._eu @ self._P @ self._eu)
 
     def interval(self, x: np.ndarray, p_load: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -155,9 +160,9 @@ class CertifiedSet:
         if p_load:
             s = s + p_load * self._row_l
         lo, hi = float(np.max(self._row_a - s)), float(np.min(self._row_b - s))
-        g_u, g_p = self._dw_eq
-        half, centre = self._eq_room / abs(g_u), -g_p * p_load / g_u
-        lo, hi = max(lo, centre - half, self.u_min), min(hi, centre + half, self.u_max)
+        centre = self._eq_per_p * p_load
+        lo = max(lo, centre - self._eq_half, self.u_min)
+        hi = min(hi, centre + self._eq_half, self.u_max)
         e0 = self._E @ x + p_load * self._el
         Pe0 = self._P @ e0
         a = self._a_quad
@@ -170,10 +175,8 @@ class CertifiedSet:
         return max(lo, (-b - root) / (2 * a)), min(hi, (-b + root) / (2 * a))
 
     def _equilibrium(self, lo, hi, p_load):
-        g_u, g_p = self._dw_eq
-        half = self._eq_room / abs(g_u)
-        centre = -g_p * p_load / g_u
-        return np.maximum(lo, centre - half), np.minimum(hi, centre + half)
+        centre = self._eq_per_p * p_load
+        return np.maximum(lo, centre - self._eq_half), np.minimum(hi, centre + self._eq_half)
 
     def _ellipsoid(self, lo, hi, x, p_load):
         """(e0 + eu u)ᵀ P (e0 + eu u) <= rho²: a u² + b u + c <= 0."""
@@ -284,21 +287,17 @@ class CertifiedFilter:
         p_load = np.zeros_like(u_ref) if p_load is None else np.asarray(p_load, float)
         if self._u_prev_batch is None or len(self._u_prev_batch) != len(u_ref):
             self._u_prev_batch = np.zeros(len(u_ref))
-        u, flags = self._decide(x, u_ref, p_load, self._u_prev_batch)
-        self._u_prev_batch = u.copy()
-        flags["infeasible"] = np.zeros(len(u), bool)
-        return u, flags
-
-    def _decide(self, x, u_ref, p_load, u_prev):
-        cert = self.cert
+        u_prev, cert = self._u_prev_batch, self.cert
         valid = np.isfinite(x).all(axis=1) & np.isfinite(u_ref) & np.isfinite(p_load)
         xs, ps = np.where(valid[:, None], x, 0.0), np.where(valid, p_load, 0.0)
         lo, hi = cert.interval(xs, ps)
         certified = valid & (lo <= hi)
         ref = np.where(np.isfinite(u_ref), u_ref, u_prev)
         u = np.where(certified, np.clip(ref, lo, np.maximum(lo, hi)), u_prev)
+        self._u_prev_batch = u.copy()
         lims = np.array([cert.relays.F, cert.relays.rocof_limit])
-        return u, {"active": u != u_ref, "outside": valid & ~certified, "invalid_input": ~valid,
+        return u, {"active": u != u_ref, "infeasible": np.zeros(len(u), bool),
+                   "outside": valid & ~certified, "invalid_input": ~valid,
                    "h": np.where(valid[:, None], lims ** 2 - xs[:, 3:5] ** 2, np.nan),
                    "margin": np.where(certified[:, None], np.column_stack([u - lo, hi - u]),
                                       np.nan)}

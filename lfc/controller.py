@@ -15,6 +15,7 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
+from lfc._validate import check_nonnegative
 from lfc.cbf import SafetyFilter
 from lfc.estimation import KalmanFilter
 from lfc.model import LFCParams
@@ -23,7 +24,6 @@ SignalLike = Callable[[np.ndarray], np.ndarray]
 ALARM_COLUMNS = ("t", "u_ref", "u", "binding", "h_freq", "h_rocof", "margin_freq",
                  "margin_rocof", "infeasible", "outside", "invalid_input", "solver_error",
                  "reason")
-CONTROL_COLUMNS = ("t", "pc_ref", "pc", "scc_active", "dw_hat", "rocof_hat", "p_load_hat")
 
 
 def sample_signal(signal: SignalLike | None, t: np.ndarray, name: str) -> np.ndarray:
@@ -40,6 +40,17 @@ def sample_signal(signal: SignalLike | None, t: np.ndarray, name: str) -> np.nda
     if not np.all(np.isfinite(values)):
         raise ValueError(f"{name} returned non-finite values")
     return values
+
+
+def make_noise(noise_std: tuple[float, float], n: int, seed: int) -> np.ndarray:
+    """Seeded white noise for ``n`` controller readings of (dw_meas, rocof_meas):
+    shape (n, 2), std ``noise_std`` (pu, pu/s).  Raises ``ValueError`` unless it
+    is a pair of values >= 0."""
+    if len(noise_std) != 2:
+        raise ValueError(f"noise_std must be a pair (dw_meas, rocof_meas), got {noise_std!r}")
+    for i, s in enumerate(noise_std):
+        check_nonnegative(f"noise_std[{i}]", s)
+    return np.random.default_rng(seed).standard_normal((n, 2)) * np.asarray(noise_std, float)
 
 
 def make_estimator(estimator: object, params: LFCParams, control_period: float,

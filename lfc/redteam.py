@@ -54,10 +54,11 @@ class Defender:
         return {"alpha": self.alpha, "Ts": self.Ts, "method": self.method}
 
 
-def severity(results: pd.DataFrame, relays: RelaySettings) -> np.ndarray:
-    """Per run: max(peak |ROCOF| / rocof_limit, peak |Δω̂| / F)."""
-    return np.maximum(results.max_abs_rocof_meas.to_numpy() / relays.rocof_limit,
-                      results.max_abs_dw_meas.to_numpy() / relays.F)
+def severity(results, relays: RelaySettings) -> np.ndarray:
+    """Per run: max(peak |ROCOF| / rocof_limit, peak |Δω̂| / F).  ``results`` is a
+    batch table or one run's metrics (anything indexed by the metric names)."""
+    return np.maximum(np.asarray(results["max_abs_rocof_meas"], float) / relays.rocof_limit,
+                      np.asarray(results["max_abs_dw_meas"], float) / relays.F)
 
 
 def _family_table(family: str, theta: np.ndarray, defender: Defender) -> pd.DataFrame:
@@ -68,7 +69,7 @@ def _family_table(family: str, theta: np.ndarray, defender: Defender) -> pd.Data
                          "freq_hz": freq, "start": ATTACK_START, **defender.columns()})
 
 
-def _search(table_of, bounds, params, relays, duration, seed, maxiter, popsize, x0=None):
+def _search(table_of, bounds, params, relays, duration, seed, maxiter, popsize):
     """Differential evolution maximizing severity; returns (best theta, severity, row)."""
     def objective(theta: np.ndarray) -> np.ndarray:
         res = simulate_batch(params, table_of(theta), duration=duration,
@@ -77,7 +78,7 @@ def _search(table_of, bounds, params, relays, duration, seed, maxiter, popsize, 
 
     sol = differential_evolution(objective, bounds, seed=seed, maxiter=maxiter,
                                  popsize=popsize, vectorized=True, updating="deferred",
-                                 polish=False, tol=0, x0=x0)
+                                 polish=False, tol=0)
     best = simulate_batch(params, table_of(sol.x[:, None]), duration=duration, relays=relays,
                           progress=False)
     return sol.x, float(severity(best, relays)[0]), best.iloc[0]

@@ -24,7 +24,7 @@ import pandas as pd
 import papermill as pm
 from tqdm.auto import tqdm
 
-from lfc.notebook import PLANTS, check_plant
+from lfc.notebook import PLANTS, check_plant, figure_name
 
 ROOT = Path(__file__).resolve().parent.parent
 NOTEBOOKS_DIR = ROOT / "notebooks"
@@ -112,8 +112,8 @@ def reproduce(only: list[str] | None = None, plant: str = "all", jobs: int = 2,
         _prepare_testbed()
     pool = executor or ThreadPoolExecutor(max_workers=max(1, jobs))
     futures = {}
-    for name, run_plant in runs:
-        label = name if run_plant == "linear" else f"{name}_{run_plant}"
+    labels = [figure_name(n, p) for n, p in runs]
+    for (name, run_plant), label in zip(runs, labels):
         results = Path(build_dir).resolve() / "reproduce" / label
         params = {"figures_dir": str(Path(figures_dir).resolve()), "results_dir": str(results),
                   "plant": run_plant, "check_claims": True}
@@ -122,8 +122,7 @@ def reproduce(only: list[str] | None = None, plant: str = "all", jobs: int = 2,
     outcomes = _progress(futures, "reproduce")
     if executor is None:
         pool.shutdown()
-    order = {n if p == "linear" else f"{n}_{p}": i for i, (n, p) in enumerate(runs)}
-    return sorted(outcomes, key=lambda o: order[o.name])
+    return sorted(outcomes, key=lambda o: labels.index(o.name))
 
 
 def _prepare_testbed() -> None:
@@ -153,8 +152,10 @@ def parse_value(text: str) -> object:
         return text
 
 
-def validate_parameters(notebook: Path, parameters: dict[str, list]) -> None:
-    """Fail before any run: unknown names, wrong types, non-positive times or gains."""
+def validate_parameters(notebook: Path, parameters: dict[str, list]) -> dict:
+    """Fail before any run: unknown names, wrong types, non-positive times or gains.
+
+    Returns the notebook's parameters as papermill inspects them."""
     known = pm.inspect_notebook(str(notebook))
     for name, values in parameters.items():
         if name not in known:
@@ -169,6 +170,7 @@ def validate_parameters(notebook: Path, parameters: dict[str, list]) -> None:
                         raise ValueError(f"parameter {name!r} must be > 0, got {value!r}")
             if name == "plant":
                 check_plant(value)
+    return known
 
 
 def _check_type(name: str, value: object, default: object) -> None:
@@ -206,9 +208,8 @@ def sweep(notebook: str | Path, grid: dict[str, list], out: Path | None = None,
     notebook = Path(notebook).resolve()
     if not notebook.exists():
         raise ValueError(f"notebook not found: {notebook}")
-    validate_parameters(notebook, grid)
-    if "testbed" in grid.get("plant", []) or pm.inspect_notebook(str(notebook)).get(
-            "plant", {}).get("default") == '"testbed"':
+    known = validate_parameters(notebook, grid)
+    if "testbed" in grid.get("plant", []) or known.get("plant", {}).get("default") == '"testbed"':
         _prepare_testbed()
     out = Path(out or ROOT / "build" / "sweeps" / notebook.stem).resolve()
     points = [dict(zip(grid, combo)) for combo in itertools.product(*grid.values())]

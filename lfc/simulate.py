@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lfc._validate import check_multiple, check_nonnegative, check_positive
+from lfc._validate import check_multiple, check_positive
 from lfc.cbf import SafetyFilter
 from lfc.controller import (ALARM_COLUMNS, GeneratorSide, SignalLike, make_estimator,
-                            sample_signal)
+                            make_noise, sample_signal)
 from lfc.estimation import KalmanFilter
 from lfc.model import STATES, LFCParams, block_propagator, discretize
 from lfc.relays import RelayBank, RelaySettings
@@ -148,14 +148,10 @@ def simulate(params: LFCParams, *, duration: float, pc_attack: SignalLike | None
     SimResult
     """
     ratio = check_timing(duration, dt, control_period)
-    if len(noise_std) != 2:
-        raise ValueError(f"noise_std must be a pair (dw_meas, rocof_meas), got {noise_std!r}")
-    for i, s in enumerate(noise_std):
-        check_nonnegative(f"noise_std[{i}]", s)
     relays = relays if relays is not None else RelaySettings()
-    kf = make_estimator(estimator, params, control_period, noise_std)
     loop = _Loop(params, ratio, dt, int(round(duration / dt)))
-    noise = np.random.default_rng(seed).standard_normal((loop.n_ctrl, 2)) * noise_std
+    noise = make_noise(noise_std, loop.n_ctrl, seed)
+    kf = make_estimator(estimator, params, control_period, noise_std)
     gen = GeneratorSide(params, scc, kf, loop.tc, sample_signal(pc_attack, loop.tc, "pc_attack"),
                         sample_signal(wref_attack, loop.tc, "wref_attack"), noise,
                         load_feedforward)

@@ -23,6 +23,7 @@ generator terminals would, including their spikes at a fault.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,7 +31,8 @@ import pandas as pd
 
 from lfc._validate import check_multiple, check_nonnegative, check_positive
 from lfc.cbf import SafetyFilter
-from lfc.controller import (GeneratorSide, SignalLike, make_estimator, sample_signal)
+from lfc.controller import (GeneratorSide, SignalLike, make_estimator, make_noise,
+                            sample_signal)
 from lfc.estimation import KalmanFilter
 from lfc.model import STATES, LFCParams
 from lfc.relays import RelayBank, RelaySettings
@@ -120,11 +122,11 @@ def simulate_testbed(params: LFCParams, *, duration: float,
         If ANDES does not converge (with the time and ANDES' reason).
     """
     case = case or MicrogridCase()
-    n_ctrl = _check_scenario(case, duration, step, control_period, fault, load, noise_std)
+    n_ctrl = _check_scenario(case, duration, step, control_period, fault, load)
+    noise = make_noise(noise_std, n_ctrl, seed)
     relays = relays if relays is not None else RelaySettings()
     oc = overcurrent or OvercurrentSettings()
     tc = np.arange(n_ctrl) * control_period
-    noise = np.random.default_rng(seed).standard_normal((n_ctrl, 2)) * np.asarray(noise_std)
     pc_att = sample_signal(pc_attack, tc, "pc_attack")
     wref = sample_signal(wref_attack, tc, "wref_attack")
 
@@ -153,12 +155,9 @@ def simulate_testbed(params: LFCParams, *, duration: float,
 
 
 def _check_scenario(case: MicrogridCase, duration: float, step: float, control_period: float,
-                    fault: FaultSpec | None, load: SignalLike | None,
-                    noise_std: tuple[float, float]) -> int:
+                    fault: FaultSpec | None, load: SignalLike | None) -> int:
     check_positive("duration", duration)
     check_multiple("control_period", control_period, "step", step)
-    if len(noise_std) != 2 or min(noise_std) < 0:
-        raise ValueError(f"noise_std must be a pair of values >= 0, got {noise_std!r}")
     if fault is not None:
         _check_fault(case, fault, duration)
     _check_load(case, load, duration, step)
@@ -222,6 +221,7 @@ class _Testbed:
         self.trips: list[tuple[str, float]] = []
         self.next_j = 0
         self.line_open = False
+        self._load_at = (math.nan, 0.0)  # (t, dP_L): the last load value evaluated
 
     def run(self, duration: float, step: float) -> float | None:
         """Integrate to ``duration``; return the breaker-open time if a first
@@ -255,7 +255,7 @@ class _Testbed:
         if not (abs(ss.dae.x[self.ax[1]] - 1) < 1e-6 and abs(ss.dae.y[self.ay[1]] - 1) < 1e-6):
             raise TestbedError("the testbed did not initialize at 1.0 pu frequency")
         k = line.idx2uid(case.protected_line)
-        name, a, b, _ = next(ln for ln in case.lines if ln[0] == case.protected_line)
+        _, a, b, _ = next(ln for ln in case.lines if ln[0] == case.protected_line)
         self.z_line = complex(line.r.v[k], line.x.v[k])
         self.y_shunt = complex(line.g.v[k] / 2 + line.g1.v[k], line.b.v[k] / 2 + line.b1.v[k])
         bus = ss.Bus
@@ -279,9 +279,13 @@ class _Testbed:
         return state, float(v[self.gen_uid]), complex(current)
 
     def _p_load(self, t: float) -> float:
+        """dP_L at ``t`` (pu); the callback asks for each step's end time, and the
+        log for the same time one call later, so the last value is kept."""
         if self.load is None:
             return 0.0
-        return float(sample_signal(self.load, np.array([t]), "load")[0])
+        if t != self._load_at[0]:
+            self._load_at = (t, float(sample_signal(self.load, np.array([t]), "load")[0]))
+        return self._load_at[1]
 
     def _callback(self, t_attempt, system) -> None:
         ss = self.ss
@@ -330,9 +334,7 @@ class _Testbed:
                                              trace["rocof_meas"].to_numpy())
             self.trips = [(r, float(trace["t"].iat[k])) for r, k, _ in
                           sorted(found, key=lambda f: f[1])]
-        cols = list(trace.columns)
         self.gen.add_to_trace(trace)
-        trace = trace[["t", "pc_ref", "pc", *cols[1:], "wref", "scc_active"]]
         t_end = float(trace["t"].iat[-1])
         trips = pd.DataFrame(self.trips, columns=["relay", "t"])
         line_trips = pd.DataFrame(
