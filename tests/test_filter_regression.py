@@ -1,0 +1,73 @@
+"""The filters' commands on a fixed set of states, pinned before the filters move.
+
+``tests/data/filter_regression.npz`` was recorded at commit bbe860e (before the
+Baseline and Engine issues) by :func:`record`; every later version of the
+filters must give the same commands and flags on these states (the paper's
+filter with the "push" reading of E9, the certified filter).  A change of
+behaviour on purpose needs a new recording and a note in the issue.
+"""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import lfc
+
+DATA = Path(__file__).parent / "data" / "filter_regression.npz"
+P, RELAYS = lfc.LFCParams(), lfc.RelaySettings()
+N = 4000
+
+
+def cases() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Seeded states (N, 5), commands and assumed loads (N,): near equilibrium,
+    at the limits and well outside them, so every regime of each filter occurs."""
+    rng = np.random.default_rng(20261122)
+    scale = np.array([0.5, 0.5, 0.04, 0.04, 0.08]) * rng.choice([0.05, 0.3, 1.0, 3.0], (N, 1))
+    x = rng.normal(size=(N, 5)) * scale
+    u_ref = rng.normal(scale=0.6, size=N)
+    p_load = np.where(rng.random(N) < 0.5, 0.0, rng.normal(scale=0.05, size=N))
+    x[:10, 2], u_ref[10:20] = np.nan, np.inf   # lost measurements, a broken command
+    return x, u_ref, p_load
+
+
+FILTERS = {  # name -> SafetyFilter keyword arguments (paper filter: the "push" reading)
+    "paper_a3": {"alpha": 3.0},
+    "paper_a20": {"alpha": 20.0},
+    "paper_a20_limits": {"alpha": 20.0, "u_min": -0.5, "u_max": 0.8},
+    "paper_a1_ts01": {"alpha": 1.0, "Ts": 0.1},
+    "certified": {"method": "certified"},
+    "certified_load_margin": {"method": "certified", "load_bound": 0.05, "margin": 0.1},
+}
+FLAGS = ("active", "infeasible", "outside", "invalid_input")
+
+
+def record(path: Path = DATA) -> None:
+    """Write the current filters' outputs on :func:`cases` to ``path``."""
+    x, u_ref, p_load = cases()
+    out = {}
+    for name, kw in FILTERS.items():
+        u, flags = lfc.SafetyFilter(P, RELAYS, **kw).filter_batch(x, u_ref, p_load)
+        out[f"{name}/u"] = u
+        for f in FLAGS:
+            out[f"{name}/{f}"] = flags[f]
+    np.savez_compressed(path, **out)
+
+
+@pytest.mark.parametrize("name", list(FILTERS))
+def test_commands_and_flags_are_unchanged(name):
+    expected = np.load(DATA)
+    x, u_ref, p_load = cases()
+    u, flags = lfc.SafetyFilter(P, RELAYS, **FILTERS[name]).filter_batch(x, u_ref, p_load)
+    np.testing.assert_allclose(u, expected[f"{name}/u"], rtol=1e-9, atol=1e-12)
+    for f in FLAGS:
+        np.testing.assert_array_equal(flags[f], expected[f"{name}/{f}"], err_msg=f)
+
+
+@pytest.mark.parametrize("name", [n for n in FILTERS if not n.startswith("certified")])
+def test_one_state_at_a_time_gives_the_same_commands(name):
+    expected = np.load(DATA)
+    x, u_ref, p_load = cases()
+    filt = lfc.SafetyFilter(P, RELAYS, **FILTERS[name])
+    u = np.array([filt.filter(x[i], u_ref[i], p_load[i])[0] for i in range(0, N, 7)])
+    np.testing.assert_allclose(u, expected[f"{name}/u"][::7], rtol=1e-9, atol=1e-12)
