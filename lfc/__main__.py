@@ -1,5 +1,6 @@
-"""Command line: ``python -m lfc reproduce``, ``sweep`` (notebooks over a grid) and
-``batch`` (a scenario table through the batched simulator)."""
+"""Command line: ``python -m lfc reproduce``, ``sweep`` (notebooks over a grid),
+``batch`` (a scenario table through the batched simulator) and ``readme`` (copy the
+generated tables of the last reproduce into the README)."""
 
 from __future__ import annotations
 
@@ -37,6 +38,10 @@ def _parser() -> argparse.ArgumentParser:
                     help="folder: per-chunk files (resume) and results.csv")
     bt.add_argument("--chunk-size", type=int, default=500)
     bt.add_argument("--dask", metavar="ADDRESS", help="run on a Dask scheduler at ADDRESS")
+    rd = sub.add_parser("readme", help="copy figures/<name>.md into the README's "
+                        "<!-- name:start --> sections (reproduce never edits the README)")
+    rd.add_argument("--check", action="store_true",
+                    help="only report sections that differ (exit 1 if any)")
     return ap
 
 
@@ -64,6 +69,19 @@ def _batch(args) -> int:
     return 0
 
 
+def _readme(check: bool) -> int:
+    from lfc.notebook import readme_mismatches, sync_readme
+    readme, tables = runner.ROOT / "README.md", runner.ROOT / "figures"
+    if check:
+        stale = readme_mismatches(readme, tables)
+        print("README sections out of date: " + ", ".join(stale) if stale else
+              "README tables match figures/")
+        return 1 if stale else 0
+    changed = sync_readme(readme, tables)
+    print("updated README sections: " + ", ".join(changed) if changed else "README up to date")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     try:
@@ -74,6 +92,8 @@ def main(argv: list[str] | None = None) -> int:
             return 0 if all(o.ok for o in outcomes) else 1
         if args.command == "batch":
             return _batch(args)
+        if args.command == "readme":
+            return _readme(args.check)
         grid = {}
         for name, *values in args.param:
             if not values:

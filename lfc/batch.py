@@ -26,7 +26,8 @@ import numpy as np
 import pandas as pd
 from tqdm.auto import tqdm
 
-from lfc.cbf import METHODS, SafetyFilter, alarm_mask
+from lfc.cbf import (CONFLICT_RULES, METHODS, OUTSIDE_RULES, PREDICTIONS, SafetyFilter,
+                     alarm_mask)
 from lfc.controller import sample_signal
 from lfc.model import LFCParams, block_propagator, discretize
 from lfc.relays import RELAY_NAMES, RelayBank, RelaySettings
@@ -36,6 +37,8 @@ from lfc.simulate import check_timing
 WAVEFORMS = ("sinusoid", "square", "chirp", "step", "ramp", "samples", "none")
 CHANNELS = ("pc", "wref", "load")
 REQUIRED = ("waveform", "channel", "amplitude", "freq_hz", "start", "alpha", "Ts")
+READINGS = {"outside_rule": OUTSIDE_RULES, "conflict": CONFLICT_RULES,
+            "prediction": PREDICTIONS}  # optional columns: the paper filter's readings
 CHIRP_F0 = 0.1  # Hz, where every chirp starts
 BATCH_METRICS = ("tripped", "first_trip_relay", "first_trip_t", "max_abs_dw_meas",
                  "max_abs_rocof_meas", "scc_active_fraction", "max_abs_modification",
@@ -93,11 +96,13 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
             raise ValueError(f"column {col!r} must be finite{' and > 0' if col == 'Ts' else ''}"
                              f"{' and >= 0' if col in ('freq_hz', 'start') else ''}; row "
                              f"{scenarios.index[bad][0]!r} has {scenarios[col][bad].iloc[0]!r}")
-    if "method" in scenarios.columns:
-        bad = ~scenarios["method"].isin(METHODS)
+    for col, allowed in (("method", METHODS), *READINGS.items()):
+        if col not in scenarios.columns:
+            continue
+        bad = ~scenarios[col].isin(allowed)
         if bad.any():
-            raise ValueError(f"column 'method' must be one of {METHODS}; row "
-                             f"{scenarios.index[bad][0]!r} has {scenarios['method'][bad].iloc[0]!r}")
+            raise ValueError(f"column {col!r} must be one of {allowed}; row "
+                             f"{scenarios.index[bad][0]!r} has {scenarios[col][bad].iloc[0]!r}")
     alpha = pd.to_numeric(scenarios["alpha"], errors="coerce")
     bad = scenarios["alpha"].notna() & ~(alpha > 0)
     if bad.any():
@@ -155,14 +160,16 @@ class _Batch:
         alpha = pd.to_numeric(scenarios["alpha"]).to_numpy(float)
         ts = pd.to_numeric(scenarios["Ts"]).to_numpy(float)
         method = scenarios.get("method", pd.Series("paper", index=scenarios.index)).to_numpy()
+        readings = {c: scenarios[c].to_numpy() for c in READINGS if c in scenarios.columns}
         period = self.period if self.n_ctrl > 1 else self.ratio * float(self.t[1])
         self.groups = []
-        keys = {(m, a, t) if m == "paper" else (m, 0.0, 0.0)
-                for m, a, t in zip(method, alpha, ts) if np.isfinite(a)}
-        for m, a, t in sorted(keys):
-            sel = (method == m) & np.isfinite(alpha)
-            rows = np.flatnonzero(sel & (alpha == a) & (ts == t) if m == "paper" else sel)
-            filt = SafetyFilter(self.params, relays, alpha=a, Ts=t) if m == "paper" else \
+        keys = [(m, a, t, *(readings[c][i] for c in readings)) if m == "paper"
+                else (m, 0.0, 0.0) for i, (m, a, t) in enumerate(zip(method, alpha, ts))]
+        for key in sorted({k for k, a in zip(keys, alpha) if np.isfinite(a)}):
+            rows = np.flatnonzero([k == key and np.isfinite(a) for k, a in zip(keys, alpha)])
+            m, a, t = key[:3]
+            filt = SafetyFilter(self.params, relays, alpha=a, Ts=t,
+                                **dict(zip(readings, key[3:]))) if m == "paper" else \
                 SafetyFilter(self.params, relays, method=m, period=period)
             self.groups.append((rows, filt))
 

@@ -12,26 +12,38 @@ Reading of the paper (reproduction notes E2, E5, E6, E9, E10):
   ``dh/dt(u) + gamma(h) >= 0`` with ``gamma(h) = alpha h (1+h) / B(h)``
   (multiply by ``h (1+h) > 0``); that form is what both solvers use.
 * E9, outside the safe set (a prediction with ``h <= 0``): ``B`` does not
-  exist.  We extend ``gamma`` by ``gamma(h) = alpha h`` (continuous at 0, an
-  extended class-K function), so the constraint demands ``dh/dt >= alpha |h|``:
-  the command pushes back toward the set.  Flagged ``outside``.
+  exist and the paper does not say what the SCC does.  Two readings
+  (``outside_rule``), both continuous at ``h = 0``: ``"hold"`` continues the
+  paper's own condition, whose limit as ``h -> 0+`` is ``dh/dt >= 0`` ("do
+  not get worse"): ``gamma(h) = 0``; ``"push"`` extends ``gamma`` as an
+  extended class-K function, ``gamma(h) = alpha h``, demanding
+  ``dh/dt >= alpha |h|`` (push back toward the set).  Flagged ``outside``.
+* E5, what the prediction holds (``prediction``): ``"incoming"`` (the
+  command that arrives, ``u_ref``: "whether the current governor-droop
+  control signal can force the system to exit the safety set") or
+  ``"applied"`` (the command the governor currently follows, the filter's
+  previous output; 0 after :meth:`SafetyFilter.reset`).
 * E10, the QP is one-dimensional: each constraint is ``u >= bound`` or
   ``u <= bound`` and the exact answer is ``u_ref`` clipped to an interval.
-  When the constraints (with the actuator limits) admit no ``u`` the filter
-  solves the slack-relaxed QP ``min 1/2 (u-u_ref)^2 + rho/2 sum s_i^2`` with
-  each slack ``s_i`` the violation of constraint ``i`` in pu of command,
-  subject to the actuator limits (hard); with a large ``rho`` this splits a
-  conflict between the two relays evenly and, against an actuator limit,
-  pushes as hard as the actuator allows.  Flagged ``infeasible``.
+  When the constraints (with the actuator limits) admit no ``u``
+  (``conflict``): ``"slack"`` solves the slack-relaxed QP
+  ``min 1/2 (u-u_ref)^2 + rho/2 sum s_i^2`` with each slack ``s_i`` the
+  violation of constraint ``i`` in pu of command, subject to the actuator
+  limits (hard); with a large ``rho`` this splits a conflict between the two
+  relays evenly and, against an actuator limit, pushes as hard as the
+  actuator allows.  ``"rocof"`` or ``"frequency"`` meets that constraint
+  (within the actuator limits) and comes as close to the other as it allows.
+  Flagged ``infeasible``.
 * A constraint whose coefficient on ``u`` vanishes (``|g| <= 1e-12``) cannot
   be influenced by the command: it is dropped, and flagged ``infeasible`` if
   it is violated.
 * Non-finite ``x``, ``u_ref`` or ``p_load`` (a lost measurement): no barrier
   can be evaluated; the command is ``u_ref`` (``0`` if ``u_ref`` itself is not
   finite) clipped to the actuator limits, flagged ``invalid_input``.
-* ``solver="cvxpy"``: a DPP problem built once and solved by Clarabel.  If it
-  raises or does not return an optimal status the exact answer is used,
-  flagged ``solver_error``.
+* ``solver="cvxpy"``: :class:`lfc.cvxpy_reference.PaperQP`, the QP written
+  in cvxpy from the paper's definitions (a DPP problem built once, solved by
+  Clarabel).  If it raises or does not return an optimal status the exact
+  answer is used, flagged ``solver_error``.
 
 ``filter`` never raises for numeric trouble and always returns a finite command.
 """
@@ -42,7 +54,6 @@ import math
 from dataclasses import dataclass
 from operator import mul
 
-import cvxpy as cp
 import numpy as np
 
 from lfc._validate import check_positive
@@ -52,13 +63,15 @@ from lfc.relays import RelaySettings
 SOLVERS = ("exact", "cvxpy")
 METHODS = ("paper", "certified")
 CONSTRAINTS = ("frequency", "rocof")
+OUTSIDE_RULES = ("hold", "push")               # E9 readings
+CONFLICT_RULES = ("slack", "rocof", "frequency")  # E10 readings
+PREDICTIONS = ("incoming", "applied")          # E5 readings
+# The reading that stops the most tripping attacks of the default attack-surface maps at
+# alpha = 3 and 20 (notebooks/06_attack_surface.ipynb, "The paper's SCC at its strongest").
+DEFAULT_READING = {"outside_rule": "hold", "conflict": "frequency", "prediction": "incoming"}
 ALARM_FLAGS = ("active", "infeasible", "outside", "invalid_input", "solver_error")
 _G_EPS = 1e-12      # |coefficient on u| below which a constraint cannot be influenced
 _BIND_TOL = 1e-7    # relative tolerance to report a bound as binding
-# Clarabel's default gap tolerances (1e-8) leave up to ~1e-4 error in u on these QPs
-# (the relaxed one has a large optimal value, so a relative gap is loose in u).
-# Measured on 3,000 random states: these give <= 4e-10; tighter feasibility fails.
-_CLARABEL_OPTS = {"tol_gap_abs": 1e-9, "tol_gap_rel": 1e-12, "tol_feas": 1e-9}
 
 
 @dataclass(frozen=True)
@@ -120,15 +133,16 @@ def alarm_mask(flags: dict[str, np.ndarray]) -> np.ndarray:
     return np.logical_or.reduce([flags[f] for f in ALARM_FLAGS if f in flags])
 
 
-def barrier_gamma(h: np.ndarray, alpha: float) -> np.ndarray:
-    """``gamma(h) = alpha h (1+h) / -log(h/(1+h))`` for h > 0, ``alpha h`` for h <= 0.
+def barrier_gamma(h: np.ndarray, alpha: float, outside_rule: str = "push") -> np.ndarray:
+    """``gamma(h) = alpha h (1+h) / -log(h/(1+h))`` for h > 0; for h <= 0
+    ``0`` (``outside_rule="hold"``) or ``alpha h`` (``"push"``).
 
     The paper's condition ``dB/dt <= alpha / B`` equals ``dh/dt >= -gamma(h)``.
     """
     h = np.asarray(h, float)
     hp = np.where(h > 0, h, 1.0)
     paper = alpha * hp * (1 + hp) / np.log1p(1 / hp)
-    return np.where(h > 0, paper, alpha * h)
+    return np.where(h > 0, paper, alpha * h if outside_rule == "push" else 0.0)
 
 
 @dataclass(frozen=True)
@@ -163,6 +177,17 @@ class SafetyFilter:
     slack_weight : float
         Penalty ``rho`` on squared constraint violations (pu^-2) in the
         relaxed QP used when the constraints conflict, > 0. Default 1e4.
+    outside_rule : {"hold", "push"}
+        E9, a prediction already outside (``h <= 0``): demand ``dh/dt >= 0``
+        or ``dh/dt >= alpha |h|`` (module docstring). Default "hold".
+    conflict : {"slack", "rocof", "frequency"}
+        E10, conflicting constraints: the slack-relaxed QP, or meet that
+        constraint first (module docstring). Default "frequency".
+    prediction : {"incoming", "applied"}
+        E5, the command held in the look-ahead prediction (module docstring).
+        Default "incoming".  The defaults are ``DEFAULT_READING``: of the 12
+        readings, the one that stops the most attacks of the default
+        attack-surface maps (notebook 06).
     method : {"paper", "certified"}
         The paper's CBF-QP (default), or the filter with a guarantee of
         :mod:`lfc.certified` (``alpha``, ``Ts`` and ``slack_weight`` unused;
@@ -177,9 +202,17 @@ class SafetyFilter:
     def __init__(self, params: LFCParams, relays: RelaySettings | None = None, *,
                  alpha: float = 20.0, Ts: float = 0.25, solver: str = "exact",
                  u_min: float = -math.inf, u_max: float = math.inf,
-                 slack_weight: float = 1e4, method: str = "paper", period: float = 0.01,
-                 horizon: float = 4.0, load_bound: float = 0.0, margin: float = 0.0) -> None:
+                 slack_weight: float = 1e4, outside_rule: str = "hold",
+                 conflict: str = "frequency", prediction: str = "incoming", method: str = "paper",
+                 period: float = 0.01, horizon: float = 4.0, load_bound: float = 0.0,
+                 margin: float = 0.0) -> None:
         check_positive("alpha", alpha)
+        for name, value, allowed in (("outside_rule", outside_rule, OUTSIDE_RULES),
+                                     ("conflict", conflict, CONFLICT_RULES),
+                                     ("prediction", prediction, PREDICTIONS)):
+            if value not in allowed:
+                raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
+        self.outside_rule, self.conflict, self.prediction = outside_rule, conflict, prediction
         check_positive("Ts", Ts)
         check_positive("slack_weight", slack_weight)
         if solver not in SOLVERS:
@@ -192,8 +225,14 @@ class SafetyFilter:
         self.u_min, self.u_max, self.slack_weight = float(u_min), float(u_max), float(slack_weight)
         self.limits = np.array([self.relays.F, self.relays.rocof_limit])
         self._build_prediction()
-        self._cvx = _CvxpyQP(self.u_min, self.u_max, self.slack_weight) \
-            if solver == "cvxpy" else None
+        self._cvx = None
+        if solver == "cvxpy":
+            from lfc.cvxpy_reference import PaperQP
+            self._cvx = PaperQP(params, self.relays, alpha=self.alpha, Ts=self.Ts,
+                                outside_rule=outside_rule, conflict=conflict,
+                                slack_weight=self.slack_weight, u_min=self.u_min,
+                                u_max=self.u_max)
+        self._u_applied, self._u_applied_batch = 0.0, None
         self.method, self._certified = self._make_method(method, period, horizon, load_bound,
                                                          margin)
 
@@ -212,7 +251,9 @@ class SafetyFilter:
             margin=margin, u_min=self.u_min, u_max=self.u_max))
 
     def reset(self) -> None:
-        """Forget any state between runs (the certified filter's held command)."""
+        """Forget any state between runs (the certified filter's held command,
+        the applied command of ``prediction="applied"``)."""
+        self._u_applied, self._u_applied_batch = 0.0, None
         if self._certified is not None:
             self._certified.reset()
 
@@ -222,7 +263,8 @@ class SafetyFilter:
             return (f"SafetyFilter(method='certified', load_bound={c.load_bound}, "
                     f"u_min={self.u_min}, u_max={self.u_max})")
         return (f"SafetyFilter(alpha={self.alpha}, Ts={self.Ts}, solver={self.solver!r}, "
-                f"u_min={self.u_min}, u_max={self.u_max})")
+                f"outside_rule={self.outside_rule!r}, conflict={self.conflict!r}, "
+                f"prediction={self.prediction!r}, u_min={self.u_min}, u_max={self.u_max})")
 
     def _build_prediction(self) -> None:
         A, B = lfc_matrices(self.params)
@@ -238,12 +280,14 @@ class SafetyFilter:
              float(self.limits[i] ** 2)) for i in range(2))
 
     # -- the constraints -------------------------------------------------------
-    def rows(self, x: np.ndarray, u_ref: np.ndarray, p_load: np.ndarray) -> _Rows:
-        """Barrier constraints for states ``x`` (N, 5), commands and loads (N,)."""
-        y = x @ self._P + u_ref[:, None] * self._q + p_load[:, None] * self._r
+    def rows(self, x: np.ndarray, u_pred: np.ndarray, p_load: np.ndarray) -> _Rows:
+        """Barrier constraints for states ``x`` (N, 5), the commands held in the
+        prediction and the loads (N,)."""
+        y = x @ self._P + u_pred[:, None] * self._q + p_load[:, None] * self._r
         h = self.limits**2 - y**2
         g = -2 * y * self._kg
-        c = -2 * y * (x @ self._W + p_load[:, None] * self._wl) + barrier_gamma(h, self.alpha)
+        c = (-2 * y * (x @ self._W + p_load[:, None] * self._wl)
+             + barrier_gamma(h, self.alpha, self.outside_rule))
         kind = np.where(g > _G_EPS, 1, np.where(g < -_G_EPS, -1, 0))
         with np.errstate(divide="ignore", invalid="ignore"):
             bound = np.where(kind != 0, -c / np.where(kind != 0, g, 1.0), 0.0)
@@ -280,13 +324,21 @@ class SafetyFilter:
         valid = np.isfinite(x).all(axis=1) & np.isfinite(u_ref) & np.isfinite(p_load)
         xs, rs, ps = (np.where(valid[:, None], x, 0.0), np.where(valid, u_ref, 0.0),
                       np.where(valid, p_load, 0.0))
-        rows = self.rows(xs, rs, ps)
+        if self.prediction == "applied":
+            if self._u_applied_batch is None or len(self._u_applied_batch) != len(u_ref):
+                self._u_applied_batch = np.zeros(len(u_ref))
+            pred = self._u_applied_batch
+        else:
+            pred = rs
+        rows = self.rows(xs, pred, ps)
         valid &= np.isfinite(rows.c).all(axis=1) & np.isfinite(rows.g).all(axis=1)
         u, feasible = solve_interval_qp(rs, rows.kind, rows.bound, self.u_min, self.u_max,
-                                        self.slack_weight)
+                                        self.slack_weight, self.conflict)
         fallback = np.clip(np.where(np.isfinite(u_ref), u_ref, 0.0), self.u_min, self.u_max)
         fallback = np.where(np.isfinite(fallback), fallback, 0.0)
         u = np.where(valid, u, fallback)
+        if self.prediction == "applied":
+            self._u_applied_batch = u.copy()
         return u, self._flags(rows, u_ref, u, feasible, valid)
 
     def _flags(self, rows: _Rows, u_ref: np.ndarray, u: np.ndarray, feasible: np.ndarray,
@@ -341,31 +393,39 @@ class SafetyFilter:
             return self._certified.filter(xs, u_ref, p_load)
         u_ref, p_load = float(u_ref), float(p_load)
         rows = None
+        u_pred = self._u_applied if self.prediction == "applied" else u_ref
         if all(map(math.isfinite, xs)) and math.isfinite(u_ref) and math.isfinite(p_load):
-            rows = [self._scalar_row(coef, xs, u_ref, p_load) for coef in self._scalar]
+            rows = [self._scalar_row(coef, xs, u_pred, p_load) for coef in self._scalar]
             if not all(map(math.isfinite, (v for row in rows for v in row))):
                 rows = None
         if rows is None:
-            return self._invalid(u_ref)
+            u, info = self._invalid(u_ref)
+            self._u_applied = u
+            return u, info
         kind = [row[4] for row in rows]
         bound = [row[5] for row in rows]
         u, feasible = self._solve_scalar(u_ref, kind, bound)
         solver_error, note = False, ""
         if self._cvx is not None:
+            from cvxpy.error import SolverError
             try:
-                u = self._cvx.solve(u_ref, np.array(kind), np.array(bound))
-            except (cp.error.SolverError, RuntimeError) as err:
+                u = self._cvx.solve(np.array(xs), u_ref, p_load, u_pred)
+            except (SolverError, RuntimeError) as err:
                 solver_error, note = True, f"cvxpy failed ({err}); exact solution used"
+        self._u_applied = u
         return u, self._info(u_ref, u, rows, feasible, solver_error, note)
 
-    def _scalar_row(self, coef: tuple, x: list[float], u_ref: float, p_load: float
+    def _scalar_row(self, coef: tuple, x: list[float], u_pred: float, p_load: float
                     ) -> tuple[float, float, float, float, int, float]:
         """(y, h, g, c, kind, bound) of one barrier constraint."""
         P, q, r, W, kg, wl, lim2 = coef
-        y = sum(map(mul, P, x)) + q * u_ref + r * p_load
+        y = sum(map(mul, P, x)) + q * u_pred + r * p_load
         h = lim2 - y * y
         g = -2.0 * y * kg
-        gamma = self.alpha * h * (1 + h) / math.log1p(1 / h) if h > 0 else self.alpha * h
+        if h > 0:
+            gamma = self.alpha * h * (1 + h) / math.log1p(1 / h)
+        else:
+            gamma = self.alpha * h if self.outside_rule == "push" else 0.0
         c = -2.0 * y * (sum(map(mul, W, x)) + wl * p_load) + gamma
         kind = 1 if g > _G_EPS else (-1 if g < -_G_EPS else 0)
         return y, h, g, c, kind, (-c / g if kind else 0.0)
@@ -376,6 +436,10 @@ class SafetyFilter:
         hi = min([b for k, b in zip(kind, bound) if k == -1] + [self.u_max])
         if lo <= hi:
             return min(max(u_ref, lo), hi), True
+        if self.conflict != "slack":
+            u = solve_interval_qp(np.array([u_ref]), np.array([kind]), np.array([bound]),
+                                  self.u_min, self.u_max, self.slack_weight, self.conflict)[0]
+            return float(u[0]), False
         rows = [(k, b) for k, b in zip(kind, bound) if k]
         rho = self.slack_weight
 
@@ -412,7 +476,8 @@ class SafetyFilter:
             invalid_input=False, solver_error=solver_error, h_freq=hw, h_rocof=hv,
             margin_freq=gw * u + cw, margin_rocof=gv * u + cv, y_freq=yw, y_rocof=yv,
             binding=binding,
-            reason=_reason(active, infeasible, outside, False, binding, note))
+            reason=_reason(active, infeasible, outside, False, binding, note,
+                           self.outside_rule, self.conflict))
 
     def _binding(self, u: float, kind: np.ndarray, bound: np.ndarray) -> tuple[str, ...]:
         names = [name for name, k, b in zip(CONSTRAINTS, kind, bound)
@@ -430,7 +495,7 @@ def _admissible(u: np.ndarray, kind: np.ndarray, bound: np.ndarray, u_min: float
 
 
 def solve_interval_qp(u_ref: np.ndarray, kind: np.ndarray, bound: np.ndarray,
-                      u_min: float, u_max: float, rho: float
+                      u_min: float, u_max: float, rho: float, conflict: str = "slack"
                       ) -> tuple[np.ndarray, np.ndarray]:
     """Exact solution of the one-dimensional CBF-QP, vectorized over N problems.
 
@@ -445,13 +510,17 @@ def solve_interval_qp(u_ref: np.ndarray, kind: np.ndarray, bound: np.ndarray,
         Actuator limits (pu), hard.
     rho : float
         Slack penalty of the relaxed QP used where the hard QP is infeasible.
+    conflict : {"slack", "frequency", "rocof"}
+        Where it is infeasible: the relaxed QP, or (k = 2 constraints,
+        frequency then ROCOF) meet the named constraint within the actuator
+        limits and come as close to the other as that allows.
 
     Returns
     -------
     u : ndarray, shape (N,)
         ``u_ref`` clipped to the admissible interval where it is non-empty;
         otherwise the minimizer of ``1/2 (u - u_ref)^2 + rho/2 sum viol_i(u)^2``
-        over ``[u_min, u_max]``.
+        over ``[u_min, u_max]`` (``conflict="slack"``) or the priority answer.
     feasible : ndarray of bool, shape (N,)
         Whether the hard QP was feasible.
     """
@@ -462,8 +531,25 @@ def solve_interval_qp(u_ref: np.ndarray, kind: np.ndarray, bound: np.ndarray,
     u_hard = np.clip(u_ref, np.where(feasible, lo, -np.inf), np.where(feasible, hi, np.inf))
     if feasible.all():
         return u_hard, feasible
-    u_soft = np.clip(_relaxed_minimizer(u_ref, kind, bound, rho), u_min, u_max)
+    if conflict == "slack":
+        u_soft = np.clip(_relaxed_minimizer(u_ref, kind, bound, rho), u_min, u_max)
+    else:
+        u_soft = _priority_answer(u_ref, kind, bound, u_min, u_max,
+                                  CONSTRAINTS.index(conflict))
     return np.where(feasible, u_hard, u_soft), feasible
+
+
+def _priority_answer(u_ref: np.ndarray, kind: np.ndarray, bound: np.ndarray, u_min: float,
+                     u_max: float, first: int) -> np.ndarray:
+    """Meet constraint ``first`` within the actuator limits, then come as close
+    to the other constraint as that allows (used where the QP is infeasible)."""
+    kp, bp = kind[:, first], bound[:, first]
+    ko, bo = kind[:, 1 - first], bound[:, 1 - first]
+    lo = np.where(kp == 1, np.maximum(bp, u_min), u_min)
+    hi = np.where(kp == -1, np.minimum(bp, u_max), u_max)
+    target = np.where(ko != 0, bo, u_ref)
+    inside = np.clip(target, lo, np.maximum(lo, hi))
+    return np.where(lo <= hi, inside, np.clip(bp, u_min, u_max))
 
 
 def _relaxed_minimizer(u_ref: np.ndarray, kind: np.ndarray, bound: np.ndarray, rho: float
@@ -492,54 +578,21 @@ def _relaxed_objective(u: np.ndarray, u_ref: np.ndarray, kind: np.ndarray, bound
 
 
 def _reason(active: bool, infeasible: bool, outside: bool, invalid: bool,
-            binding: tuple[str, ...], note: str) -> str:
+            binding: tuple[str, ...], note: str, outside_rule: str = "push",
+            conflict: str = "slack") -> str:
     parts = []
     if invalid:
         parts.append("non-finite input: barrier not evaluated, command passed through "
                      "(0 if not finite) within the actuator limits")
     if outside:
-        parts.append("prediction outside the safe set (h <= 0): pushing back")
+        parts.append("prediction outside the safe set (h <= 0): " + (
+            "pushing back" if outside_rule == "push" else "not letting it get worse"))
     if infeasible:
-        parts.append("constraints conflict: relaxed (slack) compromise")
+        parts.append("constraints conflict: " + ("relaxed (slack) compromise"
+                                                 if conflict == "slack" else
+                                                 f"{conflict} constraint met first"))
     if active and binding:
         parts.append("command limited by " + ", ".join(binding))
     if note:
         parts.append(note)
     return "; ".join(parts)
-
-
-class _CvxpyQP:
-    """The SCC QP in cvxpy (DPP, built once), solved by Clarabel.
-
-    Hard problem: ``min 1/2 (u - u_ref)^2  s.t.  G_i u + c_i >= 0`` and the
-    actuator limits, where row ``i`` is the paper's barrier condition scaled
-    so that ``G_i = kind_i`` (violations are in pu of command).  If it is
-    infeasible, the relaxed problem with slacks ``s >= 0`` and penalty
-    ``rho/2 ||s||^2`` is solved instead.
-    """
-
-    def __init__(self, u_min: float, u_max: float, rho: float) -> None:
-        self.u, self.s = cp.Variable(), cp.Variable(2, nonneg=True)
-        self.u_ref, self.G, self.c = cp.Parameter(), cp.Parameter(2), cp.Parameter(2)
-        limits = [self.u >= u_min] if math.isfinite(u_min) else []
-        limits += [self.u <= u_max] if math.isfinite(u_max) else []
-        dist = 0.5 * cp.square(self.u - self.u_ref)
-        self.hard = cp.Problem(cp.Minimize(dist),
-                               [cp.multiply(self.G, self.u) + self.c >= 0] + limits)
-        self.soft = cp.Problem(cp.Minimize(dist + 0.5 * rho * cp.sum_squares(self.s)),
-                               [cp.multiply(self.G, self.u) + self.c + self.s >= 0] + limits)
-
-    def solve(self, u_ref: float, kind: np.ndarray, bound: np.ndarray) -> float:
-        """Return the optimal ``u``; raise ``RuntimeError`` if Clarabel does not solve."""
-        self.u_ref.value = u_ref
-        self.G.value = kind.astype(float)
-        self.c.value = -kind * bound
-        self.hard.solve(solver=cp.CLARABEL, **_CLARABEL_OPTS)
-        if self.hard.status in (cp.INFEASIBLE, cp.INFEASIBLE_INACCURATE):
-            self.soft.solve(solver=cp.CLARABEL, **_CLARABEL_OPTS)
-            status = self.soft.status
-        else:
-            status = self.hard.status
-        if status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or self.u.value is None:
-            raise RuntimeError(f"Clarabel returned status {status!r}")
-        return float(self.u.value)

@@ -29,9 +29,11 @@ is certified (e.g. equilibrium): the measured frequency and ROCOF never leave
 ``|Δω̂| ≤ F`` and ``|ROCOF| ≤ rocof_limit`` at any plant sample, whatever the
 incoming commands are (OF2, UF2 and ROCOF never trip).  The load bound is
 covered by tightening every limit by ``load_bound`` times the ℓ1 norm of the
-load-to-output impulse response; a ``load_bound`` for which nothing is left
-(near E12: a load step ΔP_L gives ROCOF ≈ ΔP_L/M whatever the governor does)
-is rejected at construction.  ``margin`` tightens both limits further, by a
+load-to-output impulse response (a conservative bound: it assumes the worst
+load signal for every sample at once); a ``load_bound`` for which nothing is
+left is rejected at construction.  (For comparison, E12: without SCC a load
+step trips a relay from 0.2229 pu on the defaults, and some governor commands
+ride through larger ones: :mod:`lfc.load_limits`.)  ``margin`` tightens both limits further, by a
 fraction, for estimation error and plant–model mismatch (no guarantee then).
 """
 
@@ -91,9 +93,10 @@ class CertifiedSet:
         self.limits = base - self.load_bound * l1
         if np.any(self.limits <= 0):
             most = float(np.min(base / l1))
-            raise ValueError(f"load_bound must be < {most:.4g} pu for these relays: a larger "
-                             "load deviation can trip a relay whatever the governor does "
-                             f"(E12); got {load_bound}")
+            raise ValueError(f"load_bound must be < {most:.4g} pu for these relays: the "
+                             "certificate tightens each limit by load_bound times the l1 norm "
+                             "of the load-to-output response (a conservative bound), which "
+                             f"leaves nothing above that; got {load_bound}")
         self._Ad, self._Bd, self.n_steps = Ad, Bd, int(math.ceil(horizon / resolution))
         Phi_n, S_n = self._horizon_rows(Ad, Bd, C, self.n_steps)
         self._terminal(params, Ad, C, Phi_n, S_n)

@@ -149,8 +149,18 @@ def discretize(params: LFCParams, period: float) -> tuple[np.ndarray, np.ndarray
     Ad : ndarray, shape (5, 5)
     Bd : ndarray, shape (5, 2)
     """
+    return zoh(*lfc_matrices(params), period)
+
+
+def zoh(A: np.ndarray, B: np.ndarray, period: float) -> tuple[np.ndarray, np.ndarray]:
+    """Zero-order-hold discretization of ``x' = A x + B u`` with python-control,
+    for any ``A`` (singular included).
+
+    Returns ``(Ad, Bd)`` with ``Ad = exp(A period)``, ``Bd = int_0^period exp(A s) ds B``.
+    """
     check_positive("period", period)
-    sysd = ct.c2d(lfc_model(params), period, method="zoh")
+    sysd = ct.c2d(ct.ss(A, B, np.zeros((1, A.shape[0])), np.zeros((1, B.shape[1]))), period,
+                  method="zoh")
     return np.asarray(sysd.A), np.asarray(sysd.B)
 
 

@@ -293,3 +293,36 @@ def severity_figure(red, title: str) -> Figure:
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1))
     ax.set_title(title)
     return fig
+
+
+def readings_figure(summary, title: str) -> Figure:
+    """The paper's filter at each reading (rows) and alpha (bars): attacks of the
+    maps stopped (left; the number that trip without SCC dashed) and false alarms
+    on legitimate load steps (right, control periods with an alarm).  ``summary``
+    is :func:`lfc.surface.readings_summary`; the default reading is marked."""
+    readings = list(dict.fromkeys(summary.reading))
+    alphas = sorted(summary.alpha.unique())
+    fig, (left, right) = plt.subplots(1, 2, figsize=(13, 0.45 * len(readings) + 2),
+                                      sharey=True, layout="constrained")
+    height = 0.8 / len(alphas)
+    y = np.arange(len(readings))
+    for i, a in enumerate(alphas):
+        sel = summary[summary.alpha == a].set_index("reading").reindex(readings)
+        offset = (i - (len(alphas) - 1) / 2) * height
+        left.barh(y + offset, sel.stopped, height, label=f"α = {a:g}")
+        right.barh(y + offset, sel["load-step alarms"], height, label=f"α = {a:g}")
+    total = int(summary["of tripping"].iloc[0])
+    left.axvline(total, color="k", ls="--", lw=1, label=f"trip without SCC ({total})")
+    default = summary[summary.default].reading.iloc[0]
+    labels = [f"{r}  (default)" if r == default else r for r in readings]
+    left.set_yticks(y, labels, fontsize=8)
+    left.invert_yaxis()
+    left.set_xlabel("Tripping attacks stopped (of the maps' sinusoids, squares and biases)")
+    right.set_xlabel("False alarms on legitimate load steps (control periods, log scale)")
+    right.set_xscale("log")
+    left.set_ylabel("Reading: outside (E9) / conflict (E10) / prediction (E5)")
+    for ax in (left, right):
+        ax.grid(alpha=0.3, axis="x")
+        ax.legend(fontsize=8, loc="lower right")
+    fig.suptitle(title)
+    return fig

@@ -110,7 +110,9 @@ def freeform_search(params: LFCParams, defender: Defender, *, amplitude: float =
                     duration: float = 6.0, control_period: float = 0.01, seed: int = 0,
                     maxiter: int = 20, popsize: int = 1) -> dict:
     """Worst free-form attack on P_c: one value in ``±amplitude`` per control
-    period for ``attack_duration`` s (then held), run for ``duration`` s."""
+    period for ``attack_duration`` s (then held), run for ``duration`` s; the
+    result's ``values`` (pu, one per control period from ``ATTACK_START``)
+    replay it."""
     relays = relays or RelaySettings()
     n = int(round(attack_duration / control_period))
     theta, sev, row = _search(lambda v: _samples_table(v, control_period, defender),
@@ -118,7 +120,8 @@ def freeform_search(params: LFCParams, defender: Defender, *, amplitude: float =
                               maxiter, popsize)
     return {"defender": defender.name, "search": f"free-form on P_c (±{amplitude:g} pu)",
             "severity": sev, "tripped": bool(row.tripped), "first_trip": row.first_trip_relay,
-            "attack": f"{n} values, max |value| {np.abs(theta).max():.3g} pu"}
+            "attack": f"{n} values, max |value| {np.abs(theta).max():.3g} pu",
+            "values": tuple(map(float, theta))}
 
 
 def piecewise_attack_table(*, n: int, amplitude: float, duration: float, seed: int,

@@ -64,8 +64,14 @@ def execute(notebook: Path, output: Path, parameters: dict) -> None:
                         progress_bar=False, log_output=False)
 
 
+RESULT_FILES = ("claims.json", "deviations.json", "metrics.json")
+
+
 def _run_one(name: str, notebook: Path, results: Path, parameters: dict) -> RunOutcome:
+    """Execute one notebook; its claims are read only from files this run wrote."""
     t0 = time.perf_counter()
+    for stale in RESULT_FILES:  # never report a claim an earlier run computed
+        (results / stale).unlink(missing_ok=True)
     error = ""
     try:
         execute(notebook, results / notebook.name, parameters)

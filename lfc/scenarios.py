@@ -130,9 +130,11 @@ def fig7_fault(params: LFCParams | None = None, *, alpha: float = 20.0, Ts: floa
 
 
 def rocof_limit_load_step(params: LFCParams, relays: RelaySettings) -> float:
-    """Largest load step (pu) whose initial ROCOF ``dPL / M`` stays within the relay (E12).
+    """Largest load step (pu) whose *true* initial ROCOF ``dPL / M`` stays within
+    the relay setting (E12).
 
-    Above it the ROCOF relay trips whatever the governor does: no controller
-    at the generator can prevent it.
+    The relay reads the measured ROCOF, lagged: without SCC steps up to about
+    10 % larger do not trip, and a governor can ride through larger ones still
+    (:mod:`lfc.load_limits` computes both).
     """
     return params.M * relays.rocof_limit

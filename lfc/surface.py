@@ -12,9 +12,13 @@ import itertools
 import numpy as np
 import pandas as pd
 
+from lfc.cbf import CONFLICT_RULES, DEFAULT_READING, OUTSIDE_RULES, PREDICTIONS
 from lfc.scenarios import ATTACK_START
 
 NO_SCC = float("nan")
+READINGS = [dict(zip(("outside_rule", "conflict", "prediction"), r))
+            for r in itertools.product(OUTSIDE_RULES, CONFLICT_RULES, PREDICTIONS)]
+ATTACK_KEY = ["waveform", "channel", "amplitude", "freq_hz"]
 
 
 def _table(rows: list[dict]) -> pd.DataFrame:
@@ -51,6 +55,76 @@ def tradeoff(alphas: list[float], Ts_values: list[float], attack_amplitude: floa
     return _table([{"waveform": w, "channel": ch, "amplitude": a, "freq_hz": f,
                     "start": ATTACK_START, "alpha": al, "Ts": ts, "event": ev}
                    for (al, ts), (ev, w, ch, a, f) in itertools.product(settings, events)])
+
+
+def reading_label(reading: dict) -> str:
+    """"hold / frequency / incoming" (the paper filter's E9 / E10 / E5 readings)."""
+    return " / ".join(reading[k] for k in ("outside_rule", "conflict", "prediction"))
+
+
+def readings_table(attacks: pd.DataFrame, alphas: list[float], load_steps: list[float],
+                   Ts: float = 0.25) -> pd.DataFrame:
+    """Every attack of ``attacks`` (rows without SCC, e.g. the maps' tables with
+    ``alphas=[]``) once without SCC and with the paper's filter at every reading
+    (``READINGS``) and alpha; plus legitimate load steps (``event="load"``) with
+    every reading and alpha, where every intervention is a false alarm."""
+    loads = _table([{"waveform": "step", "channel": "load", "amplitude": s, "freq_hz": 0.0,
+                     "start": ATTACK_START, "alpha": NO_SCC, "Ts": Ts} for s in load_steps])
+    parts = [attacks.assign(event="attack", **DEFAULT_READING)]
+    for reading, alpha in itertools.product(READINGS, alphas):
+        parts += [attacks.assign(event="attack", alpha=alpha, Ts=Ts, **reading),
+                  loads.assign(event="load", alpha=alpha, **reading)]
+    return pd.concat(parts, ignore_index=True)
+
+
+def readings_summary(results: pd.DataFrame) -> pd.DataFrame:
+    """Per reading and alpha: the attacks (of those that trip without SCC) the
+    filter stops, per waveform and in all, trips it causes, and its false alarms
+    (control periods with an alarm) and trips on the load steps."""
+    attacks = results[results.event == "attack"]
+    base = attacks[attacks.alpha.isna()].set_index(ATTACK_KEY).tripped
+    rows = []
+    keys = ["outside_rule", "conflict", "prediction", "alpha"]
+    for key, grp in attacks[attacks.alpha.notna()].groupby(keys, sort=False):
+        g = grp.set_index(ATTACK_KEY)
+        tripping, tripped = base.loc[g.index].to_numpy(), g.tripped.to_numpy()
+        wave = g.index.get_level_values("waveform")
+        loads = results[(results.event == "load")
+                        & (results[keys] == pd.Series(dict(zip(keys, key)))).all(axis=1)]
+        reading = dict(zip(keys[:3], key[:3]))
+        rows.append({"reading": reading_label(reading), "default": reading == DEFAULT_READING,
+                     "alpha": key[3],
+                     **{f"{w} stopped": int((tripping & ~tripped & (wave == w)).sum())
+                        for w in dict.fromkeys(wave)},
+                     "stopped": int((tripping & ~tripped).sum()),
+                     "of tripping": int(tripping.sum()),
+                     "caused": int((~tripping & tripped).sum()),
+                     "load-step alarms": int(loads.alarms.sum()),
+                     "load-step trips": int(loads.tripped.sum())})
+    return pd.DataFrame(rows)
+
+
+def amplitude_scan(waveform: str, amplitudes: list[float], freq_hz: float,
+                   alphas: list[float], Ts: float = 0.25) -> pd.DataFrame:
+    """One waveform on P_c at one frequency over ``amplitudes`` (pu), without SCC
+    and with the SCC for each alpha (for :func:`first_failures`)."""
+    return attack_map([waveform], list(amplitudes), [freq_hz], list(alphas), Ts)
+
+
+def first_failures(results: pd.DataFrame) -> pd.DataFrame:
+    """Per SCC setting of an :func:`amplitude_scan`: the smallest amplitude (pu)
+    that trips a relay, its first relay, and how many amplitudes of the scan trip
+    (NaN and 0 if none does)."""
+    rows = []
+    for alpha, grp in results.groupby(results.alpha.fillna(-1.0), sort=False):
+        tripped = grp[grp.tripped].sort_values("amplitude", kind="stable")
+        first = tripped.iloc[0] if len(tripped) else None
+        rows.append({"SCC": scc_label(np.nan if alpha < 0 else alpha),
+                     "smallest amplitude that trips (pu)": float(first.amplitude) if first is not None
+                     else np.nan,
+                     "first relay": first.first_trip_relay if first is not None else "none",
+                     "amplitudes that trip": f"{len(tripped)} of {len(grp)}"})
+    return pd.DataFrame(rows)
 
 
 def scc_label(alpha: float) -> str:

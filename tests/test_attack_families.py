@@ -1,56 +1,104 @@
-"""Where the paper's SCC fails (reproduction notes E13, and what this package found).
+"""Where the paper's SCC fails at its strongest reading (E13 restated), and how much
+that depends on the reading (E9, E10, E5).
 
-These are findings, not bugs to hide: each test pins an attack that the
-paper's SCC (our reading, documented defaults) does NOT stop, so that a change
-which silently alters that behaviour is noticed.  The certified filter of a
-later issue is meant to stop them.
+These are findings, not bugs to hide: each test pins an attack that the paper's
+SCC does NOT stop at its default reading (``lfc.cbf.DEFAULT_READING``, the one
+that stops the most attacks of the maps), so that a change which silently alters
+that behaviour is noticed.  The numbers come from
+``python bench/attack_family_survey.py`` and notebook 06.
 """
 
 import pytest
 
-from lfc import Chirp, LFCParams, Ramp, SafetyFilter, Sinusoid, Square, Step, simulate
+from lfc import (Chirp, LFCParams, Ramp, SafetyFilter, Sinusoid, Square, Step, simulate)
 
 P = LFCParams()
+PUSH = {"outside_rule": "push", "conflict": "slack"}   # the earlier reading of E9 / E10
 
-BEATEN = {  # attack -> (channel, duration s)
-    "sinusoid 0.2 Hz, 1 pu on P_c": (Sinusoid(1.0, 0.2, start=1), "pc_attack", 30),
-    "sinusoid 0.5 Hz, 0.5 pu on P_c": (Sinusoid(0.5, 0.5, start=1), "pc_attack", 30),
-    "square 0.4 Hz, 0.3 pu on P_c": (Square(0.3, 0.4, start=1), "pc_attack", 30),
-    "chirp 0.1-3 Hz, 0.5 pu on P_c": (Chirp(0.5, 0.1, 3.0, start=1, stop=25), "pc_attack", 30),
-    "ramp 0.1 pu/s on P_c": (Ramp(0.1, start=1), "pc_attack", 30),
-    "sinusoid 1.2 Hz, 0.66 pu (2x trip amplitude) on P_c":
-        (Sinusoid(0.66, 1.2, start=1), "pc_attack", 15),
-    "bias 0.06 pu on w_ref (integrator wind-up)": (Step(0.06, start=1), "wref_attack", 30),
+BEATEN = {  # attack -> (signal, channel, duration s, alphas it beats, first relay)
+    "square 0.5 pu at 0.2, 0.4 and 1 Hz on P_c":
+        ([Square(0.5, f, start=1) for f in (0.2, 0.4, 1.0)], "pc_attack", 30, (3.0, 20.0),
+         "OF2"),
+    "sinusoid 2 pu at 0.4 Hz on P_c": ([Sinusoid(2.0, 0.4, start=1)], "pc_attack", 30,
+                                       (3.0, 20.0), "OF2"),
+    "chirp 0.1-3 Hz, 1 pu on P_c": ([Chirp(1.0, 0.1, 3.0, start=1, stop=25)], "pc_attack", 30,
+                                    (3.0, 20.0), None),
+    "sinusoids 0.25-1 pu at 0.4-0.8 Hz on P_c":
+        ([Sinusoid(a, f, start=1) for a, f in ((0.25, 0.4), (0.5, 0.8), (1.0, 0.4))],
+         "pc_attack", 30, (20.0,), "ROCOF"),
+    "square 0.3 pu at 0.2-1 Hz on P_c": ([Square(0.3, f, start=1) for f in (0.2, 0.4, 1.0)],
+                                         "pc_attack", 30, (20.0,), "ROCOF"),
+    "chirps 0.1-1 Hz, 0.25-0.5 pu on P_c":
+        ([Chirp(a, 0.1, 1.0, start=1, stop=25) for a in (0.25, 0.5)], "pc_attack", 30, (20.0,),
+         "ROCOF"),
 }
 
 
 @pytest.mark.parametrize("name", list(BEATEN))
+def test_paper_scc_at_its_strongest_is_beaten(name):
+    signals, channel, duration, alphas, relay = BEATEN[name]
+    for signal in signals:
+        assert simulate(P, duration=duration, **{channel: signal}).metrics()["tripped"]
+        for alpha in alphas:
+            m = simulate(P, duration=duration, scc=SafetyFilter(P, alpha=alpha),
+                         **{channel: signal}).metrics()
+            assert m["tripped"], f"{signal} no longer trips with alpha={alpha}"
+            assert relay is None or m["first_trip"]["relay"] == relay
+
+
+@pytest.mark.parametrize("alpha, held, diverges", [(3.0, 0.08, 0.09), (20.0, 0.12, 0.13)])
+def test_bias_on_w_ref_is_held_up_to_a_size_then_the_loop_diverges(alpha, held, diverges):
+    """The local integrator winds up behind the SCC (the incoming command grows
+    without bound) while the SCC holds the frequency at the edge of its safe set;
+    biases from 0.09 pu (alpha 3) or 0.13 pu (alpha 20) make the loop diverge and
+    trip ROCOF.  The corners of that range are pinned."""
+    scc = SafetyFilter(P, alpha=alpha)
+    ok = simulate(P, duration=120, wref_attack=Step(held, start=1), scc=scc)
+    assert not ok.metrics()["tripped"] and ok.controls.pc_ref.iloc[-1] > 2.0
+    bad = simulate(P, duration=120, wref_attack=Step(diverges, start=1), scc=scc).metrics()
+    assert bad["first_trip"]["relay"] == "ROCOF" and bad["max_abs_dw_meas"] > 0.5
+
+
+def test_fig5_bias_is_held_for_five_minutes_at_the_strongest_reading():
+    r = simulate(P, duration=300, wref_attack=Step(0.04, start=1), scc=SafetyFilter(P))
+    assert not r.metrics()["tripped"] and 0.029 < r.metrics()["max_abs_dw_meas"] < 0.03
+
+
+def test_on_a_noisy_estimate_the_frequency_parked_at_the_edge_trips_of2():
+    """The "hold" reading parks the frequency at +F; on a Kalman estimate with the
+    default noise, OF2 trips for the Fig. 5 bias at alpha 20 (the "push" reading
+    keeps a margin and holds it).  Pinned over three noise seeds."""
+    for seed in (0, 1, 2):
+        kw = dict(duration=30, wref_attack=Step(0.04, start=1), estimator="kalman",
+                  noise_std=(1e-4, 1e-3), seed=seed)
+        hold = simulate(P, scc=SafetyFilter(P, alpha=20.0), **kw).metrics()
+        push = simulate(P, scc=SafetyFilter(P, alpha=20.0, **PUSH), **kw).metrics()
+        assert hold["first_trip"]["relay"] == "OF2" and not push["tripped"]
+
+
+# -- how much the conclusions depend on the reading -----------------------------------------
 @pytest.mark.parametrize("alpha", [3.0, 20.0])
-def test_paper_scc_is_beaten(name, alpha):
-    signal, channel, duration = BEATEN[name]
-    without = simulate(P, duration=duration, **{channel: signal})
-    with_scc = simulate(P, duration=duration, scc=SafetyFilter(P, alpha=alpha),
-                        **{channel: signal})
-    assert without.metrics()["tripped"]
-    assert with_scc.metrics()["tripped"], f"{name} no longer trips with alpha={alpha}"
+def test_the_push_reading_loses_attacks_the_strongest_reading_stops(alpha):
+    """A 0.6 pu, 1 Hz sinusoid (the paper's kind) trips with "push" and not with
+    the default; so do ramps, larger biases and (alpha 3) slow sinusoids."""
+    attacks = [(Sinusoid(0.6, 1.0, start=1), "pc_attack"), (Ramp(0.1, start=1), "pc_attack"),
+               (Step(0.06, start=1), "wref_attack")]
+    if alpha == 3.0:
+        attacks.append((Sinusoid(1.0, 0.2, start=1), "pc_attack"))
+    for signal, channel in attacks:
+        kw = {channel: signal, "duration": 30}
+        assert simulate(P, scc=SafetyFilter(P, alpha=alpha, **PUSH), **kw).metrics()["tripped"]
+        assert not simulate(P, scc=SafetyFilter(P, alpha=alpha), **kw).metrics()["tripped"]
 
 
-def test_wind_up_defeats_the_scc_on_a_long_fig5_attack():
-    """Fig. 5's bias is stopped for 30 s but not forever: the local integrator winds
-    up behind the SCC, the held command in the prediction grows, and the barrier's
-    push-back eventually trips ROCOF."""
-    r = simulate(P, duration=45, wref_attack=Step(0.04, start=1), scc=SafetyFilter(P))
-    trip = r.metrics()["first_trip"]
-    assert trip["relay"] == "ROCOF" and trip["t"] > 30
-    assert r.controls.pc_ref.iloc[-1] > 2.0   # the wound-up incoming command (pu)
-
-
-def test_scc_causes_a_trip_that_would_not_happen_without_it():
-    """A -0.06 pu bias on w_ref stays above UF2 (-0.058 pu) without SCC.  The SCC
-    uses the symmetric bound F = min(OF2-1, 1-UF2) = 0.03 pu, holds the frequency
-    at -0.03 pu, the integrator winds up, and the push-back trips ROCOF."""
+@pytest.mark.parametrize("alpha", [3.0, 20.0])
+def test_only_the_push_reading_causes_a_trip_on_a_negative_bias(alpha):
+    """-0.06 pu on w_ref stays above UF2 (-0.058 pu) without SCC.  "push" holds the
+    frequency at -F = -0.03 pu (the symmetric bound), winds up and trips ROCOF;
+    the default holds it there for good."""
     attack = Step(-0.06, start=1)
     assert not simulate(P, duration=30, wref_attack=attack).metrics()["tripped"]
-    for alpha in (3.0, 20.0):
-        r = simulate(P, duration=30, wref_attack=attack, scc=SafetyFilter(P, alpha=alpha))
-        assert r.metrics()["first_trip"]["relay"] == "ROCOF"
+    push = simulate(P, duration=30, wref_attack=attack, scc=SafetyFilter(P, alpha=alpha, **PUSH))
+    assert push.metrics()["first_trip"]["relay"] == "ROCOF"
+    hold = simulate(P, duration=30, wref_attack=attack, scc=SafetyFilter(P, alpha=alpha))
+    assert not hold.metrics()["tripped"]

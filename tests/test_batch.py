@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 
 import lfc
 from lfc.batch import BATCH_METRICS, scenario_signal, simulate_batch
+from lfc.redteam import piecewise_attack_table
 
 P = lfc.LFCParams()
 CHANNEL_ARG = {"pc": "pc_attack", "wref": "wref_attack", "load": "load"}
@@ -35,16 +36,17 @@ def direct(row: pd.Series, duration: float) -> dict:
     """lfc.simulate on one scenario row."""
     sig = scenario_signal(row, duration)
     kw = {} if sig is None else {CHANNEL_ARG[row["channel"]]: sig}
-    scc = None if np.isnan(row["alpha"]) else lfc.SafetyFilter(P, alpha=row["alpha"],
-                                                                   Ts=row["Ts"])
+    if np.isnan(row["alpha"]):
+        scc = None
+    elif row.get("method", "paper") == "certified":
+        scc = lfc.SafetyFilter(P, method="certified")
+    else:
+        scc = lfc.SafetyFilter(P, alpha=row["alpha"], Ts=row["Ts"])
     return lfc.simulate(P, duration=duration, scc=scc, **kw).metrics()
 
 
-def test_batch_equals_simulate_on_a_random_sample():
-    scenarios = random_scenarios(60, seed=1)
-    res = simulate_batch(P, scenarios, duration=8.0, chunk_size=25, progress=False)
-    assert list(res.columns) == list(scenarios.columns) + list(BATCH_METRICS)
-    assert 5 <= res.tripped.sum() <= 55  # the sample exercises both outcomes
+def check_equal(scenarios: pd.DataFrame, res: pd.DataFrame, duration: float) -> None:
+    """Every row of the batch result equals lfc.simulate on that row."""
     for i, row in scenarios.iterrows():
         m, r = direct(row, 8.0), res.loc[i]
         assert m["tripped"] == r.tripped
@@ -56,6 +58,27 @@ def test_batch_equals_simulate_on_a_random_sample():
                     "scc_active_fraction"):
             assert abs(m[key] - r[key]) <= 1e-9, key
         assert m["alarms"] == r.alarms
+
+
+def test_batch_equals_simulate_on_a_random_sample():
+    scenarios = random_scenarios(60, seed=1)
+    res = simulate_batch(P, scenarios, duration=8.0, chunk_size=25, progress=False)
+    assert list(res.columns) == list(scenarios.columns) + list(BATCH_METRICS)
+    assert 5 <= res.tripped.sum() <= 55  # the sample exercises both outcomes
+    check_equal(scenarios, res, 8.0)
+
+
+def test_batch_equals_simulate_for_the_certified_filter_and_free_form_attacks():
+    """The rows the certified filter's guarantee tests rely on: method="certified"
+    and free-form "samples" attacks (with either filter)."""
+    periodic = random_scenarios(20, seed=7)
+    periodic = periodic[periodic.alpha.notna()].assign(method="certified")
+    free = piecewise_attack_table(n=8, amplitude=2.0, duration=8.0, seed=3)
+    scenarios = pd.concat([periodic, free, free.assign(method="certified")], ignore_index=True)
+    res = simulate_batch(P, scenarios, duration=8.0, chunk_size=13, progress=False)
+    assert res[res.method == "paper"].tripped.any()
+    assert (res[res.method == "certified"].alarms > 0).any()
+    check_equal(scenarios, res, 8.0)
 
 
 def test_small_map_matches_simulate_at_its_corners():

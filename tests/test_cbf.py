@@ -6,12 +6,15 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from lfc.cbf import SafetyFilter, _CvxpyQP, barrier_gamma, solve_interval_qp
-from lfc.model import LFCParams
+from lfc.cbf import (CONFLICT_RULES, OUTSIDE_RULES, SafetyFilter, barrier_gamma,
+                     solve_interval_qp)
+from lfc.cvxpy_reference import PaperQP
+from lfc.model import LFCParams, discretize
 from lfc.relays import RelaySettings
 
 P = LFCParams()
 EXACT = SafetyFilter(P)
+PUSH = SafetyFilter(P, outside_rule="push", conflict="slack")
 SCALE = np.array([0.5, 0.5, 0.04, 0.04, 0.08])  # typical magnitudes, includes outside states
 
 
@@ -22,35 +25,55 @@ def _random_cases(n, seed):
 
 
 @pytest.mark.parametrize("limits", [(-math.inf, math.inf), (-0.5, 0.8)])
-def test_exact_and_cvxpy_agree_on_random_states(limits):
-    exact = SafetyFilter(P, u_min=limits[0], u_max=limits[1])
-    ref = SafetyFilter(P, u_min=limits[0], u_max=limits[1], solver="cvxpy")
-    x, u_ref, pl = _random_cases(1500, seed=1)
+@pytest.mark.parametrize("outside_rule", OUTSIDE_RULES)
+@pytest.mark.parametrize("conflict", CONFLICT_RULES)
+def test_closed_form_equals_the_cvxpy_qp_written_from_the_definitions(limits, outside_rule,
+                                                                       conflict):
+    """The reference (lfc.cvxpy_reference) builds h, dh/dx and the paper's
+    dB/dt - alpha/B <= 0 itself, from scipy's expm; nothing is shared with the
+    closed form but the model matrices."""
+    kw = dict(u_min=limits[0], u_max=limits[1], outside_rule=outside_rule, conflict=conflict)
+    exact = SafetyFilter(P, **kw)
+    ref = PaperQP(P, RelaySettings(), alpha=exact.alpha, Ts=exact.Ts,
+                  slack_weight=exact.slack_weight, **kw)
+    x, u_ref, pl = _random_cases(400, seed=1)
     kinds = set()
     for i in range(len(u_ref)):
         ue, ie = exact.filter(x[i], u_ref[i], pl[i])
-        uc, ic = ref.filter(x[i], u_ref[i], pl[i])
-        assert not ic.solver_error
+        uc = ref.solve(x[i], u_ref[i], pl[i])
         assert abs(ue - uc) <= 1e-6 * max(1.0, abs(ue)), (i, ue, uc, ie)
-        assert (ie.active, ie.infeasible, ie.outside) == (ic.active, ic.infeasible, ic.outside)
         kinds.add((ie.active, ie.infeasible, ie.outside))
     # the sample exercises every regime: inactive, active, outside, conflicting
     assert {(False, False, False), (True, False, False), (True, False, True),
             (True, True, True)} <= kinds
 
 
+def test_solver_cvxpy_uses_the_reference_and_agrees_with_its_flags():
+    ref = SafetyFilter(P, solver="cvxpy")
+    x, u_ref, pl = _random_cases(200, seed=4)
+    for i in range(len(u_ref)):
+        ue, ie = EXACT.filter(x[i], u_ref[i], pl[i])
+        uc, ic = ref.filter(x[i], u_ref[i], pl[i])
+        assert not ic.solver_error and abs(ue - uc) <= 1e-6 * max(1.0, abs(ue))
+        assert (ie.active, ie.infeasible, ie.outside) == (ic.active, ic.infeasible, ic.outside)
+
+
 def test_cvxpy_problem_is_dpp_and_uses_clarabel():
     qp = SafetyFilter(P, solver="cvxpy")._cvx
     assert qp.hard.is_dpp() and qp.soft.is_dpp()
-    qp.solve(0.0, np.array([1, -1]), np.array([-1.0, 1.0]))
+    assert all(a.is_dpp() and b.is_dpp() for a, b, _ in qp.lexi)
+    qp.solve(np.array([0.0, 0.1, 0.01, 0.01, 0.03]), 0.6)
     assert qp.hard.solver_stats.solver_name == cp.CLARABEL
 
 
-def test_scalar_and_batch_agree():
+@pytest.mark.parametrize("kw", [{}, {"outside_rule": "push", "conflict": "slack"},
+                                {"conflict": "rocof", "u_min": -0.5, "u_max": 0.8}])
+def test_scalar_and_batch_agree(kw):
+    filt = SafetyFilter(P, **kw)
     x, u_ref, pl = _random_cases(3000, seed=2)
-    ub, flags = EXACT.filter_batch(x, u_ref, pl)
+    ub, flags = filt.filter_batch(x, u_ref, pl)
     for i in range(len(u_ref)):
-        u, info = EXACT.filter(x[i], u_ref[i], pl[i])
+        u, info = filt.filter(x[i], u_ref[i], pl[i])
         assert u == pytest.approx(ub[i], rel=1e-12, abs=1e-12)
         assert info.active == flags["active"][i] and info.outside == flags["outside"][i]
         assert info.infeasible == flags["infeasible"][i]
@@ -83,7 +106,7 @@ def test_actuator_limits_always_respected(x, u_ref, pl):
     f = SafetyFilter(P, u_min=-0.3, u_max=0.4)
     u, info = f.filter(np.array(x), u_ref, pl)
     assert -0.3 <= u <= 0.4
-    assert info.active == (u != u_ref) or info.active
+    assert info.active == (u != u_ref)
 
 
 @given(state, st.floats(-2, 2))
@@ -106,36 +129,46 @@ def test_minimal_modification(x, u_ref):
     assert np.min(np.abs(grid[ok] - u_ref)) >= abs(u - u_ref) * (1 - 1e-9) - 1e-12
 
 
-def test_steady_over_frequency_is_pushed_back():
-    """E9: from a steady state at dw = 0.05 pu (> F), the command lowers frequency."""
-    dw = 0.05
-    pm = P.D * dw
-    x = np.array([pm, pm, dw, dw, 0.0])
-    u_hold = pm + dw / P.droop  # the command that holds this state
-    u, info = EXACT.filter(x, u_hold)
-    assert info.outside and info.active and u < u_hold
+STEADY_DW = 0.05  # pu, a steady state beyond F
+STEADY_X = np.array([P.D * STEADY_DW, P.D * STEADY_DW, STEADY_DW, STEADY_DW, 0.0])
+STEADY_U = P.D * STEADY_DW + STEADY_DW / P.droop  # the command that holds it
+
+
+def test_push_rule_pushes_a_steady_over_frequency_back():
+    """E9, "push": from a steady state at dw = 0.05 pu (> F), the command lowers
+    the frequency (dh/dt >= alpha |h|)."""
+    u, info = PUSH.filter(STEADY_X, STEADY_U)
+    assert info.outside and info.active and u < STEADY_U
     assert info.margin_freq >= -1e-12 and info.h_freq < 0
-    # holding it, the frequency moves back toward the set
-    from lfc.model import discretize
     Ad, Bd = discretize(P, 0.25)
-    assert (Ad @ x + Bd[:, 0] * u)[3] < dw - 0.005
+    assert (Ad @ STEADY_X + Bd[:, 0] * u)[3] < STEADY_DW - 0.005
+
+
+def test_hold_rule_lets_a_steady_over_frequency_stay_but_not_grow():
+    """E9, "hold": dh/dt >= 0 -- a steady state outside is not pushed, a command
+    that would raise the frequency further is cut back to dh/dt = 0."""
+    u, info = EXACT.filter(STEADY_X, STEADY_U)
+    assert info.outside and not info.active and u == STEADY_U
+    u, info = EXACT.filter(STEADY_X, STEADY_U + 0.2)
+    assert info.outside and info.active and u < STEADY_U + 0.2
+    assert info.margin_freq == pytest.approx(0.0, abs=1e-12)
+    assert "not letting it get worse" in info.reason
 
 
 def test_push_back_uses_actuator_limit_when_it_cannot_do_enough():
-    dw = 0.05
-    x = np.array([0.05, 0.05, dw, dw, 0.0])
-    f = SafetyFilter(P, u_min=0.5, u_max=2.0)
+    x = np.array([0.05, 0.05, STEADY_DW, STEADY_DW, 0.0])
+    f = SafetyFilter(P, u_min=0.5, u_max=2.0, outside_rule="push", conflict="slack")
     u, info = f.filter(x, 1.05)
     assert u == 0.5 and info.infeasible and "u_min" in info.binding
 
 
 def test_conflicting_constraints_give_finite_relaxed_compromise():
     x, u_ref, pl = _random_cases(4000, seed=3)
-    _, flags = EXACT.filter_batch(x, u_ref, pl)
+    _, flags = PUSH.filter_batch(x, u_ref, pl)
     idx = np.flatnonzero(flags["infeasible"])
     assert len(idx) > 0
     for i in idx[:50]:
-        u, info = EXACT.filter(x[i], u_ref[i], pl[i])
+        u, info = PUSH.filter(x[i], u_ref[i], pl[i])
         assert math.isfinite(u) and info.infeasible and "relaxed" in info.reason
         lo = [b for k, b in zip(flags["kind"][i], flags["bound"][i]) if k == 1]
         hi = [b for k, b in zip(flags["kind"][i], flags["bound"][i]) if k == -1]
@@ -148,6 +181,27 @@ def test_relaxed_qp_splits_conflict_evenly():
                                     np.array([[0.3, 0.1]]), -np.inf, np.inf, 1e4)
     assert not feasible[0]
     assert u[0] == pytest.approx(0.2, abs=1e-4)
+
+
+@pytest.mark.parametrize("conflict, expected", [("frequency", 0.3), ("rocof", 0.1)])
+def test_priority_rules_meet_their_constraint(conflict, expected):
+    """Frequency needs u >= 0.3, ROCOF u <= 0.1: the named one is met exactly."""
+    u, feasible = solve_interval_qp(np.array([0.0]), np.array([[1, -1]]),
+                                    np.array([[0.3, 0.1]]), -np.inf, np.inf, 1e4, conflict)
+    assert not feasible[0] and u[0] == expected
+    # the priority constraint beyond the actuator limits: as close to it as they allow
+    u, _ = solve_interval_qp(np.array([0.0]), np.array([[1, -1]]), np.array([[0.3, 0.1]]),
+                             -1.0, 0.2, 1e4, "frequency")
+    assert u[0] == 0.2
+
+
+def test_default_meets_the_frequency_constraint_where_the_two_conflict():
+    x, u_ref, pl = _random_cases(4000, seed=3)
+    _, flags = EXACT.filter_batch(x, u_ref, pl)
+    conflicting = flags["infeasible"] & (flags["kind"] != 0).all(axis=1)
+    assert conflicting.sum() > 20
+    assert (flags["margin"][conflicting, 0] >= -1e-9).all()
+    assert (flags["margin"][conflicting, 1] < 0).all()
 
 
 @pytest.mark.parametrize("x, u_ref, expected", [
@@ -176,17 +230,20 @@ def test_non_finite_reference_clipped_to_actuator_limit():
 def test_cvxpy_failure_falls_back_to_exact(monkeypatch):
     def boom(self, *args):
         raise cp.error.SolverError("simulated failure")
-    monkeypatch.setattr(_CvxpyQP, "solve", boom)
+    monkeypatch.setattr(PaperQP, "solve", boom)
     x = np.array([0.0, 0.0, 0.02, 0.02, 0.04])
     u, info = SafetyFilter(P, solver="cvxpy").filter(x, 0.5)
     assert info.solver_error and "exact solution used" in info.reason
     assert u == EXACT.filter(x, 0.5)[0]
 
 
-def test_gamma_is_extended_class_k():
+def test_gamma_push_is_extended_class_k_and_hold_stops_at_zero():
     h = np.linspace(-0.01, 0.01, 2001)
-    g = barrier_gamma(h, 3.0)
+    g = barrier_gamma(h, 3.0, "push")
     assert np.all(np.diff(g) > 0) and barrier_gamma(np.array([0.0]), 3.0)[0] == 0.0
+    hold = barrier_gamma(h, 3.0, "hold")
+    assert np.all(hold[h <= 0] == 0) and np.all(np.diff(hold[h > 0]) > 0)
+    assert barrier_gamma(np.array([1e-12]), 3.0, "hold")[0] < 1e-12  # continuous at 0
     # paper's form: dB/dt <= alpha / B  <=>  dh/dt >= -alpha h (1+h) / B(h)
     hp = 0.002
     B = -math.log(hp / (1 + hp))
@@ -204,7 +261,8 @@ def test_smaller_alpha_is_stricter():
     ({"alpha": 0}, "alpha"), ({"alpha": -3}, "alpha"), ({"Ts": 0}, "Ts"),
     ({"Ts": float("nan")}, "Ts"), ({"solver": "osqp"}, "solver"),
     ({"u_min": 1, "u_max": 1}, "u_min"), ({"u_min": float("nan")}, "u_min"),
-    ({"slack_weight": 0}, "slack_weight")])
+    ({"slack_weight": 0}, "slack_weight"), ({"outside_rule": "ignore"}, "outside_rule"),
+    ({"conflict": "first"}, "conflict"), ({"prediction": "zero"}, "prediction")])
 def test_bad_parameters(kwargs, name):
     with pytest.raises(ValueError, match=name):
         SafetyFilter(P, **kwargs)

@@ -31,11 +31,12 @@ def cases() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return x, u_ref, p_load
 
 
+PUSH = {"outside_rule": "push", "conflict": "slack", "prediction": "incoming"}
 FILTERS = {  # name -> SafetyFilter keyword arguments (paper filter: the "push" reading)
-    "paper_a3": {"alpha": 3.0},
-    "paper_a20": {"alpha": 20.0},
-    "paper_a20_limits": {"alpha": 20.0, "u_min": -0.5, "u_max": 0.8},
-    "paper_a1_ts01": {"alpha": 1.0, "Ts": 0.1},
+    "paper_a3": {"alpha": 3.0, **PUSH},
+    "paper_a20": {"alpha": 20.0, **PUSH},
+    "paper_a20_limits": {"alpha": 20.0, "u_min": -0.5, "u_max": 0.8, **PUSH},
+    "paper_a1_ts01": {"alpha": 1.0, "Ts": 0.1, **PUSH},
     "certified": {"method": "certified"},
     "certified_load_margin": {"method": "certified", "load_bound": 0.05, "margin": 0.1},
 }

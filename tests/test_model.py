@@ -2,7 +2,7 @@ import control as ct
 import numpy as np
 import pytest
 
-from lfc.model import LFCParams, block_propagator, discretize, lfc_matrices, lfc_model
+from lfc.model import LFCParams, block_propagator, discretize, lfc_matrices, lfc_model, zoh
 
 
 def test_named_signals():
@@ -48,10 +48,14 @@ def test_discretization_matches_matrix_exponential():
 
 
 def test_discretization_works_for_singular_A():
-    """E4: ZOH needs no inverse of A (D = 0 and no droop make A singular-ish)."""
-    p = LFCParams(D=0.0)
-    Ad, Bd = discretize(p, 0.1)
-    assert np.all(np.isfinite(Ad)) and np.all(np.isfinite(Bd))
+    """E4: the paper's B_d = A^-1 (A_d - I) B needs an invertible A; ZOH does not.
+    A chain of integrators (A singular: rank 2 of 3) against the exact answer."""
+    A = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 0.0]])
+    B = np.array([[0.0], [0.0], [1.0]])
+    assert np.linalg.matrix_rank(A) == 2
+    Ad, Bd = zoh(A, B, 0.5)
+    np.testing.assert_allclose(Ad, [[1, 0.5, 0.125], [0, 1, 0.5], [0, 0, 1]], atol=1e-14)
+    np.testing.assert_allclose(Bd.ravel(), [0.5**3 / 6, 0.5**2 / 2, 0.5], atol=1e-14)
 
 
 def test_block_propagator_equals_stepping():

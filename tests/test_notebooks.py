@@ -1,6 +1,7 @@
 """Every notebook through papermill with short parameters; reproduce and sweep."""
 
 import json
+import subprocess
 
 import pandas as pd
 import pytest
@@ -22,7 +23,8 @@ RUNS = [(name, plant) for name, plants in runner.FIGURE_PLANTS.items() for plant
         if name not in ("surface", "redteam")]
 SMALL_SURFACE = {"amplitudes": [0.1, 0.5], "freqs": [0.5, 1.0], "biases": [0.02, 0.04],
                  "tradeoff_alphas": [20.0], "tradeoff_Ts": [0.25], "load_steps": [0.1, 0.25],
-                 "duration": 10.0, "jobs": 1}
+                 "readings_load_steps": [0.1], "duration": 10.0, "jobs": 1,
+                 "check_claims": False}
 
 
 @pytest.mark.parametrize("name, plant", RUNS)
@@ -47,14 +49,21 @@ def test_attack_surface_notebook_writes_maps_tables_and_claims(tmp_path):
     nb = runner.NOTEBOOKS_DIR / runner.FIGURES["surface"]
     runner.execute(nb, tmp_path / nb.name, {**SMALL_SURFACE, "figures_dir": str(tmp_path / "fig"),
                                             "results_dir": str(tmp_path / "res")})
-    for name in ("attack_surface", "bias_surface", "alpha_ts_tradeoff"):
+    for name in ("readings", "attack_surface", "bias_surface", "alpha_ts_tradeoff"):
         assert (tmp_path / "fig" / f"{name}.png").stat().st_size > 1000
     surface = pd.read_csv(tmp_path / "res" / "surface.csv")
     assert len(surface) == 2 * 3 * 2 * 2  # waveforms x (no SCC, 2 alphas) x amplitudes x freqs
     assert len(pd.read_csv(tmp_path / "res" / "bias.csv")) == 3 * 2
     assert len(pd.read_csv(tmp_path / "res" / "tradeoff.csv")) == 2 * 3
+    # 12 readings x 2 alphas: every attack (8 periodic, 2 biases) and the load step
+    assert len(pd.read_csv(tmp_path / "res" / "readings.csv")) == 10 + 24 * 11
+    table = (tmp_path / "fig" / "readings.md").read_text()
+    assert table.count("hold / frequency / incoming") == 2      # one row per alpha
+    # claims about the default grid are computed on this small one, not asserted
     claims = json.loads((tmp_path / "res" / "claims.json").read_text())
-    assert claims and all(claims.values())
+    assert {"the default reading stops the most tripping attacks of the maps, at every alpha",
+            "E12: every load step above the no-SCC threshold trips ROCOF with every SCC setting"
+            } <= set(claims)
 
 
 SMALL_RED_TEAM = {"families": ["square on P_c"], "family_maxiter": 2, "family_popsize": 3,
@@ -64,21 +73,30 @@ SMALL_RED_TEAM = {"families": ["square on P_c"], "family_maxiter": 2, "family_po
                   "robust_duration": 4.0, "load_steps": [0.1], "testbed": False}
 
 
-def test_red_team_notebook_writes_results_figures_and_the_readme_table(tmp_path):
-    readme = tmp_path / "README.md"
-    readme.write_text("intro\n<!-- comparison:start -->\nold\n<!-- comparison:end -->\nrest\n")
+def tracked_changes() -> str:
+    """``git status`` of the tracked files (empty when nothing changed)."""
+    out = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
+                         cwd=runner.ROOT, capture_output=True, text=True)
+    if out.returncode:
+        pytest.skip("not a git checkout")
+    return out.stdout
+
+
+def test_red_team_notebook_writes_results_figures_and_the_comparison_table(tmp_path):
+    before = tracked_changes()
     nb = runner.NOTEBOOKS_DIR / runner.FIGURES["redteam"]
-    runner.execute(nb, tmp_path / nb.name, {**SMALL_RED_TEAM, "readme": str(readme),
+    runner.execute(nb, tmp_path / nb.name, {**SMALL_RED_TEAM,
                                             "figures_dir": str(tmp_path / "fig"),
                                             "results_dir": str(tmp_path / "res")})
     for name in ("red_team", "certified_vs_paper"):
         assert (tmp_path / "fig" / f"{name}.png").stat().st_size > 1000
     red = pd.read_csv(tmp_path / "res" / "red_team.csv")
     assert set(red.defender) == {"no SCC", "paper α=3", "paper α=20", "certified"}
-    text = readme.read_text()
-    assert "old" not in text and "| certified filter |" in text and text.endswith("rest\n")
+    table = (tmp_path / "fig" / "comparison.md").read_text()
+    assert "| certified filter |" in table and "µs" not in table   # no run-to-run latencies
     claims = json.loads((tmp_path / "res" / "claims.json").read_text())
     assert claims and all(claims.values())
+    assert tracked_changes() == before   # the README and every tracked file untouched
 
 
 @pytest.mark.parametrize("name", ["tutorial", "kalman"])
@@ -89,14 +107,41 @@ def test_linear_only_notebooks_refuse_the_testbed(name, tmp_path):
                                                 "figures_dir": str(tmp_path)})
 
 
-def test_documented_deviations_pass_and_stale_ones_fail(tmp_path):
-    claim = "with SCC no relay trips"  # a documented deviation on the testbed
-    record_claims(tmp_path, {claim: False}, check=True, plant="testbed")
-    assert claim in json.loads((tmp_path / "deviations.json").read_text())
+def fig5_metrics(relay: str, peak: float) -> dict:
+    trip = {"relay": relay, "t": 15.6}
+    return {"no_scc": {"first_trip": trip, "max_abs_dw_meas": 0.0376},
+            "scc": {"first_trip": trip, "max_abs_dw_meas": peak}}
+
+
+def test_documented_deviations_are_predicates_on_the_run(tmp_path):
+    claim = "with SCC no relay trips"  # a documented deviation on the testbed (Fig. 5)
+    record_claims(tmp_path, {claim: False}, check=True, plant="testbed",
+                  metrics=fig5_metrics("OF2", 0.0361))
+    why = json.loads((tmp_path / "deviations.json").read_text())[claim]
+    assert "1.0361 pu" in why and "15.60 s" in why        # the run's own numbers
+    for relay, peak in (("ROCOF", 0.0361), ("OF2", 0.045)):  # failed another way: not covered
+        with pytest.raises(AssertionError, match="not reproduced"):
+            record_claims(tmp_path, {claim: False}, check=True, plant="testbed",
+                          metrics=fig5_metrics(relay, peak))
     with pytest.raises(AssertionError, match="claim"):
         record_claims(tmp_path, {claim: False}, check=True, plant="linear")
     with pytest.raises(AssertionError, match="no longer observed"):
-        record_claims(tmp_path, {claim: True}, check=True, plant="testbed")
+        record_claims(tmp_path, {claim: True}, check=True, plant="testbed",
+                      metrics=fig5_metrics("OF2", 0.0361))
+
+
+def test_reproduce_never_reports_claims_of_an_earlier_run(tmp_path, monkeypatch):
+    results = tmp_path / "build" / "reproduce" / "fig4"
+    results.mkdir(parents=True)
+    (results / "claims.json").write_text(json.dumps({"a claim of an earlier run": True}))
+
+    def fails_early(notebook, output, parameters):
+        raise runner.pm.PapermillExecutionError(0, 1, "", "ImportError", "broken", [])
+    monkeypatch.setattr(runner, "execute", fails_early)
+    outcome, = runner.reproduce(["fig4"], "linear", figures_dir=tmp_path / "fig",
+                                build_dir=tmp_path / "build")
+    assert not outcome.ok and outcome.claims == {} and "ImportError" in outcome.error
+    assert list(runner.summary_table([outcome]).reproduced) == ["no"]
 
 
 def test_a_broken_claim_fails_the_notebook(tmp_path):

@@ -1,0 +1,31 @@
+"""The README: its two commands, and generated tables that match the figures they come from."""
+
+from lfc import runner
+from lfc.notebook import readme_mismatches, sync_readme
+
+README = runner.ROOT / "README.md"
+
+
+def test_readme_starts_with_the_two_commands():
+    text = README.read_text()
+    block = text.split("```bash\n", 1)[1].split("```", 1)[0].strip().splitlines()
+    assert block == ["pip install -r environment.txt && python -m lfc reproduce",
+                     "pip install -r environment.txt && python -m pytest"]
+    assert text.index("```bash") < text.index("##")
+
+
+def test_generated_tables_in_the_readme_match_the_committed_results():
+    """Each ``<!-- name:start -->`` section equals ``figures/name.md``, written by the
+    notebook that computes it (``python -m lfc readme`` copies them in)."""
+    assert readme_mismatches(README, runner.ROOT / "figures") == []
+
+
+def test_sync_copies_tables_and_reports_what_changed(tmp_path):
+    readme, tables = tmp_path / "README.md", tmp_path / "figures"
+    tables.mkdir()
+    readme.write_text("a\n<!-- t:start -->\nold\n<!-- t:end -->\nb\n")
+    (tables / "t.md").write_text("| x |\n|---|\n| 1 |\n")
+    assert readme_mismatches(readme, tables) == ["t"]
+    assert sync_readme(readme, tables) == ["t"]
+    assert readme.read_text() == "a\n<!-- t:start -->\n| x |\n|---|\n| 1 |\n<!-- t:end -->\nb\n"
+    assert readme_mismatches(readme, tables) == [] and sync_readme(readme, tables) == []
