@@ -89,6 +89,10 @@ def main(argv: list[str] | None = None) -> int:
             outcomes = runner.reproduce(args.only, args.plant, args.jobs, args.figures_dir,
                                         args.build_dir)
             print(runner.summary_table(outcomes).to_string(index=False))
+            notes = runner.deviation_notes(outcomes)
+            if notes:
+                print("\nDocumented deviations (README, 'Where the testbed differs'):")
+                print("\n".join(f"- {n}" for n in notes))
             return 0 if all(o.ok for o in outcomes) else 1
         if args.command == "batch":
             return _batch(args)

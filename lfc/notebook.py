@@ -77,8 +77,10 @@ def _fig5_testbed_matches(m: dict) -> bool:
 def _fig5_testbed_explain(m: dict) -> str:
     s = m["scc"]
     return (f"the fitted design model under-predicts the testbed's frequency near the edge of "
-            f"its safe set: with the SCC the frequency reaches {1 + s['max_abs_dw_meas']:.4f} "
-            f"pu and OF2 trips at {s['first_trip']['t']:.2f} s (without it at "
+            f"its safe set, so the SCC's prediction leaves the set only after the frequency "
+            f"has, and outside it the default reading ('hold') only stops the prediction from "
+            f"getting worse: the frequency reaches {1 + s['max_abs_dw_meas']:.4f} pu and OF2 "
+            f"trips at {s['first_trip']['t']:.2f} s (without SCC at "
             f"{m['no_scc']['first_trip']['t']:.2f} s)")
 
 

@@ -149,6 +149,11 @@ def summary_table(outcomes: list[RunOutcome]) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def deviation_notes(outcomes: list[RunOutcome]) -> list[str]:
+    """One line per documented deviation of this run: figure, claim, why (with its numbers)."""
+    return [f"{o.name}: {claim}: {why}" for o in outcomes for claim, why in o.deviations.items()]
+
+
 # -- sweeps -------------------------------------------------------------------------
 def parse_value(text: str) -> object:
     """A command-line value: a Python literal if it parses as one, else the string."""

@@ -91,6 +91,14 @@ def test_the_push_reading_loses_attacks_the_strongest_reading_stops(alpha):
         assert not simulate(P, scc=SafetyFilter(P, alpha=alpha), **kw).metrics()["tripped"]
 
 
+def test_under_the_push_reading_wind_up_trips_rocof_on_fig5_bias():
+    """"push" holds Fig. 5's bias for 30 s, then the wound-up incoming command in its
+    prediction makes the push-back trip ROCOF (the default holds it: above)."""
+    r = simulate(P, duration=45, wref_attack=Step(0.04, start=1), scc=SafetyFilter(P, **PUSH))
+    trip = r.metrics()["first_trip"]
+    assert trip["relay"] == "ROCOF" and trip["t"] > 30
+
+
 @pytest.mark.parametrize("alpha", [3.0, 20.0])
 def test_only_the_push_reading_causes_a_trip_on_a_negative_bias(alpha):
     """-0.06 pu on w_ref stays above UF2 (-0.058 pu) without SCC.  "push" holds the

@@ -25,6 +25,8 @@ from lfc.testbed.case import MicrogridCase
 FIT_STEP = 0.02      # pu, small enough to stay linear
 FIT_DURATION = 8.0   # s
 FITTED = ("M", "D", "tau_g", "tau_t", "droop", "tau_w", "tau_rocof")
+UNITS = {"M": "s", "D": "pu/pu", "tau_g": "s", "tau_t": "s", "droop": "pu", "tau_w": "s",
+         "tau_rocof": "s"}
 OUTPUTS = ("dPm", "dw", "dw_meas", "rocof_meas")
 
 
@@ -52,8 +54,8 @@ class FitReport:
     def table(self) -> str:
         """Markdown table: parameters (initial, fitted) and errors."""
         lines = ["| parameter | from case data | fitted |", "|---|---|---|"]
-        lines += [f"| {n} | {getattr(self.initial, n):.4g} | {getattr(self.params, n):.4g} |"
-                  for n in FITTED]
+        lines += [f"| {n} ({UNITS[n]}) | {getattr(self.initial, n):.4g} | "
+                  f"{getattr(self.params, n):.4g} |" for n in FITTED]
         lines += ["", "| output | error, case data | error, fitted |", "|---|---|---|"]
         lines += [f"| {n} | {100 * self.initial_error[n]:.2f} % | {100 * self.error[n]:.2f} % |"
                   for n in OUTPUTS]
@@ -126,9 +128,14 @@ def fit_design_model(case: MicrogridCase | None = None) -> FitReport:
 def design_model(case: MicrogridCase | None = None) -> LFCParams:
     """The fitted design model of ``case`` (default ``MicrogridCase()``),
     computed once per process and case."""
+    return fit_report(case).params
+
+
+def fit_report(case: MicrogridCase | None = None) -> FitReport:
+    """:func:`fit_design_model` of ``case``, computed once per process and case."""
     return _fitted(case or MicrogridCase())
 
 
 @lru_cache(maxsize=4)
-def _fitted(case: MicrogridCase) -> LFCParams:
-    return fit_design_model(case).params
+def _fitted(case: MicrogridCase) -> FitReport:
+    return fit_design_model(case)
