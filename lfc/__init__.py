@@ -3,11 +3,17 @@
 Mohamed, Kundur, Khalaf, "On the Use of Safety Critical Control for
 Cyber-Physical Security in the Smart Grid".  Per-unit values are on the
 generator's MVA base (``LFCParams.s_base_mva``); time in seconds.
+
+The core (this namespace: model, relays, signals, filters, estimation, the
+engine, ``simulate`` and ``simulate_batch``) needs numpy, scipy,
+python-control, numba and pandas.  ``lfc.experiments`` (the paper's scenarios,
+maps, red team) builds on it, ``lfc.repro`` (notebooks, figures, command line)
+on both; ``lfc.testbed`` (ANDES) and the cvxpy references are optional extras.
 """
 
 from lfc.batch import simulate_batch
-from lfc.cbf import FilterInfo, SafetyFilter
 from lfc.estimation import KalmanFilter
+from lfc.filters import FilterInfo, SafetyFilter
 from lfc.model import LFCParams, discretize, lfc_matrices, lfc_model
 from lfc.relays import RelayBank, RelaySettings
 from lfc.signals import Chirp, Ramp, Samples, Sinusoid, Square, Step

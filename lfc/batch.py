@@ -1,11 +1,10 @@
 """Many scenarios at once: :func:`simulate_batch`.
 
-The linear plant, the local integral controller, the paper's SCC (exact
-solver) and the relays of :func:`lfc.simulate`, advanced for N scenarios
-together as arrays (the scenario axis is vectorized; time runs block by block,
-one control period per block).  Scenarios come as a table, one row each; the
-result is that table with the :meth:`SimResult.metrics` fields added.  No
-trace is kept, so memory grows with N, not with N × duration.
+The engine of :func:`lfc.simulate` (:mod:`lfc.engine`) run over a table of
+scenarios, one row each; the result is that table with the
+:meth:`SimResult.metrics` fields added.  Each row may set its own plant, noise
+(and so a Kalman estimate) and filter.  No trace is kept, so memory grows with
+N, not with N × duration.
 
 Large tables are split into chunks run by a ``concurrent.futures.Executor``
 (default: a process pool with one worker per core; a Dask cluster's
@@ -20,17 +19,17 @@ import hashlib
 import math
 import os
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 from tqdm.auto import tqdm
 
-from lfc.cbf import (CONFLICT_RULES, METHODS, OUTSIDE_RULES, PREDICTIONS, SafetyFilter,
-                     alarm_mask)
-from lfc.controller import sample_signal
-from lfc.model import LFCParams, block_propagator, discretize
-from lfc.relays import RELAY_NAMES, RelayBank, RelaySettings
+from lfc.engine import METRICS, Scenarios
+from lfc.filters import CONFLICT_RULES, METHODS, OUTSIDE_RULES, PREDICTIONS, SafetyFilter
+from lfc.model import LFCParams
+from lfc.relays import RELAY_NAMES, RelaySettings
 from lfc.signals import Chirp, Ramp, Samples, Signal, Sinusoid, Square, Step
 from lfc.simulate import check_timing
 
@@ -40,9 +39,11 @@ REQUIRED = ("waveform", "channel", "amplitude", "freq_hz", "start", "alpha", "Ts
 READINGS = {"outside_rule": OUTSIDE_RULES, "conflict": CONFLICT_RULES,
             "prediction": PREDICTIONS}  # optional columns: the paper filter's readings
 CHIRP_F0 = 0.1  # Hz, where every chirp starts
+PLANT = ("M", "D", "tau_g", "tau_t", "droop")   # optional columns: the row's own plant
+NOISE = ("noise_w", "noise_rocof")             # optional: measurement noise std (pu, pu/s)
 BATCH_METRICS = ("tripped", "first_trip_relay", "first_trip_t", "max_abs_dw_meas",
                  "max_abs_rocof_meas", "scc_active_fraction", "max_abs_modification",
-                 "mean_abs_modification", "alarms")
+                 "mean_abs_modification", "alarms", "final_abs_dw_meas")
 
 
 def scenario_signal(row: pd.Series, duration: float) -> Signal | None:
@@ -103,6 +104,21 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
         if bad.any():
             raise ValueError(f"column {col!r} must be one of {allowed}; row "
                              f"{scenarios.index[bad][0]!r} has {scenarios[col][bad].iloc[0]!r}")
+    for col, low, what in [(c, 0.0, "> 0") for c in PLANT] + [(c, -1.0, ">= 0") for c in NOISE]:
+        if col not in scenarios.columns:
+            continue
+        values = pd.to_numeric(scenarios[col], errors="coerce")
+        bad = scenarios[col].notna() & ~(np.isfinite(values) & (values > low)
+                                         & ((values >= 0) | (low == 0.0)))
+        if bad.any():
+            raise ValueError(f"column {col!r} must be finite and {what} (or NaN); row "
+                             f"{scenarios.index[bad][0]!r} has {scenarios[col][bad].iloc[0]!r}")
+    if "seed" in scenarios.columns:
+        seeds = pd.to_numeric(scenarios["seed"], errors="coerce")
+        bad = ~(np.isfinite(seeds) & (seeds == np.round(seeds)) & (seeds >= 0))
+        if bad.any():
+            raise ValueError(f"column 'seed' must be integers >= 0; row "
+                             f"{scenarios.index[bad][0]!r} has {scenarios['seed'][bad].iloc[0]!r}")
     alpha = pd.to_numeric(scenarios["alpha"], errors="coerce")
     bad = scenarios["alpha"].notna() & ~(alpha > 0)
     if bad.any():
@@ -112,122 +128,58 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
 
 def run_chunk(params: LFCParams, scenarios: pd.DataFrame, duration: float,
               relays: RelaySettings, dt: float, control_period: float) -> pd.DataFrame:
-    """Simulate every row of ``scenarios`` (vectorized); return the metric columns
-    ``BATCH_METRICS`` with the same index."""
-    ratio = check_timing(duration, dt, control_period)
-    return _Batch(params, scenarios, duration, relays, dt, ratio).run()
+    """Simulate every row of ``scenarios`` with the engine; return the metric
+    columns ``BATCH_METRICS`` with the same index."""
+    check_timing(duration, dt, control_period)
+    sc = Scenarios(params, duration=duration, dt=dt, control_period=control_period,
+                   relays=relays)
+    filters: dict = {}
+    for _, row in scenarios.iterrows():
+        signal = scenario_signal(row, duration)
+        channel = {"pc": "pc_attack", "wref": "wref_attack", "load": "load"}[row["channel"]]
+        noise = tuple(float(row.get(c, 0.0)) for c in NOISE)
+        sc.add(plant=_plant(params, row), scc=_filter(params, relays, row, control_period,
+                                                      filters),
+               estimator="kalman" if any(noise) else None, noise_std=noise,
+               seed=int(row.get("seed", 0)), **({channel: signal} if signal else {}))
+    run = sc.run()
+    m = dict(zip(METRICS, run.metrics.T))
+    tripped = ~np.isnan(m["first_trip_t"])
+    relay = np.array(RELAY_NAMES, dtype=object)[np.maximum(m["first_trip_relay"], 0)
+                                                 .astype(int)]
+    n_ctrl = max(sc.n_ctrl, 1)
+    return pd.DataFrame({
+        "tripped": tripped, "first_trip_relay": np.where(tripped, relay, None),
+        "first_trip_t": m["first_trip_t"], "max_abs_dw_meas": m["max_abs_dw_meas"],
+        "max_abs_rocof_meas": m["max_abs_rocof_meas"],
+        "scc_active_fraction": m["active"] / n_ctrl,
+        "max_abs_modification": m["max_abs_modification"],
+        "mean_abs_modification": m["sum_abs_modification"] / n_ctrl,
+        "alarms": m["alarms"].astype(int), "final_abs_dw_meas": m["final_abs_dw_meas"]},
+        index=scenarios.index)
 
 
-class _Batch:
-    """N scenarios of :func:`run_chunk`, advanced one control period at a time."""
+def _plant(params: LFCParams, row: pd.Series) -> LFCParams:
+    """The row's plant: ``params`` with any of the ``PLANT`` columns the row sets."""
+    own = {c: float(row[c]) for c in PLANT if c in row and pd.notna(row[c])}
+    return replace(params, **own) if own else params
 
-    def __init__(self, params: LFCParams, scenarios: pd.DataFrame, duration: float,
-                 relays: RelaySettings, dt: float, ratio: int) -> None:
-        self.params, self.index, self.ratio = params, scenarios.index, ratio
-        self.n = n = len(scenarios)
-        self.n_steps = int(round(duration / dt))
-        self.n_ctrl = -(-self.n_steps // ratio)
-        self.t = np.arange(self.n_steps + 1) * dt
-        self.tc = np.arange(self.n_ctrl) * ratio * dt
-        self.period = float(self.tc[1] - self.tc[0]) if self.n_ctrl > 1 else 0.0
-        self.Phi, self.Gu, self.Gl = block_propagator(*discretize(params, dt), ratio)
-        self._signals(scenarios, duration)
-        self._filters(scenarios, relays)
-        self.bank = RelayBank(relays, n)
-        self.first_t = np.full(n, np.nan)
-        self.first_relay = np.full(n, "", dtype=object)
-        self.max_dw, self.max_rocof = np.zeros(n), np.zeros(n)
-        self.active, self.alarms = np.zeros(n, int), np.zeros(n, int)
-        self.max_mod, self.sum_mod = np.zeros(n), np.zeros(n)
 
-    def _signals(self, scenarios: pd.DataFrame, duration: float) -> None:
-        self.pc = np.zeros((self.n_ctrl, self.n))
-        self.wref = np.zeros((self.n_ctrl, self.n))
-        load_rows = np.flatnonzero(scenarios["channel"].to_numpy() == "load")
-        self.load_rows, self.load = load_rows, np.zeros((self.n_steps + 1, len(load_rows)))
-        col = {r: i for i, r in enumerate(load_rows)}
-        for i, (_, row) in enumerate(scenarios.iterrows()):
-            sig = scenario_signal(row, duration)
-            if sig is None:
-                continue
-            if row["channel"] == "load":
-                self.load[:, col[i]] = sample_signal(sig, self.t, "load")
-            else:
-                target = self.pc if row["channel"] == "pc" else self.wref
-                target[:, i] = sample_signal(sig, self.tc, f"{row['channel']}_attack")
-
-    def _filters(self, scenarios: pd.DataFrame, relays: RelaySettings) -> None:
-        alpha = pd.to_numeric(scenarios["alpha"]).to_numpy(float)
-        ts = pd.to_numeric(scenarios["Ts"]).to_numpy(float)
-        method = scenarios.get("method", pd.Series("paper", index=scenarios.index)).to_numpy()
-        readings = {c: scenarios[c].to_numpy() for c in READINGS if c in scenarios.columns}
-        period = self.period if self.n_ctrl > 1 else self.ratio * float(self.t[1])
-        self.groups = []
-        keys = [(m, a, t, *(readings[c][i] for c in readings)) if m == "paper"
-                else (m, 0.0, 0.0) for i, (m, a, t) in enumerate(zip(method, alpha, ts))]
-        for key in sorted({k for k, a in zip(keys, alpha) if np.isfinite(a)}):
-            rows = np.flatnonzero([k == key and np.isfinite(a) for k, a in zip(keys, alpha)])
-            m, a, t = key[:3]
-            filt = SafetyFilter(self.params, relays, alpha=a, Ts=t,
-                                **dict(zip(readings, key[3:]))) if m == "paper" else \
-                SafetyFilter(self.params, relays, method=m, period=period)
-            self.groups.append((rows, filt))
-
-    def run(self) -> pd.DataFrame:
-        X = np.zeros((self.n, 5))
-        pc_int = np.zeros(self.n)
-        self._watch(0, X[None])
-        for j in range(self.n_ctrl):
-            k0 = j * self.ratio
-            u_ref = pc_int + self.pc[j]
-            u = self._filter(X, u_ref)
-            pc_int = pc_int + self.params.k_i * self.period * (self.wref[j] - X[:, 3])
-            X = self._advance(X, u, k0)
-        return self._metrics()
-
-    def _filter(self, X: np.ndarray, u_ref: np.ndarray) -> np.ndarray:
-        u = u_ref.copy()
-        for rows, filt in self.groups:
-            u[rows], flags = filt.filter_batch(X[rows], u_ref[rows])
-            self.active[rows] += flags["active"]
-            self.alarms[rows] += alarm_mask(flags)
-        mod = np.abs(u - u_ref)
-        self.max_mod = np.maximum(self.max_mod, mod)
-        self.sum_mod += mod
-        return u
-
-    def _advance(self, X: np.ndarray, u: np.ndarray, k0: int) -> np.ndarray:
-        k1 = min(k0 + self.ratio, self.n_steps)
-        m = k1 - k0
-        pl = np.zeros((self.n, self.ratio))
-        if len(self.load_rows):
-            pl[self.load_rows, :m] = self.load[k0:k1].T
-        block = X @ self.Phi.T + u[:, None] * self.Gu + pl @ self.Gl.T
-        block = block.reshape(self.n, self.ratio, 5)[:, :m]  # (N, m, 5)
-        self._watch(k0 + 1, block.transpose(1, 0, 2))
-        return block[:, -1]
-
-    def _watch(self, k: int, samples: np.ndarray) -> None:
-        """Relays and maxima over plant samples ``k, k+1, ...`` (shape (T, N, 5))."""
-        dw, rocof = samples[:, :, 3], samples[:, :, 4]
-        self.max_dw = np.maximum(self.max_dw, np.abs(dw).max(axis=0))
-        self.max_rocof = np.maximum(self.max_rocof, np.abs(rocof).max(axis=0))
-        for relay, i, s in sorted(self.bank.update(self.t[k:k + len(samples)], dw, rocof),
-                                  key=lambda f: (f[1], RELAY_NAMES.index(f[0]))):
-            if np.isnan(self.first_t[s]):
-                self.first_t[s], self.first_relay[s] = self.t[k + i], relay
-
-    def _metrics(self) -> pd.DataFrame:
-        n_ctrl = max(self.n_ctrl, 1)
-        return pd.DataFrame({
-            "tripped": ~np.isnan(self.first_t),
-            "first_trip_relay": np.where(np.isnan(self.first_t), None, self.first_relay),
-            "first_trip_t": self.first_t,
-            "max_abs_dw_meas": self.max_dw, "max_abs_rocof_meas": self.max_rocof,
-            "scc_active_fraction": self.active / n_ctrl,
-            "max_abs_modification": self.max_mod,
-            "mean_abs_modification": self.sum_mod / n_ctrl,
-            "alarms": self.alarms}, index=self.index)
+def _filter(params: LFCParams, relays: RelaySettings, row: pd.Series, period: float,
+            cache: dict) -> SafetyFilter | None:
+    """The row's filter (None without SCC), one object per distinct setting."""
+    if pd.isna(row["alpha"]):
+        return None
+    method = row.get("method", "paper")
+    if method == "paper":
+        options = {"alpha": float(row["alpha"]), "Ts": float(row["Ts"]),
+                   **{c: row[c] for c in READINGS if c in row and pd.notna(row[c])}}
+    else:
+        options = {"period": period}
+    key = (method, tuple(sorted(options.items())))
+    if key not in cache:
+        cache[key] = SafetyFilter(params, relays, method=method, **options)
+    return cache[key]
 
 
 def simulate_batch(params: LFCParams, scenarios: pd.DataFrame, *, duration: float,
@@ -246,10 +198,17 @@ def simulate_batch(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
         reference, ``"load"``), ``amplitude`` (pu; pu/s for a ramp), ``freq_hz``
         (Hz; a chirp's end frequency, from ``CHIRP_F0``), ``start`` (s),
         ``alpha`` (1/s; NaN runs without SCC) and ``Ts`` (s); optionally
-        ``stop`` (s), ``values`` and ``sample_period`` (``"samples"`` rows)
-        and ``method`` (``"paper"``, the default, or
-        ``"certified"``; the certified filter ignores ``alpha`` and ``Ts`` but
-        runs only where ``alpha`` is not NaN).  Other columns are carried through.
+        ``stop`` (s), ``values`` and ``sample_period`` (``"samples"`` rows),
+        ``method`` (``"paper"``, the default, or ``"certified"``; the certified
+        filter ignores ``alpha`` and ``Ts`` but runs only where ``alpha`` is not
+        NaN), the paper filter's readings ``outside_rule``, ``conflict``,
+        ``prediction``, the row's own plant ``M``, ``D``, ``tau_g``, ``tau_t``,
+        ``droop`` (the filter keeps the design model ``params``), and
+        measurement noise ``noise_w`` (pu), ``noise_rocof`` (pu/s) with its
+        ``seed`` (noise > 0: the generator side uses a Kalman estimate, as
+        ``simulate(estimator="kalman")`` does).  A row equals
+        :func:`lfc.simulate` with the same plant, noise and seed.  Other
+        columns are carried through.
     duration, dt, control_period : float
         As in :func:`lfc.simulate` (s).
     relays : RelaySettings, optional
@@ -317,6 +276,8 @@ def _execute(todo: list, args: tuple, executor: Executor | None):
         for i, chunk, path in todo:
             yield finish(i, run_chunk(params, chunk, duration, relays, dt, cp), path)
         return
+    if executor is None:   # load the compiled code once, before the workers fork
+        run_chunk(params, todo[0][1].iloc[:1], duration, relays, dt, cp)
     pool = executor or ProcessPoolExecutor(max_workers=os.cpu_count() or 1)
     try:
         futures = {pool.submit(run_chunk, params, chunk, duration, relays, dt, cp): (i, path)

@@ -9,11 +9,35 @@ controller period, with the applied command ``dPc`` as a known input and
 
 from __future__ import annotations
 
-import control as ct
 import numpy as np
 
+from lfc._jit import inline
 from lfc._validate import check_nonnegative, check_positive
 from lfc.model import LFCParams, discretize, output_matrix
+
+
+@inline
+def kf_correct(gain: np.ndarray, C: np.ndarray, xs: np.ndarray, y0: float, y1: float) -> None:
+    """``xs[1] = xs[0] + gain (y - C xs[0])`` (prior to posterior) for the
+    measurement ``(y0, y1)``; the filter has ``gain.shape[0]`` states."""
+    n = gain.shape[0]
+    e0, e1 = y0, y1
+    for k in range(n):
+        e0 -= C[0, k] * xs[0, k]
+        e1 -= C[1, k] * xs[0, k]
+    for k in range(n):
+        xs[1, k] = xs[0, k] + (gain[k, 0] * e0 + gain[k, 1] * e1)
+
+
+@inline
+def kf_predict(A: np.ndarray, B: np.ndarray, xs: np.ndarray, u: float) -> None:
+    """``xs[0] = A xs[1] + B u`` (posterior to the next prior, command ``u`` held)."""
+    n = A.shape[0]
+    for i in range(n):
+        acc = B[i] * u
+        for k in range(n):
+            acc += A[i, k] * xs[1, k]
+        xs[0, i] = acc
 
 
 class KalmanFilter:
@@ -65,8 +89,9 @@ class KalmanFilter:
             q = np.append(q, max(load_std**2 * period, 1e-12))
         else:
             Bd = Bd[:, 0:1]
-        self.A, self.B, self.C = Ad, Bd, C
+        self.A, self.B, self.C = Ad, np.ascontiguousarray(Bd[:, 0]), C
         self.n = Ad.shape[0]
+        import control as ct  # here, not at import: python-control loads matplotlib
         if np.linalg.matrix_rank(ct.obsv(Ad, C)) < self.n:
             raise ValueError("the LFC model is not observable from (dw_meas, rocof_meas)")
         R = np.diag(np.square(self.meas_std))
@@ -80,7 +105,7 @@ class KalmanFilter:
 
     def reset(self) -> None:
         """Start from the equilibrium (all deviations zero)."""
-        self._x_prior = np.zeros(self.n)
+        self._xs = np.zeros((2, self.n))   # prior, posterior
 
     def correct(self, y: np.ndarray) -> tuple[np.ndarray, float]:
         """Fuse a measurement ``y = [dw_meas, rocof_meas]`` (pu, pu/s).
@@ -92,10 +117,11 @@ class KalmanFilter:
         p_load_hat : float
             Estimated load change (pu); 0 when ``estimate_load`` is False.
         """
-        self._x_post = self._x_prior + self.gain @ (np.asarray(y, float) - self.C @ self._x_prior)
-        pl = float(self._x_post[5]) if self.estimate_load else 0.0
-        return self._x_post[:5].copy(), pl
+        y = np.asarray(y, float)
+        kf_correct(self.gain, self.C, self._xs, float(y[0]), float(y[1]))
+        pl = float(self._xs[1, 5]) if self.estimate_load else 0.0
+        return self._xs[1, :5].copy(), pl
 
     def predict(self, u: float) -> None:
         """Propagate the last corrected estimate over one period with command ``u`` (pu)."""
-        self._x_prior = self.A @ self._x_post + self.B[:, 0] * u
+        kf_predict(self.A, self.B, self._xs, float(u))

@@ -13,11 +13,14 @@ The governor row uses the standard droop sign (Kundur 1994, ch. 11; Saadat
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import control as ct
 import numpy as np
 
 from lfc._validate import check_nonnegative, check_positive
+
+if TYPE_CHECKING:
+    import control
 
 STATES = ("dPg", "dPm", "dw", "dw_meas", "rocof_meas")
 INPUTS = ("dPc", "dPL")
@@ -122,12 +125,13 @@ def output_matrix() -> np.ndarray:
     return C
 
 
-def lfc_model(params: LFCParams) -> ct.StateSpace:
+def lfc_model(params: LFCParams) -> control.StateSpace:
     """Return eq. (1) as a named python-control ``StateSpace``.
 
     States ``[dPg, dPm, dw, dw_meas, rocof_meas]``, inputs ``[dPc, dPL]``,
     outputs ``[dw_meas, rocof_meas]``; droop sign corrected (E1).
     """
+    import control as ct  # here, not at import: python-control loads matplotlib
     A, B = lfc_matrices(params)
     return ct.ss(A, B, output_matrix(), np.zeros((2, 2)), states=list(STATES),
                  inputs=list(INPUTS), outputs=list(OUTPUTS), name="lfc")
@@ -158,6 +162,7 @@ def zoh(A: np.ndarray, B: np.ndarray, period: float) -> tuple[np.ndarray, np.nda
 
     Returns ``(Ad, Bd)`` with ``Ad = exp(A period)``, ``Bd = int_0^period exp(A s) ds B``.
     """
+    import control as ct  # here, not at import: python-control loads matplotlib
     check_positive("period", period)
     sysd = ct.c2d(ct.ss(A, B, np.zeros((1, A.shape[0])), np.zeros((1, B.shape[1]))), period,
                   method="zoh")

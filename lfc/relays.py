@@ -9,14 +9,16 @@ lines": delay 0 by default, configurable.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from lfc._jit import inline, jit
 from lfc._validate import check_nonnegative, check_positive, check_range
 
 RELAY_NAMES = ("OF2", "UF2", "ROCOF")
-_TIME_TOL = 1e-9  # s, tolerance when comparing elapsed pickup time to a delay
+TIME_TOL = 1e-9  # s, tolerance when comparing elapsed pickup time to a delay
 
 
 @dataclass(frozen=True)
@@ -62,13 +64,52 @@ class RelaySettings:
         return ((dw <= self.of2 - 1) & (dw >= self.uf2 - 1)
                 & (np.abs(rocof_meas) <= self.rocof_limit))
 
-    def thresholds(self) -> dict[str, tuple[str, float, float]]:
-        """Map relay name to (measured signal, threshold on it, delay in s)."""
-        return {
-            "OF2": ("dw_meas", self.of2 - 1.0, self.of2_delay),
-            "UF2": ("dw_meas", self.uf2 - 1.0, self.uf2_delay),
-            "ROCOF": ("abs_rocof_meas", self.rocof_limit, self.rocof_delay),
-        }
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(limits, delays)`` in ``RELAY_NAMES`` order: the thresholds on
+        ``dw_meas`` (``of2 - 1``, ``uf2 - 1``, pu) and ``|rocof_meas|`` (pu/s), and
+        the clearing times (s)."""
+        return (np.array([self.of2 - 1.0, self.uf2 - 1.0, self.rocof_limit]),
+                np.array([self.of2_delay, self.uf2_delay, self.rocof_delay]))
+
+
+@inline
+def relay_sample(t: float, dw: float, rocof: float, limits: np.ndarray, delays: np.ndarray,
+                 start: np.ndarray, due: np.ndarray) -> int:
+    """Feed one sample to the OF2, UF2 and ROCOF pickup timers; return the relays
+    that trip at it as bits (``1 << RELAY_NAMES.index(name)``).
+
+    ``limits`` = ``(of2 - 1, uf2 - 1, rocof_limit)`` (pu, pu/s) and ``delays`` (s)
+    come from :meth:`RelaySettings.arrays`; ``start`` (time the signal went
+    beyond, NaN if it is not) and ``due`` (the delay has run out) are each
+    relay's state, updated in place.  A relay trips at the sample where its
+    signal has been beyond the threshold for its delay; the timer resets when
+    the signal returns, and a later excursion trips it again.
+    """
+    beyond = (dw > limits[0], dw < limits[1], abs(rocof) > limits[2])
+    trips = 0
+    for r in range(3):
+        if not beyond[r]:
+            start[r], due[r] = np.nan, 0.0
+            continue
+        if math.isnan(start[r]):
+            start[r] = t
+        now = t - start[r] >= delays[r] - TIME_TOL
+        if now and due[r] == 0.0:
+            trips |= 1 << r
+        due[r] = 1.0 if now else 0.0
+    return trips
+
+
+@jit
+def _relay_block(t: np.ndarray, dw: np.ndarray, rocof: np.ndarray, limits: np.ndarray,
+                 delays: np.ndarray, start: np.ndarray, due: np.ndarray) -> np.ndarray:
+    """:func:`relay_sample` over a block of samples (T, n); trip bits (T, n)."""
+    out = np.zeros(dw.shape, np.int64)
+    for j in range(dw.shape[1]):
+        for k in range(dw.shape[0]):
+            out[k, j] = relay_sample(t[k], dw[k, j], rocof[k, j], limits, delays, start[j],
+                                     due[j])
+    return out
 
 
 @dataclass
@@ -80,7 +121,8 @@ class RelayBank:
     beyond the threshold continuously for its delay; the timer resets when the
     signal returns, and a later excursion can trip it again (every trip is
     reported; the generator is not disconnected, so runs can show the SCC's
-    continuity as the paper does).
+    continuity as the paper does).  The timers are :func:`relay_sample`, the
+    same code the engine runs.
 
     Parameters
     ----------
@@ -91,21 +133,12 @@ class RelayBank:
 
     settings: RelaySettings
     n: int = 1
-    _run_start: dict = field(init=False, repr=False)
-    _tripped_run: dict = field(init=False, repr=False)
+    _start: np.ndarray = field(init=False, repr=False)
+    _due: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        self._run_start = {r: np.full(self.n, np.nan) for r in RELAY_NAMES}
-        self._tripped_run = {r: np.zeros(self.n, bool) for r in RELAY_NAMES}
-
-    def _beyond(self, name: str, dw_meas: np.ndarray, rocof_meas: np.ndarray
-                ) -> np.ndarray:
-        s = self.settings
-        if name == "OF2":
-            return dw_meas > s.of2 - 1.0
-        if name == "UF2":
-            return dw_meas < s.uf2 - 1.0
-        return np.abs(rocof_meas) > s.rocof_limit
+        self._start = np.full((self.n, 3), np.nan)
+        self._due = np.zeros((self.n, 3))
 
     def update(self, t: np.ndarray, dw_meas: np.ndarray, rocof_meas: np.ndarray
                ) -> list[tuple[str, int, int]]:
@@ -121,40 +154,12 @@ class RelayBank:
         Returns
         -------
         list of (relay, sample index in block, scenario index)
-            One entry per trip, in no particular order.
+            One entry per trip, in time order (relays in ``RELAY_NAMES`` order).
         """
         t = np.asarray(t, float)
         dw = np.asarray(dw_meas, float).reshape(len(t), self.n)
         rc = np.asarray(rocof_meas, float).reshape(len(t), self.n)
-        delays = {"OF2": self.settings.of2_delay, "UF2": self.settings.uf2_delay,
-                  "ROCOF": self.settings.rocof_delay}
-        trips = []
-        for name in RELAY_NAMES:
-            beyond = self._beyond(name, dw, rc)
-            tripped = self._scan(t, beyond, name, delays[name])
-            for k, j in zip(*np.nonzero(tripped)):
-                trips.append((name, int(k), int(j)))
-        return trips
-
-    def _scan(self, t: np.ndarray, beyond: np.ndarray, name: str, delay: float
-              ) -> np.ndarray:
-        """Vectorized pickup timer over a block; updates the carried state."""
-        prev = np.vstack([~np.isnan(self._run_start[name])[None, :], beyond[:-1]])
-        onset = beyond & ~prev
-        start = np.where(onset, t[:, None], np.nan)
-        start[0] = np.where(onset[0], t[0], self._run_start[name])
-        start = _ffill(start)
-        start = np.where(beyond, start, np.nan)
-        due = beyond & (t[:, None] - start >= delay - _TIME_TOL)
-        prev_due = np.vstack([self._tripped_run[name][None, :], due[:-1]])
-        tripped = due & ~prev_due
-        self._run_start[name] = start[-1]
-        self._tripped_run[name] = due[-1]
-        return tripped
-
-
-def _ffill(a: np.ndarray) -> np.ndarray:
-    """Forward-fill NaNs along axis 0 (rows), column by column."""
-    idx = np.where(~np.isnan(a), np.arange(a.shape[0])[:, None], 0)
-    np.maximum.accumulate(idx, axis=0, out=idx)
-    return np.take_along_axis(a, idx, axis=0)
+        limits, delays = self.settings.arrays()
+        bits = _relay_block(t, dw, rc, limits, delays, self._start, self._due)
+        return [(name, int(k), int(j)) for k, j in zip(*np.nonzero(bits))
+                for r, name in enumerate(RELAY_NAMES) if bits[k, j] >> r & 1]

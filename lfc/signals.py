@@ -1,17 +1,83 @@
 """Attack and load waveforms: callables of time (s) returning pu.
 
 Every signal is zero before ``start`` and accepts a float or a numpy array of
-times; a float in gives a float out.
+times; a float in gives a float out.  Each waveform is one compiled function
+(:func:`value_at`), used both when a signal is called and inside the engine, so
+the simulators and the plots see exactly the same numbers.  A signal is
+described to the engine by :meth:`Signal.spec`: a waveform code, six float
+parameters and, for :class:`Samples`, its sample times and values.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
+from lfc._jit import inline, jit
 from lfc._validate import check_finite, check_positive
+
+# waveform codes of Signal.spec() and value_at(); GRID: values given on the engine's grid
+NONE, SINUSOID, SQUARE, STEP, RAMP, CHIRP, SAMPLES, GRID = range(8)
+N_PARAMS = 6
+SignalLike = Callable[[np.ndarray], np.ndarray]   # a Signal, or any callable of time (s)
+
+
+@inline
+def value_at(kind: int, params: np.ndarray, row: int, t: float, st: np.ndarray,
+             sv: np.ndarray, o: int, n: int) -> float:
+    """The value (pu) at time ``t`` (s) of waveform ``kind`` with parameters
+    ``params[row]``.
+
+    The parameters are ``(amplitude or value or slope, frequency or f0 (Hz),
+    start, stop (s), phase (rad) or f1 (Hz), unused)``; ``st[o:o+n]``,
+    ``sv[o:o+n]`` the sample times and values of ``SAMPLES``.  ``GRID`` is not
+    evaluated here (the engine indexes it).
+    """
+    a, f, start = params[row, 0], params[row, 1], params[row, 2]
+    stop, extra = params[row, 3], params[row, 4]
+    if kind == NONE or kind == GRID or t < start:
+        return 0.0
+    if kind == STEP:
+        return a
+    if kind == RAMP:
+        return a * (min(t, stop) - start)
+    if kind == SAMPLES:
+        last = o + n - 1
+        if t >= st[last]:
+            return sv[last]
+        lo, hi = o, last          # st[lo] <= t < st[hi]: bisect, then np.interp's formula
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if st[mid] <= t:
+                lo = mid
+            else:
+                hi = mid
+        return (sv[hi] - sv[lo]) / (st[hi] - st[lo]) * (t - st[lo]) + sv[lo]
+    if t >= stop:
+        return 0.0
+    tau = t - start
+    if kind == SINUSOID:
+        return a * math.sin(2 * math.pi * f * tau + extra)
+    if kind == SQUARE:
+        return a if (tau * f) % 1.0 < 0.5 else -a
+    rate = (extra - f) / (stop - start)    # CHIRP: f0 = f, f1 = extra
+    return a * math.sin(2 * math.pi * (f * tau + 0.5 * rate * tau**2))
+
+
+@jit
+def _values(kind: int, p: np.ndarray, t: np.ndarray, st: np.ndarray, sv: np.ndarray
+            ) -> np.ndarray:
+    out = np.empty(t.shape)
+    params = p.reshape(1, -1)
+    for i in range(t.size):
+        out.flat[i] = value_at(kind, params, 0, t.flat[i], st, sv, 0, len(st))
+    return out
+
+
+_EMPTY = np.zeros(1)
 
 
 def _check_window(start: float, stop: float) -> None:
@@ -21,15 +87,23 @@ def _check_window(start: float, stop: float) -> None:
 
 
 class Signal:
-    """Base class: subclasses implement ``_eval(t_array) -> array``."""
+    """Base class: subclasses describe themselves with :meth:`spec`."""
+
+    def spec(self) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
+        """``(kind, params (6,), sample times, sample values)`` for the engine."""
+        raise NotImplementedError  # pragma: no cover - abstract
 
     def __call__(self, t: float | np.ndarray) -> float | np.ndarray:
         arr = np.asarray(t, dtype=float)
-        out = self._eval(arr)
+        kind, p, st, sv = self.spec()
+        out = _values(kind, p, arr.reshape(-1), st, sv).reshape(arr.shape)
         return float(out) if arr.ndim == 0 else out
 
-    def _eval(self, t: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
-        raise NotImplementedError
+
+def _params(*values: float) -> np.ndarray:
+    p = np.zeros(N_PARAMS)
+    p[:len(values)] = values
+    return p
 
 
 @dataclass(frozen=True)
@@ -45,13 +119,6 @@ class _Periodic(Signal):
         check_finite("amplitude", self.amplitude)
         check_positive("freq_hz", self.freq_hz)
         _check_window(self.start, self.stop)
-
-    def _eval(self, t: np.ndarray) -> np.ndarray:
-        on = (t >= self.start) & (t < self.stop)
-        return np.where(on, self._wave(t - self.start), 0.0)
-
-    def _wave(self, tau: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
-        raise NotImplementedError
 
 
 @dataclass(frozen=True)
@@ -76,8 +143,9 @@ class Sinusoid(_Periodic):
         super().__post_init__()
         check_finite("phase", self.phase)
 
-    def _wave(self, tau: np.ndarray) -> np.ndarray:
-        return self.amplitude * np.sin(2 * np.pi * self.freq_hz * tau + self.phase)
+    def spec(self):
+        return SINUSOID, _params(self.amplitude, self.freq_hz, self.start, self.stop,
+                                 self.phase), _EMPTY, _EMPTY
 
 
 @dataclass(frozen=True)
@@ -94,9 +162,9 @@ class Square(_Periodic):
         Active window (s); zero outside.
     """
 
-    def _wave(self, tau: np.ndarray) -> np.ndarray:
-        cycle = np.mod(tau * self.freq_hz, 1.0)
-        return np.where(cycle < 0.5, self.amplitude, -self.amplitude)
+    def spec(self):
+        return SQUARE, _params(self.amplitude, self.freq_hz, self.start, self.stop), \
+            _EMPTY, _EMPTY
 
 
 @dataclass(frozen=True)
@@ -110,8 +178,8 @@ class Step(Signal):
         check_finite("value", self.value)
         check_finite("start", self.start)
 
-    def _eval(self, t: np.ndarray) -> np.ndarray:
-        return np.where(t >= self.start, self.value, 0.0)
+    def spec(self):
+        return STEP, _params(self.value, 0.0, self.start, math.inf), _EMPTY, _EMPTY
 
 
 @dataclass(frozen=True)
@@ -126,8 +194,8 @@ class Ramp(Signal):
         check_finite("slope", self.slope)
         _check_window(self.start, self.stop)
 
-    def _eval(self, t: np.ndarray) -> np.ndarray:
-        return self.slope * (np.clip(t, self.start, self.stop) - self.start)
+    def spec(self):
+        return RAMP, _params(self.slope, 0.0, self.start, self.stop), _EMPTY, _EMPTY
 
 
 @dataclass(frozen=True)
@@ -152,12 +220,9 @@ class Chirp(Signal):
         if not math.isfinite(self.stop):
             raise ValueError(f"stop must be finite for a Chirp, got {self.stop!r}")
 
-    def _eval(self, t: np.ndarray) -> np.ndarray:
-        on = (t >= self.start) & (t < self.stop)
-        tau = t - self.start
-        rate = (self.f1_hz - self.f0_hz) / (self.stop - self.start)
-        wave = self.amplitude * np.sin(2 * np.pi * (self.f0_hz * tau + 0.5 * rate * tau**2))
-        return np.where(on, wave, 0.0)
+    def spec(self):
+        return CHIRP, _params(self.amplitude, self.f0_hz, self.start, self.stop,
+                              self.f1_hz), _EMPTY, _EMPTY
 
 
 @dataclass(frozen=True)
@@ -190,5 +255,5 @@ class Samples(Signal):
         object.__setattr__(self, "t", t)
         object.__setattr__(self, "values", v)
 
-    def _eval(self, t: np.ndarray) -> np.ndarray:
-        return np.where(t >= self.t[0], np.interp(t, self.t, self.values), 0.0)
+    def spec(self):
+        return SAMPLES, _params(0.0, 0.0, float(self.t[0]), math.inf), self.t, self.values

@@ -1,10 +1,11 @@
-"""Closed-loop simulation of the LFC plant, local controller, SCC and relays.
+"""Closed-loop simulation of the LFC plant, local controller, safety filter and relays.
 
 Timing: the plant is advanced exactly (zero-order hold) every ``dt``; the
-local controller, the network command (with any attack) and the SCC run every
-``control_period`` and hold their command in between.  Relays watch the
+local controller, the network command (with any attack) and the filter run
+every ``control_period`` and hold their command in between.  Relays watch the
 measured signals at every plant step.  Trips are recorded and the run goes on
 (as in the paper, "to show the SCC's continuity") unless ``stop_on_trip``.
+:func:`simulate` is the engine (:mod:`lfc.engine`) with one scenario and a trace.
 """
 
 from __future__ import annotations
@@ -17,16 +18,19 @@ import numpy as np
 import pandas as pd
 
 from lfc._validate import check_multiple, check_positive
-from lfc.cbf import SafetyFilter
-from lfc.controller import (ALARM_COLUMNS, GeneratorSide, SignalLike, make_estimator,
-                            make_noise, sample_signal)
-from lfc.estimation import KalmanFilter
-from lfc.model import STATES, LFCParams, block_propagator, discretize
-from lfc.relays import RelayBank, RelaySettings
+from lfc.engine import CTRL_COLUMNS, Scenarios, sample_signal
+from lfc.filters import SafetyFilter, binding_names
+from lfc.filters.base import ACTIVE, ALARM_BITS, INFEASIBLE, INVALID, OUTSIDE, SOLVER_ERROR
+from lfc.model import STATES, LFCParams
+from lfc.relays import RELAY_NAMES, RelaySettings
+from lfc.signals import Signal
 
 __all__ = ["ALARM_COLUMNS", "METRIC_KEYS", "SimResult", "check_timing", "simulate"]
 METRIC_KEYS = ("tripped", "first_trip", "max_abs_dw_meas", "max_abs_rocof_meas",
                "scc_active_fraction", "max_abs_modification", "alarms")
+ALARM_COLUMNS = ("t", "u_ref", "u", "binding", "h_freq", "h_rocof", "margin_freq",
+                 "margin_rocof", "infeasible", "outside", "invalid_input", "solver_error",
+                 "reason")
 
 
 @dataclass
@@ -42,11 +46,11 @@ class SimResult:
         ``scc_active`` (bool).
     controls : DataFrame
         Every controller sample: ``t``, ``pc_ref``, ``pc``, ``scc_active``, and
-        the SCC's view of the state ``dw_hat``, ``rocof_hat`` and ``p_load_hat``.
+        the filter's view of the state ``dw_hat``, ``rocof_hat`` and ``p_load_hat``.
     trips : DataFrame
         Every relay trip: ``relay`` and ``t`` (s).
     alarms : DataFrame
-        Every SCC alarm (an intervention or a flagged condition), columns
+        Every filter alarm (an intervention or a flagged condition), columns
         ``ALARM_COLUMNS``: the paper's log for learning attacker strategies.
     settings : dict
         What the run was called with (JSON-serializable).
@@ -99,12 +103,11 @@ def check_timing(duration: float, dt: float, control_period: float) -> int:
     return check_multiple("control_period", control_period, "dt", dt)
 
 
-def simulate(params: LFCParams, *, duration: float, pc_attack: SignalLike | None = None,
-             wref_attack: SignalLike | None = None, load: SignalLike | None = None,
+def simulate(params: LFCParams, *, duration: float, pc_attack: Signal | None = None,
+             wref_attack: Signal | None = None, load: Signal | None = None,
              scc: SafetyFilter | None = None, relays: RelaySettings | None = None,
-             estimator: str | KalmanFilter | None = None,
-             noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0, dt: float = 1e-3,
-             control_period: float = 0.01, stop_on_trip: bool = False,
+             estimator=None, noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0,
+             dt: float = 1e-3, control_period: float = 0.01, stop_on_trip: bool = False,
              load_feedforward: bool = False) -> SimResult:
     """Simulate the closed loop from equilibrium.
 
@@ -115,18 +118,19 @@ def simulate(params: LFCParams, *, duration: float, pc_attack: SignalLike | None
     duration : float
         Simulated time (s), > 0.
     pc_attack : callable, optional
-        Added to the governor command dPc that arrives from the network (pu).
+        Added to the governor command dPc that arrives from the network (pu);
+        a :class:`~lfc.signals.Signal` or any callable of time.
     wref_attack : callable, optional
         Corrupts the frequency reference dw_ref of the local integral
         controller ``d dPc/dt = k_i (dw_ref - dw_meas)`` (pu).
     load : callable, optional
         Load change dPL (pu).
     scc : SafetyFilter, optional
-        The safety filter; None runs without SCC.
+        The safety filter; None runs without one.
     relays : RelaySettings, optional
         Default IEEE 1547 Cat. III.
     estimator : None, "kalman" or KalmanFilter
-        None gives the SCC the true state; "kalman" a Kalman filter's estimate
+        None gives the filter the true state; "kalman" a Kalman filter's estimate
         (its measurement-noise model taken from ``noise_std`` where > 0).
     noise_std : (float, float)
         Std of white noise on the controller's ``dw_meas`` (pu) and
@@ -136,83 +140,77 @@ def simulate(params: LFCParams, *, duration: float, pc_attack: SignalLike | None
     dt : float
         Plant step (s). Default 1 ms.
     control_period : float
-        Controller/SCC period (s), an integer multiple of ``dt``. Default 10 ms.
+        Controller/filter period (s), an integer multiple of ``dt``. Default 10 ms.
     stop_on_trip : bool
         End the run at the first relay trip.
     load_feedforward : bool
-        With ``estimator=None``, give the SCC the true dPL (an idealized load
+        With ``estimator=None``, give the filter the true dPL (an idealized load
         measurement) instead of 0 (E7: dPL is not measured at the generator).
 
     Returns
     -------
     SimResult
     """
-    ratio = check_timing(duration, dt, control_period)
+    check_timing(duration, dt, control_period)
     relays = relays if relays is not None else RelaySettings()
-    loop = _Loop(params, ratio, dt, int(round(duration / dt)))
-    noise = make_noise(noise_std, loop.n_ctrl, seed)
-    kf = make_estimator(estimator, params, control_period, noise_std)
-    gen = GeneratorSide(params, scc, kf, loop.tc, sample_signal(pc_attack, loop.tc, "pc_attack"),
-                        sample_signal(wref_attack, loop.tc, "wref_attack"), noise,
-                        load_feedforward)
-    loop.run(gen, load, RelayBank(relays), stop_on_trip)
+    sc = Scenarios(params, duration=duration, dt=dt, control_period=control_period,
+                   relays=relays)
+    sc.add(pc_attack=pc_attack, wref_attack=wref_attack, load=load, scc=scc,
+           estimator=estimator, noise_std=noise_std, seed=seed,
+           load_feedforward=load_feedforward)
+    run = sc.run(trace=True, stop_on_trip=stop_on_trip)
+    end = int(run.ends[0])
+    t = sc.t[:end + 1]
+    trace = pd.DataFrame({"t": t})
+    for i, name in enumerate(STATES):
+        trace[name] = run.x[:end + 1, i]
+    trace["p_load"] = sample_signal(load, t, "load")
+    trips = pd.DataFrame([(RELAY_NAMES[r], float(t[k])) for k in np.flatnonzero(run.trips[:end + 1])
+                          for r in range(3) if run.trips[k] >> r & 1], columns=["relay", "t"])
     settings = {"params": vars(params), "relays": vars(relays), "duration": duration,
                 "dt": dt, "control_period": control_period, "seed": seed,
                 "noise_std": list(noise_std), "scc": repr(scc), "estimator": repr(estimator),
                 "pc_attack": repr(pc_attack), "wref_attack": repr(wref_attack),
                 "load": repr(load), "stop_on_trip": stop_on_trip,
                 "load_feedforward": load_feedforward}
-    return loop.result(gen, settings)
+    return result(trace, sc.tc, run.ctrl, trips, scc, settings)
 
 
-class _Loop:
-    """The linear plant of one closed-loop run (internal to :func:`simulate`)."""
-
-    def __init__(self, params: LFCParams, ratio: int, dt: float, n_steps: int) -> None:
-        self.ratio, self.dt, self.n_steps = ratio, dt, n_steps
-        self.n_ctrl = -(-n_steps // ratio)
-        self.t = np.arange(n_steps + 1) * dt
-        self.tc = np.arange(self.n_ctrl) * ratio * dt
-        Ad, Bd = discretize(params, dt)
-        self.Phi, self.Gu, self.Gl = block_propagator(Ad, Bd, ratio)
-        self.X = np.zeros((n_steps + 1, 5))
-        self.trips: list[tuple[str, float]] = []
-        self.end = n_steps  # last plant sample index kept
-
-    def run(self, gen: GeneratorSide, load, bank: RelayBank, stop_on_trip: bool) -> None:
-        self.p_load = sample_signal(load, self.t, "load")
-        for j in range(self.n_ctrl):
-            k0 = j * self.ratio
-            u = gen.step(j, self.X[k0], self.p_load[k0])
-            k1 = min(k0 + self.ratio, self.n_steps)
-            self._advance(k0, k1, u)
-            if stop_on_trip and self._check_relays(bank, k0 + (j > 0), k1 + 1):
-                self.end = int(np.searchsorted(self.t, self.trips[0][1]))
-                return
-        if not stop_on_trip:
-            self._check_relays(bank, 0, self.n_steps + 1)
-
-    def _advance(self, k0: int, k1: int, u: float) -> None:
-        m = k1 - k0
-        pl = np.zeros(self.ratio)
-        pl[:m] = self.p_load[k0:k1]
-        block = self.Phi @ self.X[k0] + self.Gu * u + self.Gl @ pl
-        self.X[k0 + 1:k1 + 1] = block.reshape(self.ratio, 5)[:m]
-
-    def _check_relays(self, bank: RelayBank, k0: int, k1: int) -> bool:
-        """Feed plant samples ``k0:k1`` to the relays; True if any tripped."""
-        found = bank.update(self.t[k0:k1], self.X[k0:k1, 3], self.X[k0:k1, 4])
-        for relay, k, _ in sorted(found, key=lambda r: r[1]):
-            self.trips.append((relay, float(self.t[k0 + k])))
-        return bool(found)
-
-    def result(self, gen: GeneratorSide, settings: dict) -> SimResult:
-        end = self.end
-        trace = pd.DataFrame({"t": self.t[: end + 1]})
-        for i, name in enumerate(STATES):
-            trace[name] = self.X[: end + 1, i]
-        trace["p_load"] = self.p_load[: end + 1]
-        gen.add_to_trace(trace)
-        t_end = float(self.t[end])
-        trips = pd.DataFrame(self.trips, columns=["relay", "t"])
-        return SimResult(trace, gen.controls(t_end), trips, gen.alarm_log(t_end), settings)
+def result(trace: pd.DataFrame, tc: np.ndarray, ctrl: np.ndarray, trips: pd.DataFrame,
+           scc: SafetyFilter | None, settings: dict,
+           line_trips: pd.DataFrame | None = None) -> SimResult:
+    """A :class:`SimResult` from a trace (``t``, states, ``p_load``), the control
+    samples ``tc`` (s) and their generator-side rows ``ctrl`` (``CTRL_COLUMNS``;
+    rows not reached are NaN), and the trips.  Adds ``pc_ref``, ``pc``,
+    ``wref`` and ``scc_active`` (held values) to the trace and builds the
+    controls and the alarm log."""
+    t_end = float(trace["t"].iat[-1])
+    n = int(np.searchsorted(tc, t_end + 1e-9, side="right"))
+    n = min(n, int(np.sum(~np.isnan(ctrl[:, 0]))))
+    c = pd.DataFrame(ctrl[:n], columns=list(CTRL_COLUMNS))
+    flags = c["flags"].to_numpy().astype(np.int64)
+    active = (flags & ACTIVE) != 0
+    held = np.clip(np.searchsorted(tc, trace["t"].to_numpy() + 1e-9, side="right") - 1, 0,
+                   max(n - 1, 0))
+    trace.insert(1, "pc_ref", c["u_ref"].to_numpy()[held])
+    trace.insert(2, "pc", c["u"].to_numpy()[held])
+    trace["wref"] = c["wref"].to_numpy()[held]
+    trace["scc_active"] = active[held]
+    controls = pd.DataFrame({"t": tc[:n], "pc_ref": c["u_ref"], "pc": c["u"],
+                             "scc_active": active, "dw_hat": c["dw_hat"],
+                             "rocof_hat": c["rocof_hat"], "p_load_hat": c["p_load_hat"]})
+    alarm = (flags & ALARM_BITS) != 0
+    a = c[alarm]
+    fa = flags[alarm]
+    explain = scc.backend.reason if scc is not None else (lambda f: "")
+    alarms = pd.DataFrame({
+        "t": tc[:n][alarm], "u_ref": a["u_ref"], "u": a["u"],
+        "binding": [";".join(binding_names(f)) if f & ACTIVE else "" for f in fa],
+        "h_freq": a["h_freq"], "h_rocof": a["h_rocof"], "margin_freq": a["margin_freq"],
+        "margin_rocof": a["margin_rocof"], "infeasible": (fa & INFEASIBLE) != 0,
+        "outside": (fa & OUTSIDE) != 0, "invalid_input": (fa & INVALID) != 0,
+        "solver_error": (fa & SOLVER_ERROR) != 0, "reason": [explain(int(f)) for f in fa]},
+        columns=list(ALARM_COLUMNS)).reset_index(drop=True)
+    return SimResult(trace, controls, trips, alarms, settings,
+                     line_trips if line_trips is not None else
+                     pd.DataFrame(columns=["line", "trip_t", "open_t"]))

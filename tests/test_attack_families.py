@@ -2,7 +2,7 @@
 that depends on the reading (E9, E10, E5).
 
 These are findings, not bugs to hide: each test pins an attack that the paper's
-SCC does NOT stop at its default reading (``lfc.cbf.DEFAULT_READING``, the one
+SCC does NOT stop at its default reading (``lfc.filters.DEFAULT_READING``, the one
 that stops the most attacks of the maps), so that a change which silently alters
 that behaviour is noticed.  The numbers come from
 ``python bench/attack_family_survey.py`` and notebook 06.
@@ -10,7 +10,7 @@ that behaviour is noticed.  The numbers come from
 
 import pytest
 
-from lfc import (Chirp, LFCParams, Ramp, SafetyFilter, Sinusoid, Square, Step, simulate)
+from lfc import Chirp, LFCParams, Ramp, SafetyFilter, Sinusoid, Square, Step, simulate
 
 P = LFCParams()
 PUSH = {"outside_rule": "push", "conflict": "slack"}   # the earlier reading of E9 / E10

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 import lfc
 from lfc.batch import BATCH_METRICS, scenario_signal, simulate_batch
-from lfc.redteam import piecewise_attack_table
+from lfc.experiments.redteam import piecewise_attack_table
 
 P = lfc.LFCParams()
 CHANNEL_ARG = {"pc": "pc_attack", "wref": "wref_attack", "load": "load"}
@@ -121,11 +121,19 @@ class InlineExecutor(Executor):
 
 
 KILLED_RUN = """
-import sys, pandas as pd, lfc
+import sys, time, pandas as pd, lfc
 from concurrent.futures import ThreadPoolExecutor
+
+def slowly(*args):   # a chunk takes milliseconds: give the test time to kill the run
+    time.sleep(0.5)
+    return lfc.batch.run_chunk(*args)
+
+class Slow(ThreadPoolExecutor):
+    def submit(self, fn, *args):
+        return super().submit(slowly, *args)
+
 lfc.simulate_batch(lfc.LFCParams(), pd.read_csv(sys.argv[2], index_col=0), duration=20.0,
-                   chunk_size=5, out=sys.argv[1], executor=ThreadPoolExecutor(1),
-                   progress=False)
+                   chunk_size=5, out=sys.argv[1], executor=Slow(1), progress=False)
 """
 
 

@@ -3,7 +3,7 @@
 import pytest
 
 import lfc
-from lfc.load_limits import governor_ride_through, no_scc_threshold
+from lfc.experiments.load_limits import governor_ride_through, no_scc_threshold
 
 P, RELAYS = lfc.LFCParams(), lfc.RelaySettings()
 

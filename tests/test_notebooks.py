@@ -6,9 +6,9 @@ import subprocess
 import pandas as pd
 import pytest
 
-from lfc import runner
-from lfc.__main__ import main
-from lfc.notebook import figure_name, record_claims
+from lfc.repro import runner
+from lfc.repro.cli import main
+from lfc.repro.notebook import figure_name, record_claims
 from lfc.simulate import METRIC_KEYS
 
 SHORT = {"duration": 3.0}

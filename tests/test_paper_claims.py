@@ -1,4 +1,4 @@
-"""One test per claim of the paper, on the documented defaults (lfc.scenarios), with the
+"""One test per claim of the paper, on the documented defaults (lfc.experiments.scenarios), with the
 paper's SCC at its default (strongest) reading; tests are named after the range they cover."""
 
 import functools
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from lfc import LFCParams, RelaySettings, SafetyFilter, Sinusoid, Step, simulate
-from lfc.scenarios import (ATTACK_START, FIG6_LOAD, fig4_rocof_attack, fig5_bias_attack,
-                           fig6_load_step, rocof_limit_load_step)
+from lfc.experiments.scenarios import (ATTACK_START, FIG6_LOAD, fig4_rocof_attack,
+                                       fig5_bias_attack, fig6_load_step, rocof_limit_load_step)
 
 P, RELAYS = LFCParams(), RelaySettings()
 

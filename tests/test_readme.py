@@ -1,7 +1,7 @@
 """The README: its two commands, and generated tables that match the figures they come from."""
 
-from lfc import runner
-from lfc.notebook import readme_mismatches, sync_readme
+from lfc.repro import runner
+from lfc.repro.notebook import readme_mismatches, sync_readme
 
 README = runner.ROOT / "README.md"
 

@@ -4,8 +4,8 @@ import pandas as pd
 import pytest
 
 import lfc
-from lfc.notebook import update_markdown_section
-from lfc.redteam import Defender, family_search, freeform_search, severity
+from lfc.experiments.redteam import Defender, family_search, freeform_search, severity
+from lfc.repro.notebook import update_markdown_section
 
 P, RELAYS = lfc.LFCParams(), lfc.RelaySettings()
 

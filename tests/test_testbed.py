@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 import lfc
+from lfc.experiments.scenarios import FIG4_AMPLITUDE, fig7_fault
 from lfc.model import STATES
-from lfc.scenarios import FIG4_AMPLITUDE, fig7_fault
 from lfc.simulate import METRIC_KEYS
 from lfc.testbed import (FaultSpec, MicrogridCase, OvercurrentSettings, TestbedError,
                          build_system, phase_a_current, simulate_testbed)

@@ -4,8 +4,9 @@ ANDES integrates the network (implicit trapezoidal, fixed ``step`` except
 around events).  Before every step it calls back into :class:`_Testbed`,
 which logs the last accepted state, runs the over-current relay, and, when a
 control sample is due, hands the generator-side loop
-(:class:`lfc.controller.GeneratorSide`: noise, Kalman filter, local integral
-controller, attacks, SCC) the state in the design model's coordinates:
+(:class:`lfc.engine.GeneratorSide`: noise, Kalman filter, local integral
+controller, attacks, filter — the engine's own compiled code) the state in the
+design model's coordinates:
 
 =============  ======================================================
 ``dPg``        governor valve ``TGOV1N.LAG_y`` minus its initial value
@@ -30,13 +31,13 @@ import numpy as np
 import pandas as pd
 
 from lfc._validate import check_multiple, check_nonnegative, check_positive
-from lfc.cbf import SafetyFilter
-from lfc.controller import (GeneratorSide, SignalLike, make_estimator, make_noise,
-                            sample_signal)
+from lfc.engine import GeneratorSide, sample_signal
 from lfc.estimation import KalmanFilter
+from lfc.filters import SafetyFilter
 from lfc.model import STATES, LFCParams
 from lfc.relays import RelayBank, RelaySettings
-from lfc.simulate import SimResult
+from lfc.signals import SignalLike
+from lfc.simulate import SimResult, result
 from lfc.testbed.case import MicrogridCase, build_system, check_bus
 from lfc.testbed.protection import OvercurrentRelay, OvercurrentSettings
 
@@ -123,16 +124,13 @@ def simulate_testbed(params: LFCParams, *, duration: float,
     """
     case = case or MicrogridCase()
     n_ctrl = _check_scenario(case, duration, step, control_period, fault, load)
-    noise = make_noise(noise_std, n_ctrl, seed)
     relays = relays if relays is not None else RelaySettings()
     oc = overcurrent or OvercurrentSettings()
     tc = np.arange(n_ctrl) * control_period
-    pc_att = sample_signal(pc_attack, tc, "pc_attack")
-    wref = sample_signal(wref_attack, tc, "wref_attack")
 
     def testbed(open_t: float | None) -> _Testbed:
-        kf = make_estimator(estimator, params, control_period, noise_std)
-        gen = GeneratorSide(params, scc, kf, tc, pc_att, wref, noise, load_feedforward)
+        gen = GeneratorSide(params, scc, estimator, noise_std, seed, tc, pc_attack,
+                            wref_attack, load_feedforward, control_period)
         return _Testbed(case, fault, load, gen, OvercurrentRelay(oc),
                         RelayBank(relays) if stop_on_trip else None, open_t)
 
@@ -334,12 +332,11 @@ class _Testbed:
                                              trace["rocof_meas"].to_numpy())
             self.trips = [(r, float(trace["t"].iat[k])) for r, k, _ in
                           sorted(found, key=lambda f: f[1])]
-        self.gen.add_to_trace(trace)
         t_end = float(trace["t"].iat[-1])
         trips = pd.DataFrame(self.trips, columns=["relay", "t"])
         line_trips = pd.DataFrame(
             [(self.case.protected_line, round(self.oc.trip_t, 9), round(self.oc.open_t, 9))]
             if self.oc.trip_t is not None and self.oc.trip_t <= t_end else [],
             columns=["line", "trip_t", "open_t"])
-        return SimResult(trace, self.gen.controls(t_end), trips, self.gen.alarm_log(t_end),
-                         settings, line_trips)
+        return result(trace, self.gen.tc, self.gen.ctrl, trips, self.gen.scc, settings,
+                      line_trips)

@@ -9,9 +9,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from lfc.experiments.scenarios import PLANTS, check_plant, design_params
 from lfc.model import LFCParams
 from lfc.relays import RelaySettings
-from lfc.scenarios import PLANTS, check_plant, design_params
 from lfc.simulate import SimResult
 
 __all__ = ["DEVIATIONS", "PLANTS", "PLANT_LABELS", "Deviation", "check_plant", "figure_name",

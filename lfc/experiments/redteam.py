@@ -23,9 +23,9 @@ import pandas as pd
 from scipy.optimize import differential_evolution
 
 from lfc.batch import simulate_batch
+from lfc.experiments.scenarios import ATTACK_START
 from lfc.model import LFCParams
 from lfc.relays import RelaySettings
-from lfc.scenarios import ATTACK_START
 
 # family -> (channel, waveform, bounds of (amplitude, freq_hz)); one bound: freq unused
 FAMILIES = {

@@ -24,9 +24,9 @@ import pandas as pd
 import papermill as pm
 from tqdm.auto import tqdm
 
-from lfc.notebook import PLANTS, check_plant, figure_name
+from lfc.repro.notebook import PLANTS, check_plant, figure_name
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 NOTEBOOKS_DIR = ROOT / "notebooks"
 FIGURES = {  # name -> notebook
     "tutorial": "01_tutorial_cbf_lfc.ipynb",   # the CBF-QP step by step

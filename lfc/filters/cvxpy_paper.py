@@ -1,6 +1,6 @@
 """The paper's SCC written in cvxpy from its definitions: the readable reference.
 
-Independent of :class:`lfc.cbf.SafetyFilter`'s closed form: the look-ahead
+Independent of :mod:`lfc.filters.paper`'s closed form: the look-ahead
 matrices come from ``scipy.linalg.expm`` (not python-control), and each
 constraint is the paper's own expression evaluated at the state:
 
@@ -31,7 +31,7 @@ import cvxpy as cp
 import numpy as np
 from scipy.linalg import expm
 
-from lfc.cbf import CONSTRAINTS
+from lfc.filters.paper import CONSTRAINTS
 from lfc.model import LFCParams, lfc_matrices
 from lfc.relays import RelaySettings
 

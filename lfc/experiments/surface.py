@@ -2,7 +2,7 @@
 
 Each function returns a table for :func:`lfc.simulate_batch` (one row per
 scenario; ``alpha`` NaN means no SCC).  All attacks and load steps start at
-``lfc.scenarios.ATTACK_START``.
+``lfc.experiments.scenarios.ATTACK_START``.
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ import itertools
 import numpy as np
 import pandas as pd
 
-from lfc.cbf import CONFLICT_RULES, DEFAULT_READING, OUTSIDE_RULES, PREDICTIONS
-from lfc.scenarios import ATTACK_START
+from lfc.experiments.scenarios import ATTACK_START
+from lfc.filters import CONFLICT_RULES, DEFAULT_READING, OUTSIDE_RULES, PREDICTIONS
 
 NO_SCC = float("nan")
 READINGS = [dict(zip(("outside_rule", "conflict", "prediction"), r))

@@ -10,11 +10,11 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from lfc.cbf import SafetyFilter
+from lfc.experiments.redteam import severity
+from lfc.experiments.scenarios import ATTACK_START
+from lfc.filters import SafetyFilter
 from lfc.model import LFCParams
-from lfc.redteam import severity
 from lfc.relays import RelaySettings
-from lfc.scenarios import ATTACK_START
 from lfc.signals import Step
 from lfc.simulate import simulate
 

@@ -1,19 +1,24 @@
-"""Paper-style figures: command on top, frequency or ROCOF below, relay limits dashed."""
+"""Paper-style figures: command on top, frequency or ROCOF below, relay limits dashed.
+
+Styling and saving only: every function takes results computed elsewhere and
+returns a matplotlib ``Figure``.  Nothing here chooses a backend (notebooks show
+their figures inline; scripts and the runner choose their own).
+"""
 
 from __future__ import annotations
 
 import itertools
 from pathlib import Path
 
-import matplotlib
+import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.colors import ListedColormap
+from matplotlib.figure import Figure
+from matplotlib.patches import Patch
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-
-from lfc.relays import RelaySettings  # noqa: E402
-from lfc.simulate import SimResult  # noqa: E402
+from lfc.experiments.surface import scc_label
+from lfc.relays import RelaySettings
+from lfc.simulate import SimResult
 
 COLORS = {"a": "tab:blue", "b": "tab:orange", "c": "tab:green", "d": "tab:red",
           "no_scc": "tab:blue", "scc": "tab:orange", "scc_true": "tab:orange",
@@ -99,22 +104,19 @@ def _frequency(ax, runs: dict[str, SimResult], labels: dict[str, str], relays: R
     ax.set_ylabel(f"Measured frequency $\\hat\\omega$ (pu of {f_nominal:g} Hz)")
 
 
-def fault_figure(runs: dict[str, SimResult], labels: dict[str, str], relays: RelaySettings,
-                 title: str, *, f_nominal: float, i_base: float, line_label: str) -> Figure:
-    """Fig. 7: phase-A current of the protected line (A) with the over-current
-    trip and breaker opening marked, measured frequency (pu) with OF2/UF2, and
-    measured ROCOF (pu/s) with its setting.  Runs after the first are dashed; the
-    current panel zooms on the fault (its own time axis)."""
-    from lfc.testbed.protection import phase_a_current
-
+def fault_figure(runs: dict[str, SimResult], currents: dict[str, tuple[np.ndarray, np.ndarray]],
+                 labels: dict[str, str], relays: RelaySettings, title: str, *,
+                 f_nominal: float, line_label: str) -> Figure:
+    """Fig. 7: phase-A current of the protected line (A; ``currents`` maps each run
+    to its times (s) and current) with the over-current trip and breaker opening
+    marked, measured frequency (pu) with OF2/UF2, and measured ROCOF (pu/s) with
+    its setting.  Runs after the first are dashed; the current panel zooms on the
+    fault (its own time axis)."""
     fig, axes = plt.subplots(3, 1, figsize=(10, 9), layout="constrained")
     axes[2].sharex(axes[1])
     dashed = tuple(labels)[1:]
     for key, label in labels.items():
-        tr = runs[key].trace
-        t, i_a = phase_a_current(tr.t.to_numpy(), tr.i_line_re.to_numpy()
-                                 + 1j * tr.i_line_im.to_numpy(), f_nominal=f_nominal,
-                                 i_base=i_base)
+        t, i_a = currents[key]
         axes[0].plot(t, i_a, color=COLORS[key], lw=0.6, label=label,
                      ls="--" if key in dashed else "-")
     first = runs[next(iter(labels))].line_trips
@@ -149,7 +151,6 @@ def _trip_codes(results) -> np.ndarray:
 
 
 def _trip_legend(fig: Figure) -> None:
-    from matplotlib.patches import Patch
     handles = [Patch(color=c, label="no trip" if k == "none" else f"first trip: {k}")
                for k, c in TRIP_COLORS.items()]
     fig.legend(handles=handles, loc="outside right upper", fontsize=8)
@@ -159,9 +160,6 @@ def surface_figure(results, title: str, marks: list[tuple[str, float, float, str
     """Attack-surface maps: one panel per waveform (rows) and SCC setting
     (columns) over amplitude (pu) × frequency (Hz), each cell coloured by the
     first relay to trip.  ``marks``: (waveform, amplitude, freq_hz, label)."""
-    from matplotlib.colors import ListedColormap
-
-    from lfc.surface import scc_label
     results = results.assign(code=_trip_codes(results))
     waves = list(dict.fromkeys(results.waveform))
     alphas = list(dict.fromkeys(results.alpha.fillna(-1.0)))
@@ -204,7 +202,6 @@ def _edges(centers: np.ndarray) -> np.ndarray:
 def bias_figure(results, relays: RelaySettings, title: str) -> Figure:
     """Bias attacks on ω_ref: first relay to trip (colour) and its time, per SCC
     setting; the bias that moves the frequency to OF2/UF2 dashed."""
-    from lfc.surface import scc_label
     results = results.assign(code=_trip_codes(results))
     alphas = list(dict.fromkeys(results.alpha.fillna(-1.0)))
     fig, ax = plt.subplots(figsize=(10, 1.2 + 0.9 * len(alphas)), layout="constrained")
@@ -299,7 +296,7 @@ def readings_figure(summary, title: str) -> Figure:
     """The paper's filter at each reading (rows) and alpha (bars): attacks of the
     maps stopped (left; the number that trip without SCC dashed) and false alarms
     on legitimate load steps (right, control periods with an alarm).  ``summary``
-    is :func:`lfc.surface.readings_summary`; the default reading is marked."""
+    is :func:`lfc.experiments.surface.readings_summary`; the default reading is marked."""
     readings = list(dict.fromkeys(summary.reading))
     alphas = sorted(summary.alpha.unique())
     fig, (left, right) = plt.subplots(1, 2, figsize=(13, 0.45 * len(readings) + 2),

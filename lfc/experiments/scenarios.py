@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from typing import Callable
 
-from lfc.cbf import SafetyFilter
+from lfc.filters import SafetyFilter
 from lfc.model import LFCParams
 from lfc.relays import RelaySettings
 from lfc.signals import Sinusoid, Step
@@ -135,6 +135,6 @@ def rocof_limit_load_step(params: LFCParams, relays: RelaySettings) -> float:
 
     The relay reads the measured ROCOF, lagged: without SCC steps up to about
     10 % larger do not trip, and a governor can ride through larger ones still
-    (:mod:`lfc.load_limits` computes both).
+    (:mod:`lfc.experiments.load_limits` computes both).
     """
     return params.M * relays.rocof_limit

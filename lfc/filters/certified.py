@@ -1,6 +1,7 @@
 """A safety filter with a guarantee: no command on P_c or ω_ref trips the relays.
 
-``SafetyFilter(params, relays, method="certified")`` uses this module.  The
+``SafetyFilter(params, relays, method="certified")`` uses this module
+(:class:`CertifiedFilter`, options as there).  The
 idea is an implicit control-invariant set with a *hold* backup law:
 
 * A command ``u`` is **certified** at state ``x`` if applying it and holding it
@@ -21,6 +22,9 @@ idea is an implicit control-invariant set with a *hold* backup law:
   certificate, issued when it was applied, still covers holding it.  Flagged
   ``outside`` with the reason.
 
+``details`` of a :class:`~lfc.filters.base.FilterInfo`: the certified interval
+``(lo, hi)`` (pu; ``lo > hi`` where none is certified).
+
 **Guarantee.**  On the design model (plant = ``params``), with the exact state,
 a command held between calls spaced ``period`` apart, a load deviation
 ``|ΔP_L(t) − p_load| ≤ load_bound`` (``p_load`` as given to the filter when
@@ -33,7 +37,7 @@ load-to-output impulse response (a conservative bound: it assumes the worst
 load signal for every sample at once); a ``load_bound`` for which nothing is
 left is rejected at construction.  (For comparison, E12: without SCC a load
 step trips a relay from 0.2229 pu on the defaults, and some governor commands
-ride through larger ones: :mod:`lfc.load_limits`.)  ``margin`` tightens both limits further, by a
+ride through larger ones: :mod:`lfc.experiments.load_limits`.)  ``margin`` tightens both limits further, by a
 fraction, for estimation error and plant–model mismatch (no guarantee then).
 """
 
@@ -44,12 +48,17 @@ import math
 import numpy as np
 from scipy.linalg import solve_discrete_lyapunov
 
+from lfc._jit import inline
 from lfc._validate import check_multiple, check_nonnegative, check_positive
+from lfc.filters.base import (ACTIVE, BIND_CERT, BIND_UMAX, BIND_UMIN, INVALID, OUTSIDE,
+                              Backend, check_limits)
 from lfc.model import LFCParams, discretize, lfc_matrices, output_matrix
 from lfc.relays import RelaySettings
 
 L1_HORIZON = 60.0  # s over which the load-to-output impulse response is summed
 NUMERIC_MARGIN = 1e-6  # relative tightening that absorbs floating-point differences
+# layout of the data array read by decide(): a header, then the rows and the terminal set
+U_MIN, U_MAX, EQ_PER_P, EQ_HALF, RHO, A_QUAD, N_ROWS, F_LIM, R_LIM, HEAD = range(10)
 
 
 class CertifiedSet:
@@ -85,6 +94,7 @@ class CertifiedSet:
         if not 0.0 <= margin < 1.0:
             raise ValueError(f"margin must be in [0, 1), got {margin!r}")
         self.params, self.relays, self.load_bound = params, relays, float(load_bound)
+        self.margin = float(margin)
         self.u_min, self.u_max = float(u_min), float(u_max)
         Ad, Bd = discretize(params, resolution)
         C = output_matrix()
@@ -147,86 +157,14 @@ class CertifiedSet:
         self._el = S_n @ self._Bd[:, 1] - self._q[:, 1]
         self._a_quad = float(self._eu @ self._P @ self._eu)
 
-    def interval(self, x: np.ndarray, p_load: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Certified interval [lo, hi] of commands for states ``x`` (N, 5) and
-        assumed loads (N,); ``lo > hi`` where none is certified."""
-        s = x @ self._row_GT + p_load[:, None] * self._row_l       # (N, rows)
-        lo = np.max(self._row_a - s, axis=1)
-        hi = np.min(self._row_b - s, axis=1)
-        lo, hi = self._equilibrium(lo, hi, p_load)
-        lo, hi = self._ellipsoid(lo, hi, x, p_load)
-        return np.maximum(lo, self.u_min), np.minimum(hi, self.u_max)
-
-    def interval_one(self, x: np.ndarray, p_load: float) -> tuple[float, float]:
-        """:meth:`interval` for one state ``x`` (5,), with less numpy overhead."""
-        s = x @ self._row_GT
-        if p_load:
-            s = s + p_load * self._row_l
-        lo, hi = float(np.max(self._row_a - s)), float(np.min(self._row_b - s))
-        centre = self._eq_per_p * p_load
-        lo = max(lo, centre - self._eq_half, self.u_min)
-        hi = min(hi, centre + self._eq_half, self.u_max)
-        e0 = self._E @ x + p_load * self._el
-        Pe0 = self._P @ e0
-        a = self._a_quad
-        b = 2.0 * float(Pe0 @ self._eu)
-        c = float(Pe0 @ e0) - self.rho ** 2
-        disc = b * b - 4 * a * c
-        if disc < 0:
-            return math.inf, -math.inf
-        root = math.sqrt(disc)
-        return max(lo, (-b - root) / (2 * a)), min(hi, (-b + root) / (2 * a))
-
-    def _equilibrium(self, lo, hi, p_load):
-        centre = self._eq_per_p * p_load
-        return np.maximum(lo, centre - self._eq_half), np.minimum(hi, centre + self._eq_half)
-
-    def _ellipsoid(self, lo, hi, x, p_load):
-        """(e0 + eu u)ᵀ P (e0 + eu u) <= rho²: a u² + b u + c <= 0."""
-        e0 = x @ self._E.T + p_load[:, None] * self._el
-        Pe0 = e0 @ self._P
-        a = self._a_quad
-        b = 2 * Pe0 @ self._eu
-        c = np.einsum("ij,ij->i", Pe0, e0) - self.rho ** 2
-        disc = b * b - 4 * a * c
-        root = np.sqrt(np.maximum(disc, 0.0))
-        ok = disc >= 0
-        return (np.where(ok, np.maximum(lo, (-b - root) / (2 * a)), np.inf),
-                np.where(ok, np.minimum(hi, (-b + root) / (2 * a)), -np.inf))
-
-
-def cvxpy_certified(cert: CertifiedSet, x: np.ndarray, u_ref: float,
-                    p_load: float = 0.0) -> float | None:
-    """The certified command as a cvxpy problem (Clarabel): the readable reference.
-
-    Written from the definition, independently of :class:`CertifiedSet`'s
-    precomputed rows: simulate the model's free and unit-command responses
-    sample by sample, then ``min (u − u_ref)²`` subject to both outputs within
-    the limits at every sample, the held command's equilibrium within its
-    room, the terminal deviation in the ellipsoid and the actuator limits.
-    Returns None when no command is certified.  Slow (a problem per call).
-    """
-    import cvxpy as cp
-
-    C, Bd = output_matrix(), cert._Bd
-    free, unit = np.empty((cert.n_steps, 5)), np.empty((cert.n_steps, 5))
-    xf, xu = np.asarray(x, float), np.zeros(5)
-    for k in range(cert.n_steps):
-        xf = cert._Ad @ xf + Bd[:, 1] * p_load
-        xu = cert._Ad @ xu + Bd[:, 0]
-        free[k], unit[k] = xf, xu
-    u = cp.Variable()
-    y = free @ C.T + cp.reshape(u * (unit @ C.T).ravel(), (cert.n_steps, 2), order="C")
-    e = xf + u * xu - (cert._q[:, 0] * u + cert._q[:, 1] * p_load)
-    g_u, g_p = cert._dw_eq
-    cons = [cp.abs(y) <= np.tile(cert.limits, (cert.n_steps, 1)),
-            cp.abs(g_u * u + g_p * p_load) <= cert._eq_room,
-            cp.quad_form(e, cert._P) <= cert.rho ** 2]
-    cons += [u >= cert.u_min] if math.isfinite(cert.u_min) else []
-    cons += [u <= cert.u_max] if math.isfinite(cert.u_max) else []
-    prob = cp.Problem(cp.Minimize(cp.square(u - u_ref)), cons)
-    prob.solve(solver=cp.CLARABEL, tol_gap_abs=1e-10, tol_gap_rel=1e-12, tol_feas=1e-10)
-    return float(u.value) if prob.status == cp.OPTIMAL else None
+    def pack(self) -> np.ndarray:
+        """The data array :func:`decide` reads (layout in the module's constants)."""
+        head = np.zeros(HEAD)
+        head[:HEAD] = (self.u_min, self.u_max, self._eq_per_p, self._eq_half, self.rho,
+                       self._a_quad, self.n_rows, self.relays.F, self.relays.rocof_limit)
+        return np.concatenate([head, self._row_a, self._row_b, self._row_GT.T.ravel(),
+                               self._row_l, self._E.ravel(), self._el, self._eu,
+                               self._P.ravel()])
 
 
 def _l1_norms(Ad: np.ndarray, bl: np.ndarray, C: np.ndarray, n: int) -> np.ndarray:
@@ -238,86 +176,135 @@ def _l1_norms(Ad: np.ndarray, bl: np.ndarray, C: np.ndarray, n: int) -> np.ndarr
     return total
 
 
-class CertifiedFilter:
-    """The filter around :class:`CertifiedSet`: clip to the certified interval,
-    or hold the last certified command.  Used through
-    ``SafetyFilter(..., method="certified")``; stateful (the held command),
-    :meth:`reset` before a new run.
 
-    ``FilterInfo`` fields: ``y_*`` and ``h_*`` describe the current measured
-    outputs; ``margin_freq``/``margin_rocof`` are ``u − lo`` and ``hi − u``, the
-    distances (pu) from the applied command to the certified interval's ends;
-    ``binding`` is ``("certified",)`` (plus ``u_min``/``u_max``) when clipped;
-    ``outside`` means no command was certified and the last one is held.
+class CertifiedFilter(Backend):
+    """The certified filter (method ``"certified"``): clip to the certified
+    interval of :class:`CertifiedSet`, or hold the last certified command.
+
+    Parameters
+    ----------
+    params : LFCParams
+        Design model.
+    relays : RelaySettings
+    period : float
+        Time between calls (s); the command is held in between. Default 0.01.
+    horizon : float
+        Look-ahead before the terminal set (s). Default 4.
+    load_bound : float
+        Load deviation covered (pu), >= 0. Default 0.
+    margin : float
+        Extra fractional tightening of the limits, in [0, 1). Default 0.
+    u_min, u_max : float
+        Actuator limits (pu).
     """
 
-    def __init__(self, cert: CertifiedSet) -> None:
-        self.cert = cert
-        self.reset()
+    name, method_id = "certified", 1
 
-    def reset(self) -> None:
-        """Forget the held command (a run starts at equilibrium with u = 0)."""
-        self._u_prev = 0.0
-        self._u_prev_batch = None
+    def __init__(self, params: LFCParams, relays: RelaySettings, *, period: float = 0.01,
+                 horizon: float = 4.0, load_bound: float = 0.0, margin: float = 0.0,
+                 u_min: float = -math.inf, u_max: float = math.inf) -> None:
+        super().__init__(params, relays)
+        check_limits(u_min, u_max)
+        self.cert = CertifiedSet(params, relays, period=period, horizon=horizon,
+                                 load_bound=load_bound, margin=margin, u_min=u_min,
+                                 u_max=u_max)
+        self.data, self.jit = self.cert.pack(), True
 
-    def filter(self, x: list[float], u_ref: float, p_load: float = 0.0):
-        """One command (see ``SafetyFilter.filter``); ``x`` has 5 entries."""
-        from lfc.cbf import FilterInfo
-        u_ref, p_load = float(u_ref), float(p_load)
-        valid = all(map(math.isfinite, x)) and math.isfinite(u_ref) and math.isfinite(p_load)
-        lo, hi = self.cert.interval_one(np.asarray(x, float), p_load) if valid \
-            else (math.inf, -math.inf)
-        certified = lo <= hi
-        u = min(max(u_ref, lo), hi) if certified else self._u_prev
-        self._u_prev = u
-        active = u != u_ref
-        lims = (self.cert.relays.F, self.cert.relays.rocof_limit)
-        nan = math.nan
-        h = (lims[0] ** 2 - x[3] ** 2, lims[1] ** 2 - x[4] ** 2) if valid else (nan, nan)
-        return u, FilterInfo(
-            u_ref=u_ref, u=u, active=active, infeasible=False,
-            outside=valid and not certified, invalid_input=not valid, solver_error=False,
-            h_freq=h[0], h_rocof=h[1], margin_freq=u - lo if certified else nan,
-            margin_rocof=hi - u if certified else nan,
-            y_freq=x[3] if valid else nan, y_rocof=x[4] if valid else nan,
-            binding=self._binding(u, active, certified),
-            reason=self._reason(active, certified, valid))
+    def describe(self) -> str:
+        c = self.cert
+        return (f"SafetyFilter(method='certified', load_bound={c.load_bound}, "
+                f"margin={c.margin}, u_min={c.u_min}, u_max={c.u_max})")
 
-    def filter_batch(self, x: np.ndarray, u_ref: np.ndarray, p_load: np.ndarray | None = None
-                     ) -> tuple[np.ndarray, dict]:
-        x = np.asarray(x, float).reshape(-1, 5)
-        u_ref = np.asarray(u_ref, float).reshape(-1)
-        p_load = np.zeros_like(u_ref) if p_load is None else np.asarray(p_load, float)
-        if self._u_prev_batch is None or len(self._u_prev_batch) != len(u_ref):
-            self._u_prev_batch = np.zeros(len(u_ref))
-        u_prev, cert = self._u_prev_batch, self.cert
-        valid = np.isfinite(x).all(axis=1) & np.isfinite(u_ref) & np.isfinite(p_load)
-        xs, ps = np.where(valid[:, None], x, 0.0), np.where(valid, p_load, 0.0)
-        lo, hi = cert.interval(xs, ps)
-        certified = valid & (lo <= hi)
-        ref = np.where(np.isfinite(u_ref), u_ref, u_prev)
-        u = np.where(certified, np.clip(ref, lo, np.maximum(lo, hi)), u_prev)
-        self._u_prev_batch = u.copy()
-        lims = np.array([cert.relays.F, cert.relays.rocof_limit])
-        return u, {"active": u != u_ref, "infeasible": np.zeros(len(u), bool),
-                   "outside": valid & ~certified, "invalid_input": ~valid,
-                   "h": np.where(valid[:, None], lims ** 2 - xs[:, 3:5] ** 2, np.nan),
-                   "margin": np.where(certified[:, None], np.column_stack([u - lo, hi - u]),
-                                      np.nan)}
-
-    def _binding(self, u: float, active: bool, certified: bool) -> tuple[str, ...]:
-        if not (active and certified):
-            return ()
-        names = ["certified"]
-        names += [n for n, lim in (("u_min", self.cert.u_min), ("u_max", self.cert.u_max))
-                  if math.isfinite(lim) and abs(u - lim) <= 1e-9 * (1 + abs(lim))]
-        return tuple(names)
-
-    @staticmethod
-    def _reason(active: bool, certified: bool, valid: bool) -> str:
-        if not valid:
-            return "invalid input (non-finite state, command or load); last certified command held"
-        if not certified:
+    def reason(self, flags: int) -> str:
+        if flags & INVALID:
+            return ("invalid input (non-finite state, command or load); last certified "
+                    "command held")
+        if flags & OUTSIDE:
             return ("no command is certified from this state (load beyond load_bound, model "
                     "or estimation error); last certified command held")
-        return "command clipped to the certified interval" if active else ""
+        return "command clipped to the certified interval" if flags & ACTIVE else ""
+
+    def details(self, d0: float, d1: float, flags: int) -> dict:
+        return {"interval": (d0, d1)}
+
+
+@inline
+def _terminal_deviation(fd: np.ndarray, t0: int, x: np.ndarray, p: float) -> tuple:
+    """``e = E x + el p``: the deviation from the held command's equilibrium at the
+    horizon's end, less its command part (5 values)."""
+    e0, e1, e2, e3, e4 = (p * fd[t0 + 25], p * fd[t0 + 26], p * fd[t0 + 27], p * fd[t0 + 28],
+                          p * fd[t0 + 29])
+    for k in range(5):
+        e0 += fd[t0 + k] * x[k]
+        e1 += fd[t0 + 5 + k] * x[k]
+        e2 += fd[t0 + 10 + k] * x[k]
+        e3 += fd[t0 + 15 + k] * x[k]
+        e4 += fd[t0 + 20 + k] * x[k]
+    return e0, e1, e2, e3, e4
+
+
+@inline
+def decide(fd: np.ndarray, x: np.ndarray, u_ref: float, p: float, mem: np.ndarray) -> tuple:
+    """One call of the certified filter (module docstring).
+
+    ``fd`` is :meth:`CertifiedSet.pack`'s data, ``mem[0]`` the last certified
+    command (held when none is certified).  Returns ``(u, flags, h_freq,
+    h_rocof, margin_freq, margin_rocof, y_freq, y_rocof, lo, hi)``; the margins
+    are the distances from ``u`` to the ends of each relay's own interval.
+    """
+    nan = math.nan
+    valid = math.isfinite(u_ref) and math.isfinite(p)
+    for v in x:
+        valid = valid and math.isfinite(v)
+    if not valid:
+        u = mem[0]
+        return u, INVALID | (ACTIVE if u != u_ref else 0), nan, nan, nan, nan, nan, nan, \
+            nan, nan
+    n = int(fd[N_ROWS])
+    a0, b0, g0, l0 = HEAD, HEAD + n, HEAD + 2 * n, HEAD + 7 * n
+    lo_f, hi_f, lo_r, hi_r = -np.inf, np.inf, -np.inf, np.inf   # per output
+    for i in range(0, n, 2):                  # rows alternate: frequency, ROCOF
+        s_f, s_r = 0.0, 0.0
+        for k in range(5):
+            s_f += fd[g0 + 5 * i + k] * x[k]
+            s_r += fd[g0 + 5 * i + 5 + k] * x[k]
+        s_f, s_r = s_f + p * fd[l0 + i], s_r + p * fd[l0 + i + 1]
+        lo_f, hi_f = max(lo_f, fd[a0 + i] - s_f), min(hi_f, fd[b0 + i] - s_f)
+        lo_r, hi_r = max(lo_r, fd[a0 + i + 1] - s_r), min(hi_r, fd[b0 + i + 1] - s_r)
+    centre = fd[EQ_PER_P] * p                                # room at the equilibrium
+    lo_f, hi_f = max(lo_f, centre - fd[EQ_HALF]), min(hi_f, centre + fd[EQ_HALF])
+    t0 = l0 + n                                              # terminal ellipsoid
+    e = _terminal_deviation(fd, t0, x, p)
+    qb, qc = 0.0, -fd[RHO] ** 2
+    for r in range(5):
+        pe = 0.0
+        for k in range(5):
+            pe += fd[t0 + 35 + 5 * r + k] * e[k]
+        qb += 2.0 * pe * fd[t0 + 30 + r]
+        qc += pe * e[r]
+    disc = qb * qb - 4 * fd[A_QUAD] * qc
+    if disc >= 0:
+        root = math.sqrt(disc)
+        e_lo, e_hi = (-qb - root) / (2 * fd[A_QUAD]), (-qb + root) / (2 * fd[A_QUAD])
+    else:
+        e_lo, e_hi = np.inf, -np.inf
+    lo_f, hi_f, lo_r, hi_r = max(lo_f, e_lo), min(hi_f, e_hi), max(lo_r, e_lo), min(hi_r, e_hi)
+    lo = max(lo_f, lo_r, fd[U_MIN])
+    hi = min(hi_f, hi_r, fd[U_MAX])
+    certified = lo <= hi
+    u = min(max(u_ref, lo), hi) if certified else mem[0]
+    mem[0] = u
+    flags = 0
+    if u != u_ref:
+        flags |= ACTIVE
+        if certified:
+            flags |= BIND_CERT
+            for lim, bit in ((fd[U_MIN], BIND_UMIN), (fd[U_MAX], BIND_UMAX)):
+                if math.isfinite(lim) and abs(u - lim) <= 1e-9 * (1 + abs(lim)):
+                    flags |= bit
+    if not certified:
+        flags |= OUTSIDE
+    m_f = min(u - lo_f, hi_f - u) if certified else nan
+    m_r = min(u - lo_r, hi_r - u) if certified else nan
+    return (u, flags, fd[F_LIM] ** 2 - x[3] ** 2, fd[R_LIM] ** 2 - x[4] ** 2, m_f, m_r, x[3],
+            x[4], lo, hi)

@@ -1,0 +1,471 @@
+"""The closed loop, compiled once: the linear plant, the generator side and the relays.
+
+One engine advances N scenarios (one after another, each in registers):
+
+* every control period ``control_period`` the **generator side** runs
+  (:func:`generator_period`): measurement noise on ``(dw_meas, rocof_meas)``,
+  the Kalman estimate (or the state as it is), the incoming command
+  ``u_ref = integrator + attack on P_c``, the safety filter (any method of
+  :mod:`lfc.filters`, through its compiled dispatcher), the local integral
+  controller ``d dPc/dt = k_i (dw_ref - dw_meas)`` and the estimator's
+  prediction; the command is held until the next period;
+* every plant step ``dt`` the plant advances exactly (zero-order hold) and the
+  OF2, UF2 and ROCOF relays (:func:`lfc.relays.relay_sample`) see the
+  measured signals.
+
+:func:`lfc.simulate` is N = 1 with a trace; :func:`lfc.simulate_batch` is N
+large with metrics only; the ANDES testbed runs :class:`GeneratorSide` (the
+same :func:`generator_period`) against its own plant.  Each scenario has its own
+plant, signals, noise, estimator and filter (indices into small tables), so a
+batch can mix them freely.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from lfc._jit import inline, kernel
+from lfc.estimation import KalmanFilter, kf_correct, kf_predict
+from lfc.filters import SafetyFilter
+from lfc.filters.base import ACTIVE, ALARM_BITS, MEMORY, OUTSIDE
+from lfc.filters.dispatch import decide
+from lfc.model import LFCParams, discretize
+from lfc.relays import RelaySettings, relay_sample
+from lfc.signals import GRID, N_PARAMS, NONE, SAMPLES, STEP, Signal, value_at
+
+PC, WREF, LOAD = range(3)           # signal channels
+N_KF = 6                            # largest Kalman state (5 states + the load)
+N_CTRL = 15                         # trace columns per control period (see CTRL_COLUMNS)
+CTRL_COLUMNS = ("u_ref", "u", "flags", "h_freq", "h_rocof", "margin_freq", "margin_rocof",
+                "y_freq", "y_rocof", "detail0", "detail1", "dw_hat", "rocof_hat",
+                "p_load_hat", "wref")
+METRICS = ("first_trip_t", "first_trip_relay", "max_abs_dw_meas", "max_abs_rocof_meas",
+           "active", "alarms", "max_abs_modification", "sum_abs_modification", "outside",
+           "final_abs_dw_meas")
+
+
+@inline
+def _signal(channel: int, kinds: np.ndarray, params: np.ndarray, offsets: np.ndarray,
+            st: np.ndarray, sv: np.ndarray, t: float, index: int) -> float:
+    """Value of one scenario's signal on ``channel`` at time ``t`` (grid ``index``)."""
+    kind = kinds[channel]
+    if kind == GRID:
+        return sv[offsets[channel, 0] + index]
+    return value_at(kind, params, channel, t, st, sv, offsets[channel, 0], offsets[channel, 1])
+
+
+@inline
+def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise0: float,
+                     noise1: float,
+                     kinds: np.ndarray, params: np.ndarray, offsets: np.ndarray,
+                     st: np.ndarray, sv: np.ndarray, k_i_period: float, est: int,
+                     ka: np.ndarray, kb: np.ndarray, kc: np.ndarray, kg: np.ndarray,
+                     kstate: np.ndarray, feedforward: bool, method: int, fd: np.ndarray,
+                     mem: np.ndarray, gstate: np.ndarray, x_hat: np.ndarray,
+                     ctrl: np.ndarray) -> tuple:
+    """The generator side at control sample ``j`` (time ``t``, s) of one scenario.
+
+    ``x`` is the plant's state in design-model coordinates and ``p_true`` the true
+    load (pu); ``noise0``, ``noise1`` the measurement noise of this sample.
+    ``est`` >= 0 selects the Kalman filter ``(ka, kb, kc, kg)`` with state
+    ``kstate`` (prior, then posterior; 2 x N_KF); ``method`` < 0 runs without a
+    filter.
+    ``gstate[0]`` is the local integrator (pu); ``x_hat`` (5,) receives the state
+    the filter sees.  Writes ``ctrl[j]`` (N_CTRL values, if ``ctrl`` has rows) and
+    returns ``(u, flags, |u - u_ref|)``.
+    """
+    y0, y1 = x[3] + noise0, x[4] + noise1
+    if est >= 0:
+        n = ka.shape[0]
+        kf_correct(kg, kc, kstate, y0, y1)
+        for r in range(5):
+            x_hat[r] = kstate[1, r]
+        p_hat = kstate[1, 5] if n == N_KF else 0.0
+    else:
+        for r in range(5):
+            x_hat[r] = x[r]
+        p_hat = p_true if feedforward else 0.0
+    u_ref = gstate[0] + _signal(PC, kinds, params, offsets, st, sv, t, j)
+    wref = _signal(WREF, kinds, params, offsets, st, sv, t, j)
+    nan = math.nan
+    if method >= 0:
+        u, flags, h0, h1, m0, m1, q0, q1, d0, d1 = decide(method, fd, x_hat, u_ref, p_hat, mem)
+    else:
+        u, flags, h0, h1, m0, m1, q0, q1, d0, d1 = u_ref, 0, nan, nan, nan, nan, nan, nan, \
+            nan, nan
+    gstate[0] += k_i_period * (wref - y0)
+    if est >= 0:
+        kf_predict(ka, kb, kstate, u)
+    if ctrl.shape[0]:
+        vals = (u_ref, u, float(flags), h0, h1, m0, m1, q0, q1, d0, d1, x_hat[3], x_hat[4],
+                p_hat, wref)
+        for c in range(N_CTRL):
+            ctrl[j, c] = vals[c]
+    mod = abs(u - u_ref)
+    return u, flags, mod if math.isfinite(mod) else 0.0
+
+
+@kernel
+def _run(n_steps: int, ratio: int, dt: float, k_i_period: float, ad: np.ndarray,
+         bu: np.ndarray, bl: np.ndarray, index: np.ndarray, kinds: np.ndarray,
+         params: np.ndarray, offsets: np.ndarray, st: np.ndarray, sv: np.ndarray,
+         noise: np.ndarray, ka: np.ndarray, kb: np.ndarray, kc: np.ndarray, kg: np.ndarray,
+         kdim: np.ndarray, methods: np.ndarray, fdata: np.ndarray, foff: np.ndarray,
+         limits: np.ndarray, delays: np.ndarray, stop_on_trip: bool, metrics: np.ndarray,
+         trace_x: np.ndarray, trace_ctrl: np.ndarray, trace_trips: np.ndarray,
+         ends: np.ndarray, work: np.ndarray) -> None:
+    """Advance every scenario from equilibrium for ``n_steps`` plant steps.
+
+    ``index`` (N, 5): each scenario's plant, Kalman filter (-1: none), noise
+    table row (-1: none), filter (-1: none) and load feed-forward (0/1).
+    Writes ``metrics`` (N, len(METRICS)) and, when the trace arrays have rows
+    (N = 1), every state, control sample and trip; ``ends`` the last sample kept.
+    ``work`` (8, N_KF) is scratch space: the kernel allocates nothing.
+    """
+    n_ctrl = -(-n_steps // ratio)
+    empty = work[0, :0]
+    x, x_hat, mem, gstate = work[0, :5], work[1, :5], work[2, :MEMORY], work[3, :1]
+    kstate, start, due = work[4:6], work[6, :3], work[7, :3]
+    for i in range(index.shape[0]):
+        p_i, e_i, q_i, f_i, ff = index[i, 0], index[i, 1], index[i, 2], index[i, 3], index[i, 4]
+        A, Bu, Bl = ad[p_i], bu[p_i], bl[p_i]
+        kinds_i, params_i, offsets_i = kinds[i], params[i], offsets[i]
+        n_kf = kdim[e_i] if e_i >= 0 else 0
+        ka_i = ka[e_i, :n_kf, :n_kf] if e_i >= 0 else ka[0, :0, :0]
+        kb_i = kb[e_i, :n_kf] if e_i >= 0 else empty
+        kc_i = kc[e_i, :, :n_kf] if e_i >= 0 else kc[0, :, :0]
+        kg_i = kg[e_i, :n_kf] if e_i >= 0 else kg[0, :0]
+        method = methods[f_i] if f_i >= 0 else -1
+        fd = fdata[foff[f_i]:foff[f_i + 1]] if f_i >= 0 else empty
+        load_kind, load_value = kinds_i[LOAD], params_i[LOAD, 0]
+        load_start = params_i[LOAD, 2]
+        x[:], mem[:], gstate[:], kstate[:], due[:] = 0.0, 0.0, 0.0, 0.0, 0.0
+        start[:] = np.nan
+        first_t, first_r = math.nan, -1.0
+        max_dw = max_rc = max_mod = sum_mod = 0.0
+        active = alarms = outside = 0
+        end = n_steps
+        stopped = False
+        trips = relay_sample(0.0, 0.0, 0.0, limits, delays, start, due)   # sample 0 (x = 0)
+        if trace_x.shape[0]:
+            trace_trips[0] = trips
+        for j in range(n_ctrl):
+            k0 = j * ratio
+            t = k0 * dt
+            p_true = _signal(LOAD, kinds_i, params_i, offsets_i, st, sv, t, k0)
+            u, flags, mod = generator_period(
+                j, t, x, p_true, noise[q_i, j, 0] if q_i >= 0 else 0.0,
+                noise[q_i, j, 1] if q_i >= 0 else 0.0, kinds_i, params_i, offsets_i, st, sv,
+                k_i_period, e_i, ka_i, kb_i, kc_i, kg_i, kstate, ff == 1, method, fd, mem,
+                gstate, x_hat, trace_ctrl)
+            active += (flags & ACTIVE) != 0
+            alarms += (flags & ALARM_BITS) != 0
+            outside += (flags & OUTSIDE) != 0
+            max_mod = max(max_mod, mod)
+            sum_mod += mod
+            x0, x1, x2, x3, x4 = x[0], x[1], x[2], x[3], x[4]
+            for k in range(k0, min(k0 + ratio, n_steps)):
+                if load_kind == STEP:
+                    pl = load_value if k * dt >= load_start else 0.0
+                elif load_kind == NONE:
+                    pl = 0.0
+                else:
+                    pl = _signal(LOAD, kinds_i, params_i, offsets_i, st, sv, k * dt, k)
+                n0 = A[0, 0] * x0 + A[0, 1] * x1 + A[0, 2] * x2 + A[0, 3] * x3 + A[0, 4] * x4 \
+                    + Bu[0] * u + Bl[0] * pl
+                n1 = A[1, 0] * x0 + A[1, 1] * x1 + A[1, 2] * x2 + A[1, 3] * x3 + A[1, 4] * x4 \
+                    + Bu[1] * u + Bl[1] * pl
+                n2 = A[2, 0] * x0 + A[2, 1] * x1 + A[2, 2] * x2 + A[2, 3] * x3 + A[2, 4] * x4 \
+                    + Bu[2] * u + Bl[2] * pl
+                n3 = A[3, 0] * x0 + A[3, 1] * x1 + A[3, 2] * x2 + A[3, 3] * x3 + A[3, 4] * x4 \
+                    + Bu[3] * u + Bl[3] * pl
+                n4 = A[4, 0] * x0 + A[4, 1] * x1 + A[4, 2] * x2 + A[4, 3] * x3 + A[4, 4] * x4 \
+                    + Bu[4] * u + Bl[4] * pl
+                x0, x1, x2, x3, x4 = n0, n1, n2, n3, n4
+                trips = relay_sample((k + 1) * dt, x3, x4, limits, delays, start, due)
+                if trace_x.shape[0]:
+                    trace_x[k + 1, 0], trace_x[k + 1, 1], trace_x[k + 1, 2] = x0, x1, x2
+                    trace_x[k + 1, 3], trace_x[k + 1, 4] = x3, x4
+                    trace_trips[k + 1] = trips
+                max_dw = max(max_dw, abs(x3))
+                max_rc = max(max_rc, abs(x4))
+                if trips:
+                    if math.isnan(first_t):
+                        first_t, first_r = (k + 1) * dt, float(_lowest_bit(trips))
+                    if stop_on_trip:
+                        end, stopped = k + 1, True
+                        break
+            x[0], x[1], x[2], x[3], x[4] = x0, x1, x2, x3, x4
+            if stopped:
+                break
+        m = metrics[i]
+        m[0], m[1], m[2], m[3] = first_t, first_r, max_dw, max_rc
+        m[4], m[5], m[6], m[7] = active, alarms, max_mod, sum_mod
+        m[8], m[9] = outside, abs(x[3])
+        ends[i] = end
+
+
+@inline
+def _lowest_bit(bits: int) -> int:
+    r = 0
+    while not (bits >> r) & 1:
+        r += 1
+    return r
+
+
+
+# -- the Python side: scenario tables, a run, the testbed's generator side ---------------
+def make_noise(noise_std: tuple[float, float], n: int, seed: int) -> np.ndarray:
+    """Seeded white noise for ``n`` controller readings of (dw_meas, rocof_meas):
+    shape (n, 2), std ``noise_std`` (pu, pu/s).  Raises ``ValueError`` unless it
+    is a pair of values >= 0."""
+    if len(noise_std) != 2:
+        raise ValueError(f"noise_std must be a pair (dw_meas, rocof_meas), got {noise_std!r}")
+    for i, s in enumerate(noise_std):
+        if not (isinstance(s, (int, float)) and math.isfinite(s) and s >= 0):
+            raise ValueError(f"noise_std[{i}] must be a finite number >= 0, got {s!r}")
+    return np.random.default_rng(seed).standard_normal((n, 2)) * np.asarray(noise_std, float)
+
+
+def make_estimator(estimator: object, params: LFCParams, control_period: float,
+                   noise_std: tuple[float, float]) -> KalmanFilter | None:
+    """None, a fresh Kalman filter for ``"kalman"`` (its measurement noise taken
+    from ``noise_std`` where > 0), or the given one (its period checked)."""
+    if estimator is None:
+        return None
+    if isinstance(estimator, str) and estimator == "kalman":
+        meas = tuple(s if s > 0 else d for s, d in zip(noise_std, (1e-4, 1e-3)))
+        return KalmanFilter(params, control_period, meas_std=meas)
+    if isinstance(estimator, KalmanFilter):
+        if not math.isclose(estimator.period, control_period):
+            raise ValueError(f"estimator.period ({estimator.period}) must equal "
+                             f"control_period ({control_period})")
+        return estimator
+    raise ValueError(f"estimator must be None, 'kalman' or a KalmanFilter, got {estimator!r}")
+
+
+def sample_signal(signal, t: np.ndarray, name: str) -> np.ndarray:
+    """Evaluate an attack or load signal at times ``t`` (s); zeros for None.
+
+    Raises ``ValueError`` naming ``name`` if it is not callable or returns
+    non-finite values.
+    """
+    if signal is None:
+        return np.zeros_like(t)
+    if not callable(signal):
+        raise ValueError(f"{name} must be a callable of time (see lfc.signals), got {signal!r}")
+    values = np.broadcast_to(np.asarray(signal(t), float), t.shape).copy()
+    if not np.all(np.isfinite(values)):
+        raise ValueError(f"{name} returned non-finite values")
+    return values
+
+
+def scenario_signals(pc_attack, wref_attack, load, tc: np.ndarray, t: np.ndarray) -> tuple:
+    """One scenario's signals as the engine reads them: ``(kinds (3,), params (3, 6),
+    offsets (3, 2), sample times, sample values)``.  A :class:`~lfc.signals.Signal`
+    is passed as its spec; any other callable is sampled on its grid (control
+    samples ``tc`` for the attacks, plant samples ``t`` for the load)."""
+    kinds, params = np.zeros(3, np.int64), np.zeros((3, N_PARAMS))
+    offsets, st, sv = np.zeros((3, 2), np.int64), [], []
+    for c, (signal, name, grid) in enumerate(((pc_attack, "pc_attack", tc),
+                                             (wref_attack, "wref_attack", tc),
+                                             (load, "load", t))):
+        if signal is None:
+            times, values = np.zeros(0), np.zeros(0)          # kind NONE: zero
+        elif isinstance(signal, Signal):
+            kinds[c], params[c], times, values = signal.spec()
+            if kinds[c] != SAMPLES:
+                times, values = times[:0], values[:0]
+        else:
+            values = sample_signal(signal, grid, name)
+            kinds[c], times = GRID, np.zeros(len(values))
+        offsets[c] = (sum(map(len, st)), len(times))
+        st.append(np.asarray(times, float))
+        sv.append(np.asarray(values, float))
+    return kinds, params, offsets, np.concatenate(st), np.concatenate(sv)
+
+
+class _Table:
+    """Distinct items (plants, filters, ...) and each scenario's index into them."""
+
+    def __init__(self) -> None:
+        self.items: list = []
+        self._keys: dict = {}
+
+    def index(self, key, make) -> int:
+        if key not in self._keys:
+            self._keys[key] = len(self.items)
+            self.items.append(make())
+        return self._keys[key]
+
+
+@dataclass
+class Run:
+    """What :meth:`Scenarios.run` returns: per-scenario ``metrics`` (N, len(METRICS))
+    and ``ends`` (last plant sample kept), and for a traced run (N = 1) every
+    state ``x`` (samples, 5), control sample ``ctrl`` (periods, N_CTRL) and
+    relay trip bits ``trips`` (samples,)."""
+
+    metrics: np.ndarray
+    ends: np.ndarray
+    x: np.ndarray
+    ctrl: np.ndarray
+    trips: np.ndarray
+
+
+class Scenarios:
+    """Scenarios for the engine: add them one by one, then :meth:`run` them all.
+
+    Parameters
+    ----------
+    design : LFCParams
+        The design model: the local controller's gain ``k_i`` and the model of a
+        ``"kalman"`` estimator (filters carry their own).
+    duration, dt, control_period : float
+        Simulated time, plant step and controller period (s); checked by the caller.
+    relays : RelaySettings
+    """
+
+    def __init__(self, design: LFCParams, *, duration: float, dt: float, control_period: float,
+                 relays: RelaySettings) -> None:
+        self.design, self.dt, self.relays = design, float(dt), relays
+        self.ratio = int(round(control_period / dt))
+        self.n_steps = int(round(duration / dt))
+        self.n_ctrl = -(-self.n_steps // self.ratio)
+        self.period = self.ratio * self.dt
+        self.t = np.arange(self.n_steps + 1) * self.dt
+        self.tc = np.arange(self.n_ctrl) * self.ratio * self.dt
+        self._plants, self._kf, self._filters = _Table(), _Table(), _Table()
+        self._rows: list[tuple] = []
+        self._noise: list[np.ndarray] = []
+        self._sig: list[tuple] = []
+        self._st: list[np.ndarray] = []
+        self._sv: list[np.ndarray] = []
+        self._n_samples = 0
+
+    def add(self, *, plant: LFCParams | None = None, pc_attack=None, wref_attack=None,
+            load=None, scc: SafetyFilter | None = None, estimator=None,
+            noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0,
+            load_feedforward: bool = False) -> int:
+        """One scenario (arguments as in :func:`lfc.simulate`; ``plant`` defaults
+        to the design model).  Returns its row number."""
+        plant = plant or self.design
+        p_i = self._plants.index(plant, lambda: discretize(plant, self.dt))
+        kf = make_estimator(estimator, self.design, self.period, noise_std)
+        e_i = -1 if kf is None else self._kf.index(id(kf) if not isinstance(estimator, str)
+                                                   else ("kalman", tuple(noise_std)),
+                                                   lambda: kf)
+        noisy = any(s > 0 for s in noise_std)
+        noise = make_noise(noise_std, self.n_ctrl, seed)
+        if noisy:
+            self._noise.append(noise)
+        f_i = -1 if scc is None else self._filters.index(id(scc), lambda: scc)
+        kinds, params, offsets, st, sv = scenario_signals(pc_attack, wref_attack, load, self.tc,
+                                                          self.t)
+        self._sig.append((kinds, params, offsets + np.array([self._n_samples, 0])))
+        self._st.append(st)
+        self._sv.append(sv)
+        self._n_samples += len(st)
+        self._rows.append((p_i, e_i, len(self._noise) - 1 if noisy else -1, f_i,
+                           int(load_feedforward)))
+        return len(self._rows) - 1
+
+    def run(self, *, trace: bool = False, stop_on_trip: bool = False) -> Run:
+        """Run every scenario added; ``trace`` keeps everything (one scenario only)."""
+        n = len(self._rows)
+        kinds = np.array([s[0] for s in self._sig], np.int64).reshape(n, 3)
+        params = np.array([s[1] for s in self._sig]).reshape(n, 3, N_PARAMS)
+        offsets = np.array([s[2] for s in self._sig], np.int64).reshape(n, 3, 2)
+        st = np.concatenate(self._st) if self._st else np.zeros(0)
+        sv = np.concatenate(self._sv) if self._sv else np.zeros(0)
+        plants = self._plants.items
+        ad = np.array([a for a, _ in plants])
+        bu = np.ascontiguousarray(np.array([b[:, 0] for _, b in plants]))
+        bl = np.ascontiguousarray(np.array([b[:, 1] for _, b in plants]))
+        ka, kb, kc, kg, kdim = _kalman_tables(self._kf.items)
+        methods = np.array([f.method_id for f in self._filters.items] or [0], np.int64)
+        data = [f.data for f in self._filters.items]
+        foff = np.concatenate([[0], np.cumsum([len(d) for d in data])]).astype(np.int64)
+        fdata = np.concatenate(data) if data else np.zeros(0)
+        noise = np.array(self._noise) if self._noise else np.zeros((1, self.n_ctrl, 2))
+        limits, delays = self.relays.arrays()
+        metrics = np.zeros((n, len(METRICS)))
+        ends = np.zeros(n, np.int64)
+        rows = (self.n_steps + 1) if trace else 0
+        tx, tt = np.zeros((rows, 5)), np.zeros(rows, np.int64)
+        tc = np.full((self.n_ctrl if trace else 0, N_CTRL), np.nan)
+        _run(self.n_steps, self.ratio, self.dt, self.design.k_i * self.period, ad, bu, bl,
+             np.array(self._rows, np.int64).reshape(n, 5), kinds, params, offsets, st, sv,
+             noise, ka, kb, kc, kg, kdim, methods, fdata, foff, limits, delays, stop_on_trip,
+             metrics, tx, tc, tt, ends, np.zeros((8, N_KF)))
+        return Run(metrics, ends, tx, tc, tt)
+
+
+def _kalman_tables(filters: list[KalmanFilter]) -> tuple:
+    """The Kalman filters' matrices, padded to N_KF states: (A, B, C, gain, dims)."""
+    m = max(len(filters), 1)
+    ka, kb = np.zeros((m, N_KF, N_KF)), np.zeros((m, N_KF))
+    kc, kg = np.zeros((m, 2, N_KF)), np.zeros((m, N_KF, 2))
+    kdim = np.zeros(m, np.int64)
+    for i, kf in enumerate(filters):
+        n = kf.n
+        ka[i, :n, :n], kb[i, :n], kc[i, :, :n], kg[i, :n] = kf.A, kf.B, kf.C, kf.gain
+        kdim[i] = n
+    return ka, kb, kc, kg, kdim
+
+
+class GeneratorSide:
+    """The generator side of one scenario, for a plant that drives time itself
+    (the ANDES testbed): call :meth:`step` at every control sample; it runs
+    :func:`generator_period`, the engine's own code.
+
+    Parameters
+    ----------
+    design : LFCParams
+        Design model (local controller gain, ``"kalman"`` model).
+    scc : SafetyFilter or None
+    estimator, noise_std, seed, pc_attack, wref_attack, load_feedforward
+        As in :func:`lfc.simulate`.
+    tc : ndarray
+        Control sample times (s), uniform with step ``period``.
+    period : float
+        Controller period (s).
+    """
+
+    def __init__(self, design: LFCParams, scc: SafetyFilter | None, estimator,
+                 noise_std: tuple[float, float], seed: int, tc: np.ndarray, pc_attack,
+                 wref_attack, load_feedforward: bool, period: float) -> None:
+        self.tc, self.scc = tc, scc
+        self.noise = make_noise(noise_std, len(tc), seed)
+        kf = make_estimator(estimator, design, period, noise_std)
+        self.est = -1 if kf is None else 0
+        self.ka, self.kb, self.kc, self.kg, kdim = _kalman_tables([kf] if kf else [])
+        n = int(kdim[0]) if kf else 0
+        self.ka, self.kb = self.ka[0, :n, :n].copy(), self.kb[0, :n].copy()
+        self.kc, self.kg = self.kc[0, :, :n].copy(), self.kg[0, :n].copy()
+        self.signals = scenario_signals(pc_attack, wref_attack, None, tc, tc)
+        self.k_i_period = design.k_i * period
+        self.feedforward = load_feedforward
+        self.method = scc.method_id if scc is not None else -1
+        self.data = scc.data if scc is not None else np.zeros(0)
+        self.kstate, self.gstate = np.zeros((2, N_KF)), np.zeros(1)
+        self.memory = np.zeros(MEMORY)
+        self.x_hat = np.zeros(5)
+        self.ctrl = np.full((len(tc), N_CTRL), np.nan)
+        self.n_done = 0
+
+    def step(self, j: int, x: np.ndarray, p_load: float) -> float:
+        """Control sample ``j``: read the plant state ``x`` (design-model
+        coordinates, pu) and the true load (pu), return the command to hold (pu)."""
+        kinds, params, offsets, st, sv = self.signals
+        u, _, _ = generator_period(j, float(self.tc[j]), np.asarray(x, float), float(p_load),
+                                   float(self.noise[j, 0]), float(self.noise[j, 1]), kinds,
+                                   params, offsets, st, sv, self.k_i_period, self.est, self.ka,
+                                   self.kb, self.kc, self.kg, self.kstate, self.feedforward,
+                                   self.method, self.data, self.memory, self.gstate,
+                                   self.x_hat, self.ctrl)
+        self.n_done = j + 1
+        return u

@@ -1,0 +1,152 @@
+"""What every safety filter shares: the result of one call, the flag bits the
+compiled filters return, and the backend interface.
+
+A filter method is one module of :mod:`lfc.filters` with a :class:`Backend`
+subclass: its options (validated at construction), a flat ``data`` array that
+its compiled ``decide`` function reads, and ``memory`` per scenario (e.g. the
+command it holds).  Every call goes through :func:`lfc.filters.dispatch.decide`
+(one state) or :func:`~lfc.filters.dispatch.decide_many` (N states), the same
+compiled code the engine runs; one state is a batch of one.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from lfc.model import LFCParams
+from lfc.relays import RelaySettings
+
+# flag bits returned by every compiled decide()
+ACTIVE, INFEASIBLE, OUTSIDE, INVALID, SOLVER_ERROR = 1, 2, 4, 8, 16
+BIND_FREQ, BIND_ROCOF, BIND_UMIN, BIND_UMAX, BIND_CERT = 32, 64, 128, 256, 512
+KIND_FREQ_LO, KIND_FREQ_HI, KIND_ROCOF_LO, KIND_ROCOF_HI = 1024, 2048, 4096, 8192
+ALARM_BITS = ACTIVE | INFEASIBLE | OUTSIDE | INVALID | SOLVER_ERROR
+ALARM_FLAGS = ("active", "infeasible", "outside", "invalid_input", "solver_error")
+_FLAG_BITS = dict(zip(ALARM_FLAGS, (ACTIVE, INFEASIBLE, OUTSIDE, INVALID, SOLVER_ERROR)))
+_BINDING = (("frequency", BIND_FREQ), ("rocof", BIND_ROCOF), ("certified", BIND_CERT),
+            ("u_min", BIND_UMIN), ("u_max", BIND_UMAX))
+MEMORY = 2  # floats of memory per scenario, for every method
+
+
+class FilterInfo(NamedTuple):
+    """What a safety filter did at one call.
+
+    Attributes
+    ----------
+    u_ref, u : float
+        Incoming and applied governor command (pu).
+    active : bool
+        The command was changed (the filter intervened; an alarm).
+    infeasible : bool
+        The constraints could not all be met; ``u`` is the method's compromise.
+    outside : bool
+        The filter could not act inside its guarantee: the paper's prediction is
+        already outside the safe set (``h <= 0``, E9); the certified filter found
+        no certified command and holds the last one.
+    invalid_input : bool
+        ``x``, ``u_ref`` or ``p_load`` was not finite; no constraint was evaluated.
+    solver_error : bool
+        A reference (cvxpy) solve failed; the exact solution was used.
+    h_freq, h_rocof : float
+        ``F^2 - y_freq^2`` (pu^2) and ``limit^2 - y_rocof^2`` ((pu/s)^2): how far
+        inside its relay setting each output the filter checks is.
+    margin_freq, margin_rocof : float
+        Distance (pu of command) from the applied command to the nearest bound
+        that keeps that relay safe (>= 0: met; NaN: the command has no influence
+        or nothing was evaluated).
+    y_freq, y_rocof : float
+        The outputs the filter checks: the paper's prediction at ``t + Ts``; the
+        certified filter's current measurement (pu, pu/s).
+    binding : tuple of str
+        Bounds the applied command sits on: ``"frequency"``, ``"rocof"``,
+        ``"certified"``, ``"u_min"``, ``"u_max"`` (empty when not active).
+    reason : str
+        Human-readable explanation ("" when nothing happened).
+    details : dict
+        Method-specific values (the paper's constraint bounds, the certified
+        interval; see the method's module).
+    """
+
+    u_ref: float
+    u: float
+    active: bool
+    infeasible: bool
+    outside: bool
+    invalid_input: bool
+    solver_error: bool
+    h_freq: float
+    h_rocof: float
+    margin_freq: float
+    margin_rocof: float
+    y_freq: float
+    y_rocof: float
+    binding: tuple
+    reason: str
+    details: dict
+
+    @property
+    def alarm(self) -> bool:
+        """True when the operator should be told (anything but a pass-through)."""
+        return self.active or self.infeasible or self.outside or self.invalid_input \
+            or self.solver_error
+
+
+def flag(flags: np.ndarray | int, name: str) -> np.ndarray | bool:
+    """The alarm flag ``name`` (one of ``ALARM_FLAGS``) of flag bits."""
+    return (np.asarray(flags) & _FLAG_BITS[name]) != 0
+
+
+def binding_names(flags: int) -> tuple[str, ...]:
+    """The bounds named by the binding bits of ``flags``."""
+    return tuple(name for name, bit in _BINDING if flags & bit)
+
+
+class Backend:
+    """A filter method: options, compiled data, memory, and how to explain a call.
+
+    Subclasses set ``name`` and ``method_id`` (the compiled dispatcher's code),
+    build ``data`` (float64, read by their compiled ``decide``) in ``__init__``,
+    and implement :meth:`reason` and :meth:`details`.
+    """
+
+    name: str = ""
+    method_id: int = -1
+
+    def __init__(self, params: LFCParams, relays: RelaySettings) -> None:
+        self.params, self.relays = params, relays
+        self.data = np.zeros(1)
+
+    def reason(self, flags: int) -> str:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def details(self, d0: float, d1: float, flags: int) -> dict:  # pragma: no cover
+        raise NotImplementedError
+
+    def describe(self) -> str:  # pragma: no cover - abstract
+        """The constructor call that rebuilds this filter (for ``repr`` and logs)."""
+        raise NotImplementedError
+
+    def info(self, u_ref: float, out: tuple) -> FilterInfo:
+        """A :class:`FilterInfo` from one compiled ``decide`` result."""
+        u, flags, h0, h1, m0, m1, y0, y1, d0, d1 = out
+        return FilterInfo(u_ref, u, bool(flags & ACTIVE), bool(flags & INFEASIBLE),
+                          bool(flags & OUTSIDE), bool(flags & INVALID),
+                          bool(flags & SOLVER_ERROR), h0, h1, m0, m1, y0, y1,
+                          binding_names(flags) if flags & ACTIVE else (),
+                          self.reason(flags) if flags & ALARM_BITS else "",
+                          self.details(d0, d1, flags))
+
+
+def check_limits(u_min: float, u_max: float) -> None:
+    """Raise ``ValueError`` unless ``u_min < u_max`` (actuator limits, pu)."""
+    if not (u_min < u_max) or math.isnan(u_min) or math.isnan(u_max):
+        raise ValueError(f"u_min must be < u_max, got u_min={u_min!r}, u_max={u_max!r}")
+
+
+def check_choice(name: str, value: str, allowed: tuple[str, ...]) -> None:
+    """Raise ``ValueError`` unless ``value`` is one of ``allowed``."""
+    if value not in allowed:
+        raise ValueError(f"{name} must be one of {allowed}, got {value!r}")

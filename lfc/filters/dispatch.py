@@ -1,0 +1,71 @@
+"""One compiled entry point for every filter method: :func:`decide` and :func:`decide_many`.
+
+The engine and :class:`lfc.SafetyFilter` both call these, so a filter runs the
+same compiled code whether it is called once, on a batch of states or inside a
+simulation.  A method is a code (``METHOD_IDS``); a filter that is not
+compiled (``solver="cvxpy"``) is registered here and called back through
+``numba.objmode``.
+"""
+
+from __future__ import annotations
+
+import weakref
+
+import numba as nb
+import numpy as np
+
+from lfc._jit import inline, jit
+from lfc.filters import certified, paper
+
+PAPER, CERTIFIED, PYTHON = paper.PaperFilter.method_id, certified.CertifiedFilter.method_id, 99
+_PYTHON: weakref.WeakValueDictionary = weakref.WeakValueDictionary()  # id -> backend
+
+
+def register_python(backend) -> np.ndarray:
+    """Register a backend that is not compiled; return the data its calls carry."""
+    key = max(_PYTHON.keys(), default=0) + 1
+    _PYTHON[key] = backend
+    return np.array([float(key)])
+
+
+def _call_python(key: float, x: np.ndarray, u_ref: float, p: float, mem: np.ndarray) -> tuple:
+    return _PYTHON[int(key)].decide_python(x, u_ref, p, mem)
+
+
+@nb.njit(cache=True)   # holds the GIL: it calls back into Python
+def _decide_python(fd: np.ndarray, x: np.ndarray, u_ref: float, p: float,
+                   mem: np.ndarray) -> tuple:
+    with nb.objmode(u="float64", flags="int64", h0="float64", h1="float64", m0="float64",
+                    m1="float64", y0="float64", y1="float64", d0="float64", d1="float64"):
+        u, flags, h0, h1, m0, m1, y0, y1, d0, d1 = _call_python(fd[0], x, u_ref, p, mem)
+    return u, flags, h0, h1, m0, m1, y0, y1, d0, d1
+
+
+@inline
+def decide(method: int, fd: np.ndarray, x: np.ndarray, u_ref: float, p: float,
+           mem: np.ndarray) -> tuple:
+    """One call of filter ``method`` with data ``fd`` at state ``x`` (5,), incoming
+    command ``u_ref`` and assumed load ``p`` (pu); ``mem`` is the scenario's
+    memory.  Returns ``(u, flags, h_freq, h_rocof, margin_freq, margin_rocof,
+    y_freq, y_rocof, detail0, detail1)``."""
+    if method == PAPER:
+        return paper.decide(fd, x, u_ref, p, mem)
+    if method == CERTIFIED:
+        return certified.decide(fd, x, u_ref, p, mem)
+    return _decide_python(fd, x, u_ref, p, mem)
+
+
+@jit
+def decide_many(method: int, fd: np.ndarray, x: np.ndarray, u_ref: np.ndarray, p: np.ndarray,
+                mem: np.ndarray, flags: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """:func:`decide` for N states ``x`` (N, 5), commands and loads (N,) and
+    memories (N, MEMORY); writes ``flags`` (N,) and ``values`` (N, 8: h, margin,
+    y, details as pairs) and returns the commands (N,)."""
+    n = x.shape[0]
+    u = np.empty(n)
+    for i in range(n):
+        out = decide(method, fd, x[i], u_ref[i], p[i], mem[i])
+        u[i], flags[i] = out[0], out[1]
+        values[i, 0], values[i, 1], values[i, 2], values[i, 3] = out[2], out[3], out[4], out[5]
+        values[i, 4], values[i, 5], values[i, 6], values[i, 7] = out[6], out[7], out[8], out[9]
+    return u
