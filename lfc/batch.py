@@ -134,7 +134,7 @@ def run_chunk(params: LFCParams, scenarios: pd.DataFrame, duration: float,
     sc = Scenarios(params, duration=duration, dt=dt, control_period=control_period,
                    relays=relays)
     filters: dict = {}
-    for _, row in scenarios.iterrows():
+    for row in scenarios.to_dict("records"):
         signal = scenario_signal(row, duration)
         channel = {"pc": "pc_attack", "wref": "wref_attack", "load": "load"}[row["channel"]]
         noise = tuple(float(row.get(c, 0.0)) for c in NOISE)
@@ -159,13 +159,13 @@ def run_chunk(params: LFCParams, scenarios: pd.DataFrame, duration: float,
         index=scenarios.index)
 
 
-def _plant(params: LFCParams, row: pd.Series) -> LFCParams:
+def _plant(params: LFCParams, row: dict) -> LFCParams:
     """The row's plant: ``params`` with any of the ``PLANT`` columns the row sets."""
     own = {c: float(row[c]) for c in PLANT if c in row and pd.notna(row[c])}
     return replace(params, **own) if own else params
 
 
-def _filter(params: LFCParams, relays: RelaySettings, row: pd.Series, period: float,
+def _filter(params: LFCParams, relays: RelaySettings, row: dict, period: float,
             cache: dict) -> SafetyFilter | None:
     """The row's filter (None without SCC), one object per distinct setting."""
     if pd.isna(row["alpha"]):
@@ -185,7 +185,7 @@ def _filter(params: LFCParams, relays: RelaySettings, row: pd.Series, period: fl
 def simulate_batch(params: LFCParams, scenarios: pd.DataFrame, *, duration: float,
                    relays: RelaySettings | None = None, dt: float = 1e-3,
                    control_period: float = 0.01, executor: Executor | None = None,
-                   chunk_size: int = 500, out: str | Path | None = None,
+                   chunk_size: int = 1000, out: str | Path | None = None,
                    progress: bool = True) -> pd.DataFrame:
     """Simulate every scenario of a table; the same metrics as :func:`lfc.simulate`.
 

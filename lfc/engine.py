@@ -218,15 +218,21 @@ def _lowest_bit(bits: int) -> int:
 
 
 # -- the Python side: scenario tables, a run, the testbed's generator side ---------------
-def make_noise(noise_std: tuple[float, float], n: int, seed: int) -> np.ndarray:
-    """Seeded white noise for ``n`` controller readings of (dw_meas, rocof_meas):
-    shape (n, 2), std ``noise_std`` (pu, pu/s).  Raises ``ValueError`` unless it
-    is a pair of values >= 0."""
+def check_noise(noise_std: tuple[float, float]) -> bool:
+    """Raise ``ValueError`` unless ``noise_std`` is a pair of finite values >= 0
+    (pu, pu/s); return whether there is any noise."""
     if len(noise_std) != 2:
         raise ValueError(f"noise_std must be a pair (dw_meas, rocof_meas), got {noise_std!r}")
     for i, s in enumerate(noise_std):
         if not (isinstance(s, (int, float)) and math.isfinite(s) and s >= 0):
             raise ValueError(f"noise_std[{i}] must be a finite number >= 0, got {s!r}")
+    return any(s > 0 for s in noise_std)
+
+
+def make_noise(noise_std: tuple[float, float], n: int, seed: int) -> np.ndarray:
+    """Seeded white noise for ``n`` controller readings of (dw_meas, rocof_meas):
+    shape (n, 2), std ``noise_std`` (pu, pu/s), checked by :func:`check_noise`."""
+    check_noise(noise_std)
     return np.random.default_rng(seed).standard_normal((n, 2)) * np.asarray(noise_std, float)
 
 
@@ -358,10 +364,9 @@ class Scenarios:
         e_i = -1 if kf is None else self._kf.index(id(kf) if not isinstance(estimator, str)
                                                    else ("kalman", tuple(noise_std)),
                                                    lambda: kf)
-        noisy = any(s > 0 for s in noise_std)
-        noise = make_noise(noise_std, self.n_ctrl, seed)
+        noisy = check_noise(noise_std)
         if noisy:
-            self._noise.append(noise)
+            self._noise.append(make_noise(noise_std, self.n_ctrl, seed))
         f_i = -1 if scc is None else self._filters.index(id(scc), lambda: scc)
         kinds, params, offsets, st, sv = scenario_signals(pc_attack, wref_attack, load, self.tc,
                                                           self.t)

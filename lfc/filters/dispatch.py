@@ -15,9 +15,12 @@ import numba as nb
 import numpy as np
 
 from lfc._jit import inline, jit
-from lfc.filters import certified, paper
+from lfc.filters.certified import CertifiedFilter
+from lfc.filters.certified import decide as decide_certified
+from lfc.filters.paper import PaperFilter
+from lfc.filters.paper import decide as decide_paper
 
-PAPER, CERTIFIED, PYTHON = paper.PaperFilter.method_id, certified.CertifiedFilter.method_id, 99
+PAPER, CERTIFIED, PYTHON = PaperFilter.method_id, CertifiedFilter.method_id, 99
 _PYTHON: weakref.WeakValueDictionary = weakref.WeakValueDictionary()  # id -> backend
 
 
@@ -49,9 +52,9 @@ def decide(method: int, fd: np.ndarray, x: np.ndarray, u_ref: float, p: float,
     memory.  Returns ``(u, flags, h_freq, h_rocof, margin_freq, margin_rocof,
     y_freq, y_rocof, detail0, detail1)``."""
     if method == PAPER:
-        return paper.decide(fd, x, u_ref, p, mem)
+        return decide_paper(fd, x, u_ref, p, mem)
     if method == CERTIFIED:
-        return certified.decide(fd, x, u_ref, p, mem)
+        return decide_certified(fd, x, u_ref, p, mem)
     return _decide_python(fd, x, u_ref, p, mem)
 
 
