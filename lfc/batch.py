@@ -138,8 +138,7 @@ def run_chunk(params: LFCParams, scenarios: pd.DataFrame, duration: float,
         signal = scenario_signal(row, duration)
         channel = {"pc": "pc_attack", "wref": "wref_attack", "load": "load"}[row["channel"]]
         noise = tuple(float(row.get(c, 0.0)) for c in NOISE)
-        sc.add(plant=_plant(params, row), scc=_filter(params, relays, row, control_period,
-                                                      filters),
+        sc.add(plant=_plant(params, row), scc=_filter(params, relays, row, filters),
                estimator="kalman" if any(noise) else None, noise_std=noise,
                seed=int(row.get("seed", 0)), **({channel: signal} if signal else {}))
     run = sc.run()
@@ -165,8 +164,8 @@ def _plant(params: LFCParams, row: dict) -> LFCParams:
     return replace(params, **own) if own else params
 
 
-def _filter(params: LFCParams, relays: RelaySettings, row: dict, period: float,
-            cache: dict) -> SafetyFilter | None:
+def _filter(params: LFCParams, relays: RelaySettings, row: dict, cache: dict
+            ) -> SafetyFilter | None:
     """The row's filter (None without SCC), one object per distinct setting."""
     if pd.isna(row["alpha"]):
         return None
@@ -175,7 +174,11 @@ def _filter(params: LFCParams, relays: RelaySettings, row: dict, period: float,
         options = {"alpha": float(row["alpha"]), "Ts": float(row["Ts"]),
                    **{c: row[c] for c in READINGS if c in row and pd.notna(row[c])}}
     else:
-        options = {"period": period}
+        noise = tuple(float(row.get(c, 0.0)) for c in NOISE)
+        declared = bool(row.get("declare_noise", False)) and any(noise)
+        box = row.get("uncertainty")
+        options = {"uncertainty": 0.0 if box is None or pd.isna(box) else float(box),
+                   "noise_std": noise if declared else None}
     key = (method, tuple(sorted(options.items())))
     if key not in cache:
         cache[key] = SafetyFilter(params, relays, method=method, **options)
@@ -203,10 +206,12 @@ def simulate_batch(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
         filter ignores ``alpha`` and ``Ts`` but runs only where ``alpha`` is not
         NaN), the paper filter's readings ``outside_rule``, ``conflict``,
         ``prediction``, the row's own plant ``M``, ``D``, ``tau_g``, ``tau_t``,
-        ``droop`` (the filter keeps the design model ``params``), and
-        measurement noise ``noise_w`` (pu), ``noise_rocof`` (pu/s) with its
-        ``seed`` (noise > 0: the generator side uses a Kalman estimate, as
-        ``simulate(estimator="kalman")`` does).  A row equals
+        ``droop`` (the filter keeps the design model ``params``), measurement
+        noise ``noise_w`` (pu), ``noise_rocof`` (pu/s) with its ``seed`` (noise
+        > 0: the generator side uses a Kalman estimate, as
+        ``simulate(estimator="kalman")`` does), and the certified filter's
+        ``uncertainty`` (its plant box, NaN or 0: the design model only) and
+        ``declare_noise`` (True: it covers the row's noise, ``noise_std``).  A row equals
         :func:`lfc.simulate` with the same plant, noise and seed.  Other
         columns are carried through.
     duration, dt, control_period : float

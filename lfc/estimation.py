@@ -59,7 +59,18 @@ class KalmanFilter:
         Augment the state with ``dPL`` as a random walk (E7). Default True;
         otherwise the filter assumes ``dPL = 0``.
     load_std : float
-        Random-walk intensity of ``dPL`` (pu per sqrt(s)), >= 0. Default 0.3.
+        Random-walk intensity of ``dPL`` (pu per sqrt(s)), >= 0. Default 0.01: the
+        estimate still tracks a 0.1 pu load step to 90 % within 0.15 s at the default
+        noise, and its steady-state error is small (std 0.003 pu), which the
+        certified filter's estimation bound depends on (``tests/test_estimation.py``).
+
+    Attributes
+    ----------
+    gain : ndarray
+        Steady-state Kalman gain (n x 2).
+    posterior_covariance : ndarray
+        Steady-state error covariance after each correction (n x n): states, then
+        the load when ``estimate_load``.
 
     Raises
     ------
@@ -69,7 +80,7 @@ class KalmanFilter:
 
     def __init__(self, params: LFCParams, period: float = 0.01, *,
                  meas_std: tuple[float, float] = (1e-4, 1e-3), process_std: float = 1e-4,
-                 estimate_load: bool = True, load_std: float = 0.3) -> None:
+                 estimate_load: bool = True, load_std: float = 0.01) -> None:
         check_positive("period", period)
         if len(meas_std) != 2:
             raise ValueError(f"meas_std must be a pair (dw_meas, rocof_meas), got {meas_std!r}")
@@ -97,6 +108,7 @@ class KalmanFilter:
         R = np.diag(np.square(self.meas_std))
         _, P, _ = ct.dlqe(Ad, np.eye(self.n), C, np.diag(q), R)  # P: a-priori covariance
         self.gain = P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
+        self.posterior_covariance = (np.eye(self.n) - self.gain @ C) @ P
         self.reset()
 
     def __repr__(self) -> str:

@@ -1,180 +1,455 @@
 """A safety filter with a guarantee: no command on P_c or ω_ref trips the relays.
 
-``SafetyFilter(params, relays, method="certified")`` uses this module
-(:class:`CertifiedFilter`, options as there).  The
-idea is an implicit control-invariant set with a *hold* backup law:
+``SafetyFilter(params, relays, method="certified", **options)`` uses this module
+(:class:`CertifiedFilter`; options there).  The idea is an implicit
+control-invariant set with a *hold* backup law:
 
 * A command ``u`` is **certified** at state ``x`` if applying it and holding it
   for ever keeps both measured outputs (``dw_meas``, ``rocof_meas``) inside the
-  relay limits at every relay sample (``resolution``, the plant step) for all
-  future time.  On the design model that is checkable exactly: the trajectory
-  is affine in ``u``; over a finite ``horizon`` every sample is a pair of
-  affine constraints, and at the end the deviation from the held command's
-  equilibrium ``e = x_N − x_eq(u)`` must lie in an ellipsoid
-  ``eᵀ P e ≤ ρ²`` that the dynamics never leave (``P`` a discrete Lyapunov
-  matrix of the model) and on which the outputs stay inside the limits.  The
-  equilibrium itself must sit inside the frequency limit.  Each condition is an
-  interval in ``u`` (the ellipsoid a convex quadratic), so the admissible set
-  is one interval and the filter is ``u_ref`` clipped to it — exact, no QP
-  solver, microseconds.
-* If no command is certified from the current state (only possible when an
-  assumption below is broken), the filter keeps the last certified command: its
-  certificate, issued when it was applied, still covers holding it.  Flagged
-  ``outside`` with the reason.
+  relay limits *in continuous time*, for every plant of the declared box.  For
+  one plant the held trajectory is affine in ``u``: ``y(t) = C e^{At}(x - x_eq)
+  + C x_eq`` with ``x_eq = q_u u + q_p p``.  It is checked at samples up to
+  the horizon (8 s), each limit tightened by ``D2 delta^2 / 8``, a proven bound
+  on how far the output can move between two samples ``delta`` apart (``D2``
+  bounds ``|y''|``: see :func:`_intersample`); the samples are as sparse as a
+  chosen tightening allows (``tightening``, :func:`_merge_intervals`: 1 ms
+  apart where the fast modes move, up to 0.1 s and more once they have
+  decayed); after the horizon the deviation from the held
+  command's equilibrium must lie in an ellipsoid ``e'Pe <= rho^2`` that the
+  continuous-time dynamics never leave (``P`` a Lyapunov matrix) and on which
+  the outputs stay inside the limits; the equilibrium itself must leave that
+  room.  Each condition is an interval in ``u`` (the ellipsoid a convex
+  quadratic), so the admissible set is one interval and the filter is
+  ``u_ref`` clipped to it: no QP solver.
+* **Two levels** make the hold always re-certifiable: new commands are
+  certified with the limits tightened twice (``2 tau``), so their trajectory
+  stays ``tau`` inside the limits in continuous time; the held command is
+  re-checked with ``tau`` only, which its own trajectory always passes.  If
+  no new command is certified the filter holds the last one (flag ``active``,
+  binding ``"certified"``); if even that fails its check — only possible when
+  an assumption below is broken — it still holds it and flags ``outside``.
+
+**Guarantee (proven).**  For every plant whose M, D, tau_g, tau_t and droop are
+among the certified plants (``uncertainty``: the design model and the 32
+corners of the box), with the state known within the estimation bound
+(``noise_std``: the Kalman filter's error ellipsoid at ``confidence``; exact
+state without it), a command held between calls, a load deviation
+``|dP_L(t) - p_load| <= load_bound`` from the load given to the filter (when the
+command was certified), ``|p_load| <= P_MAX`` and a start from a state where some
+command is certified (e.g. equilibrium): the measured frequency and ROCOF stay
+inside ``|dw_meas| <= F`` and ``|rocof_meas| <= rocof_limit`` at every instant,
+whatever the incoming commands are — OF2, UF2 and ROCOF never trip, for any
+relay sampling.  The load is covered by tightening every limit by the load
+bound times the L1 norm of the load-to-output impulse response (conservative),
+and an error ``e_p`` in the load estimate likewise; a bound that leaves
+nothing is rejected at construction.  With ``trips_per_hour``, the limits
+are tightened further so that relays reading the outputs through white
+Gaussian noise ``noise_std`` at ``relay_rate`` trip at most that often (a
+union bound over an hour of samples).
+
+**Measured, not proven.**  Plants inside the box but not at its corners (the
+held response is not monotone in the parameters): tested on random interior
+plants by ``tests/test_robust.py``.  That the estimation error stays within
+its bound: the Kalman error is Gaussian only in steady state, at the
+design model.  ``margin`` tightens both limits by a fraction for anything
+else (no guarantee there).
 
 ``details`` of a :class:`~lfc.filters.base.FilterInfo`: the certified interval
 ``(lo, hi)`` (pu; ``lo > hi`` where none is certified).
-
-**Guarantee.**  On the design model (plant = ``params``), with the exact state,
-a command held between calls spaced ``period`` apart, a load deviation
-``|ΔP_L(t) − p_load| ≤ load_bound`` (``p_load`` as given to the filter when
-the active command was certified) and a start from a state where some command
-is certified (e.g. equilibrium): the measured frequency and ROCOF never leave
-``|Δω̂| ≤ F`` and ``|ROCOF| ≤ rocof_limit`` at any plant sample, whatever the
-incoming commands are (OF2, UF2 and ROCOF never trip).  The load bound is
-covered by tightening every limit by ``load_bound`` times the ℓ1 norm of the
-load-to-output impulse response (a conservative bound: it assumes the worst
-load signal for every sample at once); a ``load_bound`` for which nothing is
-left is rejected at construction.  (For comparison, E12: without SCC a load
-step trips a relay from 0.2229 pu on the defaults, and some governor commands
-ride through larger ones: :mod:`lfc.experiments.load_limits`.)  ``margin`` tightens both limits further, by a
-fraction, for estimation error and plant–model mismatch (no guarantee then).
 """
 
 from __future__ import annotations
 
+import itertools
 import math
+from dataclasses import replace
 
 import numpy as np
-from scipy.linalg import solve_discrete_lyapunov
+from scipy.linalg import expm, solve_continuous_lyapunov
+from scipy.optimize import linprog
+from scipy.stats import chi2, norm
 
 from lfc._jit import inline
-from lfc._validate import check_multiple, check_nonnegative, check_positive
+from lfc._validate import check_nonnegative, check_positive, check_range
 from lfc.filters.base import (ACTIVE, BIND_CERT, BIND_UMAX, BIND_UMIN, INVALID, OUTSIDE,
                               Backend, check_limits)
-from lfc.model import LFCParams, discretize, lfc_matrices, output_matrix
+from lfc.model import LFCParams, lfc_matrices, output_matrix
 from lfc.relays import RelaySettings
 
-L1_HORIZON = 60.0  # s over which the load-to-output impulse response is summed
+GRID = ((0.05, 1e-3), (0.1, 2e-3), (0.2, 5e-3), (2.0, 1e-2), (60.0, 2e-2))  # (until, step) s
+MIN_STEP, MAX_STEP = 1e-3, 0.1  # s: the sample spacing of adaptive_grid
+BOX = ("M", "D", "tau_g", "tau_t", "droop")  # the parameters an uncertainty box may cover
+P_MAX = 1.0            # pu: largest |p_load| the certificate covers
+L1_HORIZON = 60.0      # s over which the load-to-output impulse response is integrated
 NUMERIC_MARGIN = 1e-6  # relative tightening that absorbs floating-point differences
-# layout of the data array read by decide(): a header, then the rows and the terminal set
-U_MIN, U_MAX, EQ_PER_P, EQ_HALF, RHO, A_QUAD, N_ROWS, F_LIM, R_LIM, HEAD = range(10)
+# layout of the data array decide() reads: a header, then one block per plant
+U_MIN, U_MAX, N_PLANTS, N_ROWS, P_LIMIT, F_LIM, R_LIM, HEAD = range(8)
+(EQ_PER_P, EQ_HALF, EQ_HALF_HELD, RHO, RHO_HELD, A_QUAD, Y0_F, Y0_R, Y0_F_HELD, Y0_R_HELD,
+ BLOCK_HEAD) = range(11)
+
+
+def box_plants(params: LFCParams, uncertainty: float | dict) -> list[LFCParams]:
+    """The design model and the corners of the declared parameter box.
+
+    ``uncertainty``: a relative half-width for all of ``BOX`` (0.2: each within
+    ±20 %), or a dict naming some of them with ``(low, high)`` factors.
+    """
+    if isinstance(uncertainty, dict):
+        unknown = set(uncertainty) - set(BOX)
+        if unknown:
+            raise ValueError(f"uncertainty names unknown parameter(s) {sorted(unknown)}; "
+                             f"choose from {BOX}")
+        factors = {}
+        for name, pair in uncertainty.items():
+            low, high = pair
+            if not (0 < low <= 1 <= high < math.inf):
+                raise ValueError(f"uncertainty[{name!r}] must be factors (low, high) with "
+                                 f"0 < low <= 1 <= high, got {pair!r}")
+            factors[name] = (float(low), float(high))
+    else:
+        check_range("uncertainty", uncertainty, -1e-300, 1.0)
+        factors = {name: (1 - uncertainty, 1 + uncertainty) for name in BOX} \
+            if uncertainty > 0 else {}
+    corners = [replace(params, **{n: getattr(params, n) * f for n, f in zip(factors, combo)})
+               for combo in itertools.product(*factors.values())]
+    return [params] + [c for c in corners if c != params]
+
+
+def grid(horizon: float) -> np.ndarray:
+    """Sample times (s) of the certificate: ``GRID``'s steps up to ``horizon``."""
+    times, start = [], 0.0
+    for until, step in GRID:
+        end = min(until, horizon)
+        times += [start + step * (k + 1) for k in range(int(round((end - start) / step)))]
+        start = end
+        if start >= horizon:
+            break
+    return np.array(times)
 
 
 class CertifiedSet:
-    """The certified-command interval for a design model (see module docstring).
+    """The certified-command intervals for a design model and a box of plants.
 
     Parameters
     ----------
     params : LFCParams
+        Design model.
     relays : RelaySettings
-    period : float
-        Time between filter calls (s); the command is held in between.
-    resolution : float
-        Relay sampling step the limits are checked at (s); ``period`` must be a
-        multiple of it.  Default 1 ms (the plant step of ``lfc.simulate``).
     horizon : float
-        Look-ahead before the terminal ellipsoid (s), > 0. Default 4 s: on the
-        defaults a longer one certifies no more commands (measured on states of
-        attacked runs; the slowest mode decays as exp(−0.93 t)).
+        Look-ahead before the terminal ellipsoid (s), in [0.2, 60]. Default 8 s:
+        long enough for the weakly damped corners of a ±20 % box (damping 0.09)
+        to settle toward the terminal set.
     load_bound : float
         Bound on the load deviation from ``p_load`` (pu), >= 0.
     margin : float
         Extra fractional tightening of both limits, in [0, 1).
+    uncertainty : float or dict
+        The plant box (:func:`box_plants`); 0: the design model only.
+    noise_std : (float, float) or None
+        Measurement noise std of ``(dw_meas, rocof_meas)`` (pu, pu/s) of the
+        Kalman estimate the filter is given; None: the exact state.
+    confidence : float
+        Probability that the Kalman error lies in the ellipsoid the certificate
+        covers (its covariance's chi-square quantile), in (0, 1).
+    trips_per_hour : float or None
+        With ``noise_std``: relays read the outputs through that noise at
+        ``relay_rate``; tighten the limits so that they trip at most this often.
+    relay_rate : float
+        Relay sampling rate (Hz) of ``trips_per_hour``. Default 1 kHz.
+    tightening : float
+        How far (fraction of each limit) an output may move between two samples
+        of the design model's certificate, in [1e-4, 0.1]; sets the sample spacing
+        (:func:`adaptive_grid`).  Default 0.005: new commands lose at most about
+        1 % of each limit to sampling, with about 300 samples over 8 s.
     u_min, u_max : float
         Actuator limits (pu).
     """
 
-    def __init__(self, params: LFCParams, relays: RelaySettings, *, period: float = 0.01,
-                 resolution: float = 1e-3, horizon: float = 4.0, load_bound: float = 0.0,
-                 margin: float = 0.0, u_min: float = -math.inf, u_max: float = math.inf) -> None:
-        check_multiple("period", period, "resolution", resolution)
-        check_positive("horizon", horizon)
+    def __init__(self, params: LFCParams, relays: RelaySettings, *, horizon: float = 8.0,
+                 load_bound: float = 0.0, margin: float = 0.0, uncertainty: float | dict = 0.0,
+                 noise_std: tuple[float, float] | None = None, confidence: float = 0.9999,
+                 trips_per_hour: float | None = None, relay_rate: float = 1000.0,
+                 tightening: float = 0.005, u_min: float = -math.inf,
+                 u_max: float = math.inf) -> None:
+        check_range("horizon", horizon, 0.2 - 1e-12, 60.0 + 1e-12)
+        check_range("tightening", tightening, 1e-4 - 1e-12, 0.1 + 1e-12)
         check_nonnegative("load_bound", load_bound)
+        check_range("confidence", confidence, 0.0, 1.0)
+        check_positive("relay_rate", relay_rate)
         if not 0.0 <= margin < 1.0:
             raise ValueError(f"margin must be in [0, 1), got {margin!r}")
-        self.params, self.relays, self.load_bound = params, relays, float(load_bound)
-        self.margin = float(margin)
+        if trips_per_hour is not None and noise_std is None:
+            raise ValueError("trips_per_hour needs noise_std (the relays' measurement noise)")
+        self.params, self.relays = params, relays
+        self.load_bound, self.margin, self.uncertainty = float(load_bound), float(margin), \
+            uncertainty
+        self.noise_std, self.confidence, self.trips_per_hour = noise_std, confidence, \
+            trips_per_hour
         self.u_min, self.u_max = float(u_min), float(u_max)
-        Ad, Bd = discretize(params, resolution)
-        C = output_matrix()
-        l1 = _l1_norms(Ad, Bd[:, 1], C, int(round(L1_HORIZON / resolution)))
-        base = np.array([relays.F, relays.rocof_limit]) * (1 - margin) * (1 - NUMERIC_MARGIN)
-        self.limits = base - self.load_bound * l1
-        if np.any(self.limits <= 0):
-            most = float(np.min(base / l1))
-            raise ValueError(f"load_bound must be < {most:.4g} pu for these relays: the "
-                             "certificate tightens each limit by load_bound times the l1 norm "
-                             "of the load-to-output response (a conservative bound), which "
-                             f"leaves nothing above that; got {load_bound}")
-        self._Ad, self._Bd, self.n_steps = Ad, Bd, int(math.ceil(horizon / resolution))
-        Phi_n, S_n = self._horizon_rows(Ad, Bd, C, self.n_steps)
-        self._terminal(params, Ad, C, Phi_n, S_n)
-
-    def _horizon_rows(self, Ad: np.ndarray, Bd: np.ndarray, C: np.ndarray, n: int
-                      ) -> tuple[np.ndarray, np.ndarray]:
-        """Outputs at samples 1..n under a held u: ``y = G x + hu u + hl p`` per row.
-        Returns ``Ad^n`` and ``sum_{i<n} Ad^i`` for the terminal condition."""
-        G, hu, hl = np.empty((n, 2, 5)), np.empty((n, 2)), np.empty((n, 2))
-        Ak, S = np.eye(5), np.zeros((5, 5))  # Ad^k and sum_{i<k} Ad^i
-        for k in range(n):
-            S = S + Ak
-            Ak = Ad @ Ak
-            G[k], hu[k], hl[k] = C @ Ak, C @ S @ Bd[:, 0], C @ S @ Bd[:, 1]
-        G, hu, hl = G.reshape(-1, 5), hu.ravel(), hl.ravel()
-        lim = np.tile(self.limits, n)
-        if np.any(np.abs(hu) < 1e-15):
-            raise ValueError("horizon too short: the command has no effect on some sample")
-        # -lim <= G x + hu u + hl p <= lim  <=>  u in [lo_i, hi_i] (sign of hu decides)
-        inv = 1.0 / hu
-        up, dn = (lim * inv), (-lim * inv)
-        self._row_a = np.minimum(up, dn)  # lo_i = a_i - (G x + hl p)/hu
-        self._row_b = np.maximum(up, dn)  # hi_i = b_i - (G x + hl p)/hu
-        self._row_GT = np.ascontiguousarray((G * inv[:, None]).T)  # (5, rows): fast x @ GT
-        self._row_l = hl * inv
-        self.n_rows = len(hu)
-        return Ak, S
-
-    def _terminal(self, params: LFCParams, Ad: np.ndarray, C: np.ndarray, Phi_n: np.ndarray,
-                  S_n: np.ndarray) -> None:
-        """Terminal ellipsoid around the held command's equilibrium, and the room
-        that leaves the equilibrium: ``|u - eq_per_p * p| <= eq_half``."""
-        A, B = lfc_matrices(params)
-        self._q = -np.linalg.solve(A, B)            # x_eq = q[:, 0] u + q[:, 1] p
-        # Lyapunov weight: each state scaled by its size at the limits (1 pu of power,
-        # F for the frequencies, the ROCOF limit) so the ellipsoid fits the outputs' box
-        scale = np.array([1.0, 1.0, self.limits[0], self.limits[0], self.limits[1]])
-        self._P = solve_discrete_lyapunov(Ad.T, np.diag(scale ** -2.0))
-        sigma = np.sqrt(np.einsum("ij,jk,ik->i", C, np.linalg.inv(self._P), C))
-        self.rho = float(min(0.5 * self.limits[0] / sigma[0], self.limits[1] / sigma[1]))
-        self._eq_room = float(self.limits[0] - self.rho * sigma[0])  # |dw_eq| allowed
-        self._dw_eq = tuple(map(float, (C @ self._q)[0]))            # dw_eq per (u, p)
-        g_u, g_p = self._dw_eq
-        self._eq_half, self._eq_per_p = self._eq_room / abs(g_u), -g_p / g_u
-        # e = x_N - x_eq = E x + eu u + el p
-        self._E = Phi_n
-        self._eu = S_n @ self._Bd[:, 0] - self._q[:, 0]
-        self._el = S_n @ self._Bd[:, 1] - self._q[:, 1]
-        self._a_quad = float(self._eu @ self._P @ self._eu)
+        self.plants = box_plants(params, uncertainty)
+        cov = _estimate_covariance(params, noise_std) if noise_std is not None else None
+        self.kappa = math.sqrt(chi2.ppf(confidence, len(cov))) if cov is not None else 0.0
+        limits = np.array([relays.F, relays.rocof_limit]) * (1 - margin) * (1 - NUMERIC_MARGIN)
+        if trips_per_hour is not None:
+            check_positive("trips_per_hour", trips_per_hour)
+            kappa_r = -norm.ppf(trips_per_hour / (2 * 3600 * relay_rate))
+            limits = limits - kappa_r * np.asarray(noise_std, float)
+        fine = grid(horizon)
+        gains = [_curvature_gains(lfc_matrices(p)[0], output_matrix(), fine) for p in self.plants]
+        self.times = _design_grid(params, fine, gains, limits, tightening)
+        self.blocks = [_PlantBlock(p, self.times, fine, g, limits, self.load_bound, cov,
+                                   self.kappa) for p, g in zip(self.plants, gains)]
+        self.n_rows = 2 * len(self.times)
+        self.tau = max(b.tau for b in self.blocks)   # largest inter-sample tightening (pu, pu/s)
 
     def pack(self) -> np.ndarray:
         """The data array :func:`decide` reads (layout in the module's constants)."""
         head = np.zeros(HEAD)
-        head[:HEAD] = (self.u_min, self.u_max, self._eq_per_p, self._eq_half, self.rho,
-                       self._a_quad, self.n_rows, self.relays.F, self.relays.rocof_limit)
-        return np.concatenate([head, self._row_a, self._row_b, self._row_GT.T.ravel(),
-                               self._row_l, self._E.ravel(), self._el, self._eu,
-                               self._P.ravel()])
+        head[:] = (self.u_min, self.u_max, len(self.blocks), self.n_rows, P_MAX,
+                   self.relays.F, self.relays.rocof_limit)
+        return np.concatenate([head] + [b.pack() for b in self.blocks])
 
 
-def _l1_norms(Ad: np.ndarray, bl: np.ndarray, C: np.ndarray, n: int) -> np.ndarray:
-    """Sum over k of |C Ad^k bl|: the worst output deviation per pu of load deviation."""
-    total, v = np.zeros(2), bl.copy()
-    for _ in range(n):
-        total += np.abs(C @ v)
-        v = Ad @ v
-    return total
+def _design_grid(params: LFCParams, fine: np.ndarray, gains: list[np.ndarray],
+                 limits: np.ndarray, tightening: float) -> np.ndarray:
+    """The certificate's sample times: the coarsest subset of the graded grid
+    ``fine`` on which every plant's outputs move at most ``tightening`` times
+    their limits between samples (:func:`_merge_intervals`), for the design
+    model's derivative bound (on every 4th sample of ``fine`` after 0.05 s).
+    Only the spacing comes from here: each plant's inter-sample bound is then
+    proven on these times (:class:`_PlantBlock`)."""
+    A, B = lfc_matrices(params)
+    C = output_matrix()
+    q = -np.linalg.solve(A, B)
+    ref = fine[(fine <= 0.05) | (np.arange(len(fine)) % 4 == 0)]
+    E = _expm_at(A, ref)
+    rest = np.eye(5)[None] - E
+    V = _derivative_bound(A, B, C, C @ E, C @ rest @ q[:, 0], C @ rest @ q[:, 1], limits, q)
+    envelope = np.max([g @ V for g in gains], axis=0) / limits
+    return fine[_merge_intervals(fine, envelope, tightening)]
 
+
+class _PlantBlock:
+    """The rows, equilibrium room and terminal ellipsoid of one plant.
+
+    Attributes read by the cvxpy reference (:mod:`lfc.filters.cvxpy_certified`),
+    per level (``"new"``, ``"held"``): ``bounds`` (n, 2) the limits at each
+    sample, ``y0`` (2,) on the current outputs, ``eq_half`` on the command
+    around ``eq_per_p * p``, ``rho`` the terminal ellipsoid's radius in ``P``.
+    """
+
+    def __init__(self, plant: LFCParams, times: np.ndarray, fine: np.ndarray,
+                 gains: np.ndarray, limits: np.ndarray, load: float, cov: np.ndarray | None,
+                 kappa: float) -> None:
+        A, B = lfc_matrices(plant)
+        C = output_matrix()
+        q = -np.linalg.solve(A, B)                       # x_eq = q[:, 0] u + q[:, 1] p
+        l1 = _l1_norms(A, B[:, 1], C)
+        lim = limits - load * l1                          # the load (and its estimate) covered
+        if np.any(lim <= 0):
+            most = float(np.min(limits / l1))
+            raise ValueError(f"load_bound must be < {most:.4g} pu for these relays: the "
+                             "certificate tightens each limit by the load bound times the L1 "
+                             "norm of the load-to-output response (a conservative bound), which "
+                             "leaves nothing above that")
+        E = _expm_at(A, times)                            # (n, 5, 5)
+        G = C @ E                                         # y(t_k) = G x + hu u + hl p
+        rest = np.eye(5)[None] - E
+        hu, hl = C @ rest @ q[:, 0], C @ rest @ q[:, 1]
+        if np.any(np.abs(hu) < 1e-15):
+            raise ValueError("horizon too short: the command has no effect on some sample")
+        V = _derivative_bound(A, B, C, G, hu, hl, limits, q)
+        tau = _intersample(gains, V, fine, times)          # (n, 2) per sample
+        t_max, tau0 = tau.max(axis=0), tau[0]
+        self.tau = float(np.max(t_max / limits))
+        if cov is not None:                    # the state and load estimates' error
+            lim = lim - _error_bound(A, C, q[:, 1], cov, kappa)
+        # new commands: every sample tau_max plus its own tau inside, so that the
+        # trajectory stays tau_max inside between samples; the held one: tau_max
+        self.plant, self.times = plant, times
+        self.bounds = {"new": lim - t_max - tau, "held": np.broadcast_to(lim - t_max, tau.shape)}
+        self.rows = {level: _rows(hu, b) for level, b in self.bounds.items()}
+        self.G = (G / hu[..., None]).reshape(-1, 5)       # rows normalized by hu
+        self.l = (hl / hu).ravel()
+        # the current outputs: for [0, t_1] to stay tau_max (new) or 0 (held) inside
+        self.y0 = {"new": lim - t_max - tau0, "held": lim - tau0}
+        if np.any(self.y0["new"] <= 0):
+            raise ValueError("the tightenings (load, estimation error, relay noise, margin) "
+                             "leave nothing of the relay limits")
+        self._terminal(A, C, q, times[-1], lim, t_max, cov, kappa)
+
+    def _terminal(self, A, C, q, horizon, lim, t_max, cov, kappa) -> None:
+        """Continuous-time Lyapunov ellipsoid around the held command's equilibrium,
+        the room that leaves the equilibrium, and ``e_T = E x + eu u + el p``."""
+        lim_new = lim - 2 * t_max
+        scale = np.array([1.0, 1.0, lim_new[0], lim_new[0], lim_new[1]])
+        self.P = solve_continuous_lyapunov(A.T, -np.diag(scale ** -2.0))
+        sigma = np.sqrt(np.einsum("ij,jk,ik->i", C, np.linalg.inv(self.P), C))
+        self.E = expm(A * horizon)
+        self.eu, self.el = -self.E @ q[:, 0], -self.E @ q[:, 1]
+        self.a_quad = float(self.eu @ self.P @ self.eu)
+        dw_u, dw_p = (C @ q)[0]
+        error, eq_error = 0.0, 0.0
+        if cov is not None:   # the estimates' error moves e_T by [E, el] e, dw_eq by dw_p e_p
+            half = np.linalg.cholesky(cov)
+            m = np.column_stack([self.E, self.el]) @ half
+            error = kappa * math.sqrt(np.max(np.linalg.eigvalsh(m.T @ self.P @ m)))
+            eq_error = kappa * math.sqrt(cov[5, 5]) * abs(dw_p / dw_u)
+        self.eq_per_p = -dw_p / dw_u
+        self.rho, self.eq_half = {}, {}
+        for level, factor in (("new", 2.0), ("held", 1.0)):
+            room = lim - factor * t_max
+            rho = float(min(0.5 * room[0] / sigma[0], room[1] / sigma[1]))
+            self.rho[level] = rho - error
+            self.eq_half[level] = (room[0] - rho * sigma[0]) / abs(dw_u) - eq_error
+        if self.rho["new"] <= 0:
+            raise ValueError("the estimation error leaves no terminal set: lower noise_std or "
+                             "confidence")
+
+    def pack(self) -> np.ndarray:
+        """Header, then per output (frequency, ROCOF) its rows column by column
+        (``a`` and ``b`` new, ``a`` and ``b`` held, the five columns of ``G``,
+        ``l``; contiguous, so the compiled loop vectorizes), then the ellipsoid."""
+        head = np.zeros(BLOCK_HEAD)
+        head[:] = (self.eq_per_p, self.eq_half["new"], self.eq_half["held"], self.rho["new"],
+                   self.rho["held"], self.a_quad, *self.y0["new"], *self.y0["held"])
+        new, held = self.rows["new"], self.rows["held"]
+        parts = [head]
+        for o in range(2):   # rows alternate frequency, ROCOF: take every other one
+            parts += [new[0][o::2], new[1][o::2], held[0][o::2], held[1][o::2],
+                      *self.G[o::2].T, self.l[o::2]]
+        return np.concatenate(parts + [self.E.ravel(), self.el, self.eu, self.P.ravel()])
+
+
+def _rows(hu: np.ndarray, lim: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(a, b)``: ``-lim <= G x + hu u + hl p <= lim`` reads
+    ``a_i - s_i <= u <= b_i - s_i`` with ``s = (G x + hl p) / hu``; ``lim`` is (2,)
+    or one pair per sample (n, 2)."""
+    lim = np.broadcast_to(lim, hu.shape)
+    up, dn = lim / hu, -lim / hu
+    return np.minimum(up, dn).ravel(), np.maximum(up, dn).ravel()
+
+
+def _error_bound(A: np.ndarray, C: np.ndarray, q_p: np.ndarray, cov: np.ndarray,
+                 kappa: float) -> np.ndarray:
+    """How far the estimates' error ``e = (e_x, e_p)`` can move each output, at any
+    time of a held trajectory with a constant true load: the true trajectory is
+    the estimated one plus ``w(t) e`` with ``w(t) = [C e^{At}, C (I - e^{At}) q_p]``,
+    so over the error ellipsoid ``e' cov^-1 e <= kappa^2`` the shift is at most
+    ``sup_t kappa sqrt(w(t) cov w(t)')``.  On a grid of 0.1 ms to 0.2 s, 1 ms to
+    2 s and 10 ms to ``L1_HORIZON`` (finest where the fast modes move), plus 1 %
+    for between grid points."""
+    t = np.concatenate([np.arange(0.0, 0.2, 1e-4), np.arange(0.2, 2.0, 1e-3),
+                        np.arange(2.0, L1_HORIZON, 1e-2)])
+    E = _expm_at(A, t)
+    w = np.concatenate([C @ E, (C @ (np.eye(len(A))[None] - E) @ q_p)[..., None]], axis=2)
+    spread = w @ np.linalg.cholesky(cov)                        # (t, 2, 6)
+    return 1.01 * kappa * np.sqrt(np.max(np.sum(spread ** 2, axis=2), axis=0))
+
+
+def _derivative_bound(A: np.ndarray, B: np.ndarray, C: np.ndarray, G: np.ndarray,
+                      hu: np.ndarray, hl: np.ndarray, limits: np.ndarray,
+                      q: np.ndarray) -> np.ndarray:
+    """``V >= |x'|`` entrywise, ``x' = A x + B [u; p]``, over every state and
+    command whose held outputs satisfy the untightened limits at the samples of
+    ``G, hu, hl`` (a superset of the certified ones) with ``|p| <= P_MAX`` and
+    the equilibrium's frequency inside the limit: ten linear programs."""
+    Gz = np.concatenate([G.reshape(-1, 5), hu.reshape(-1, 1), hl.reshape(-1, 1)], axis=1)
+    lim = np.tile(limits, len(G))
+    dw_u, dw_p = (C @ q)[0]
+    eq = np.array([[0, 0, 0, 0, 0, dw_u, dw_p], [0, 0, 0, 0, 0, -dw_u, -dw_p]])
+    a_ub = np.vstack([Gz, -Gz, eq])
+    b_ub = np.concatenate([lim, lim, [limits[0], limits[0]]])
+    bounds = [(None, None)] * 6 + [(-P_MAX, P_MAX)]
+    M = np.hstack([A, B])
+    V = np.zeros(len(A))
+    for i in range(len(A)):
+        for sign in (1.0, -1.0):
+            res = linprog(-sign * M[i], A_ub=a_ub, b_ub=b_ub, bounds=bounds, method="highs")
+            if res.status != 0:
+                raise RuntimeError(f"bounding the state derivative failed: {res.message}")
+            V[i] = max(V[i], -res.fun)
+    return V
+
+
+def _curvature_gains(A: np.ndarray, C: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """``K_k`` (per interval of ``times``, the first from 0; shape (n, 2, 5)) with
+    ``|y''| <= K_k V`` on the interval whenever ``|x'(0)| <= V`` entrywise.
+
+    Held input: ``y''(t) = C A e^{At} v`` with ``v = x'(0)``, and on
+    ``[t_k, t_k + d]``, ``|C A e^{At} v| <= |C A e^{A t_k}| e^{|A| d} |v|``
+    entrywise (``|e^{As}| <= e^{|A| s}``)."""
+    starts = np.concatenate([[0.0], times[:-1]])
+    growth = _expm_at(np.abs(A), times - starts)          # e^{|A| d}
+    return np.abs(C @ A @ _expm_at(A, starts)) @ growth
+
+
+def _merge_intervals(times: np.ndarray, curvature: np.ndarray, tightening: float
+                     ) -> np.ndarray:
+    """The coarsest subset of ``times`` whose steps ``d`` keep ``D2 d^2 / 8``
+    within ``tightening`` (``curvature``: ``D2`` over each interval of ``times``
+    divided by the limit, (n, 2)): consecutive intervals are merged greedily,
+    ``D2`` over a merged step being the largest of its parts'."""
+    keep, start, worst = [], 0.0, 0.0
+    for k, t in enumerate(times):
+        worst = max(worst, float(np.max(curvature[k])))
+        if k + 1 < len(times):
+            nxt = max(worst, float(np.max(curvature[k + 1])))
+            if nxt * (times[k + 1] - start) ** 2 / 8 <= tightening:
+                continue
+        keep.append(k)
+        start, worst = t, 0.0
+    return np.array(keep)
+
+
+def _intersample(gains: np.ndarray, V: np.ndarray, fine: np.ndarray,
+                 times: np.ndarray) -> np.ndarray:
+    """How far each output can move between two samples (pu, pu/s).
+
+    For the interval ending at sample k (the first starts at the current state),
+    of length d: ``D2 d^2 / 8``, ``D2`` the largest of :func:`_curvature_gains`
+    ``@ V`` over the intervals of the finer grid ``fine`` it spans (``times`` is
+    a subset of ``fine``).  Returns, per sample and output (n, 2), the larger
+    of its two intervals' bounds (row 0 also bounds the first interval).  If an
+    output's extreme between two samples is interior, ``y' = 0`` there and it
+    is at most ``d / 2`` from one of them: ``|y| <= max(|y_k|, |y_k+1|) +
+    D2 d^2 / 8``."""
+    d2_fine = gains @ V                                     # (n_fine, 2)
+    ends = np.searchsorted(fine, times - 1e-12) + 1         # fine[ends - 1] == times
+    d2 = np.maximum.reduceat(d2_fine, np.concatenate([[0], ends[:-1]]), axis=0)
+    steps = np.diff(np.concatenate([[0.0], times]))
+    tau = d2 * steps[:, None] ** 2 / 8
+    return np.maximum(tau, np.vstack([tau[1:], tau[-1:]]))
+
+
+def _expm_at(A: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """``e^{A t}`` for every ``t`` of ``times``: shape (len(times), n, n); by the
+    eigendecomposition when ``A``'s eigenvectors are well conditioned, else
+    ``expm`` at each distinct time."""
+    w, V = np.linalg.eig(A)
+    if np.linalg.cond(V) < 1e6:
+        return np.real(np.einsum("ij,tj,jk->tik", V, np.exp(np.outer(times, w)),
+                                 np.linalg.inv(V)))
+    distinct, back = np.unique(times, return_inverse=True)
+    return np.array([expm(A * t) for t in distinct])[back]
+
+
+def _l1_norms(A: np.ndarray, bl: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """``int_0^inf |C e^{At} bl| dt`` per output: the largest output deviation per pu
+    of load deviation (trapezoidal over ``L1_HORIZON`` s at 1 ms, plus 1 %)."""
+    t = np.arange(0.0, L1_HORIZON, 1e-3)
+    w, V = np.linalg.eig(A)
+    resp = np.real((C @ V) @ (np.exp(np.outer(w, t)) * (np.linalg.solve(V, bl))[:, None]))
+    return 1.01 * np.trapezoid(np.abs(resp), t, axis=1)
+
+
+def _estimate_covariance(params: LFCParams, noise_std: tuple[float, float]) -> np.ndarray:
+    """The steady-state error covariance (6 x 6: states and load) of the Kalman
+    filter ``simulate(estimator="kalman", noise_std=noise_std)`` uses."""
+    from lfc.estimation import KalmanFilter
+    kf = KalmanFilter(params, 0.01, meas_std=tuple(s if s > 0 else d for s, d in
+                                                    zip(noise_std, (1e-4, 1e-3))))
+    return kf.posterior_covariance
 
 
 class CertifiedFilter(Backend):
@@ -186,42 +461,38 @@ class CertifiedFilter(Backend):
     params : LFCParams
         Design model.
     relays : RelaySettings
-    period : float
-        Time between calls (s); the command is held in between. Default 0.01.
-    horizon : float
-        Look-ahead before the terminal set (s). Default 4.
-    load_bound : float
-        Load deviation covered (pu), >= 0. Default 0.
-    margin : float
-        Extra fractional tightening of the limits, in [0, 1). Default 0.
-    u_min, u_max : float
-        Actuator limits (pu).
+    horizon, load_bound, margin, uncertainty, noise_std, confidence, trips_per_hour,
+    relay_rate, u_min, u_max
+        As in :class:`CertifiedSet` (defaults: 8 s, 0, 0, 0, None, 0.9999, None,
+        1 kHz, unlimited).
     """
 
     name, method_id = "certified", 1
 
-    def __init__(self, params: LFCParams, relays: RelaySettings, *, period: float = 0.01,
-                 horizon: float = 4.0, load_bound: float = 0.0, margin: float = 0.0,
-                 u_min: float = -math.inf, u_max: float = math.inf) -> None:
+    def __init__(self, params: LFCParams, relays: RelaySettings, *, u_min: float = -math.inf,
+                 u_max: float = math.inf, **options) -> None:
         super().__init__(params, relays)
         check_limits(u_min, u_max)
-        self.cert = CertifiedSet(params, relays, period=period, horizon=horizon,
-                                 load_bound=load_bound, margin=margin, u_min=u_min,
-                                 u_max=u_max)
+        self.cert = CertifiedSet(params, relays, u_min=u_min, u_max=u_max, **options)
         self.data, self.jit = self.cert.pack(), True
 
     def describe(self) -> str:
         c = self.cert
         return (f"SafetyFilter(method='certified', load_bound={c.load_bound}, "
-                f"margin={c.margin}, u_min={c.u_min}, u_max={c.u_max})")
+                f"margin={c.margin}, uncertainty={c.uncertainty!r}, "
+                f"noise_std={c.noise_std!r}, confidence={c.confidence}, "
+                f"trips_per_hour={c.trips_per_hour}, u_min={c.u_min}, u_max={c.u_max})")
 
     def reason(self, flags: int) -> str:
         if flags & INVALID:
             return ("invalid input (non-finite state, command or load); last certified "
                     "command held")
         if flags & OUTSIDE:
-            return ("no command is certified from this state (load beyond load_bound, model "
-                    "or estimation error); last certified command held")
+            return ("nothing is certified and the last command fails its own check (load "
+                    "beyond load_bound, a plant outside the box or a larger estimation "
+                    "error); last certified command held")
+        if flags & ACTIVE and not flags & BIND_CERT:
+            return "no new command is certified from this state; last certified command held"
         return "command clipped to the certified interval" if flags & ACTIVE else ""
 
     def details(self, d0: float, d1: float, flags: int) -> dict:
@@ -229,9 +500,38 @@ class CertifiedFilter(Backend):
 
 
 @inline
-def _terminal_deviation(fd: np.ndarray, t0: int, x: np.ndarray, p: float) -> tuple:
-    """``e = E x + el p``: the deviation from the held command's equilibrium at the
-    horizon's end, less its command part (5 values)."""
+def _output_interval(fd: np.ndarray, r0: int, m: int, x: np.ndarray, p: float,
+                     held: bool) -> tuple:
+    """The interval one output's ``m`` rows (from ``fd[r0]``) allow: ``(lo, hi)``."""
+    a0 = r0 + (2 * m if held else 0)
+    g0 = r0 + 4 * m
+    a, b = fd[a0:a0 + m], fd[a0 + m:a0 + 2 * m]        # views: the loop reads them in step
+    g_0, g_1, g_2 = fd[g0:g0 + m], fd[g0 + m:g0 + 2 * m], fd[g0 + 2 * m:g0 + 3 * m]
+    g_3, g_4, g_l = fd[g0 + 3 * m:g0 + 4 * m], fd[g0 + 4 * m:g0 + 5 * m], fd[g0 + 5 * m:g0 + 6 * m]
+    x0, x1, x2, x3, x4 = x[0], x[1], x[2], x[3], x[4]
+    lo, hi = -np.inf, np.inf
+    for i in range(m):
+        s = g_0[i] * x0 + g_1[i] * x1 + g_2[i] * x2 + g_3[i] * x3 + g_4[i] * x4 + g_l[i] * p
+        lo, hi = max(lo, a[i] - s), min(hi, b[i] - s)
+    return lo, hi
+
+
+@inline
+def _block_interval(fd: np.ndarray, b0: int, n: int, x: np.ndarray, p: float,
+                    held: bool) -> tuple:
+    """One plant's certified interval per output, ``(lo_f, hi_f, lo_r, hi_r)``
+    (pu; empty where ``lo > hi``), at the level for new commands or the held one."""
+    inf = np.inf
+    if (abs(x[3]) > fd[b0 + (Y0_F_HELD if held else Y0_F)]
+            or abs(x[4]) > fd[b0 + (Y0_R_HELD if held else Y0_R)]):
+        return inf, -inf, inf, -inf                       # the current outputs too close
+    m = n // 2
+    lo_f, hi_f = _output_interval(fd, b0 + BLOCK_HEAD, m, x, p, held)
+    lo_r, hi_r = _output_interval(fd, b0 + BLOCK_HEAD + 10 * m, m, x, p, held)
+    centre = fd[b0 + EQ_PER_P] * p                        # room at the equilibrium
+    half = fd[b0 + (EQ_HALF_HELD if held else EQ_HALF)]
+    lo_f, hi_f = max(lo_f, centre - half), min(hi_f, centre + half)
+    t0 = b0 + BLOCK_HEAD + 10 * n                         # terminal ellipsoid
     e0, e1, e2, e3, e4 = (p * fd[t0 + 25], p * fd[t0 + 26], p * fd[t0 + 27], p * fd[t0 + 28],
                           p * fd[t0 + 29])
     for k in range(5):
@@ -240,7 +540,39 @@ def _terminal_deviation(fd: np.ndarray, t0: int, x: np.ndarray, p: float) -> tup
         e2 += fd[t0 + 10 + k] * x[k]
         e3 += fd[t0 + 15 + k] * x[k]
         e4 += fd[t0 + 20 + k] * x[k]
-    return e0, e1, e2, e3, e4
+    e = (e0, e1, e2, e3, e4)
+    rho = fd[b0 + (RHO_HELD if held else RHO)]
+    qb, qc = 0.0, -rho * rho
+    for r in range(5):
+        pe = 0.0
+        for k in range(5):
+            pe += fd[t0 + 35 + 5 * r + k] * e[k]
+        qb += 2.0 * pe * fd[t0 + 30 + r]
+        qc += pe * e[r]
+    a_quad = fd[b0 + A_QUAD]
+    disc = qb * qb - 4 * a_quad * qc
+    if disc < 0:
+        return inf, -inf, inf, -inf
+    root = math.sqrt(disc)
+    e_lo, e_hi = (-qb - root) / (2 * a_quad), (-qb + root) / (2 * a_quad)
+    return max(lo_f, e_lo), min(hi_f, e_hi), max(lo_r, e_lo), min(hi_r, e_hi)
+
+
+@inline
+def _interval(fd: np.ndarray, x: np.ndarray, p: float, held: bool) -> tuple:
+    """The interval certified for every plant, per output: ``(lo_f, hi_f, lo_r, hi_r)``."""
+    inf = np.inf
+    n = int(fd[N_ROWS])
+    stride = BLOCK_HEAD + 10 * n + 60
+    lo_f, hi_f, lo_r, hi_r = -inf, inf, -inf, inf
+    if abs(p) > fd[P_LIMIT]:
+        return inf, -inf, inf, -inf
+    for j in range(int(fd[N_PLANTS])):
+        a, b, c, d = _block_interval(fd, HEAD + j * stride, n, x, p, held)
+        lo_f, hi_f, lo_r, hi_r = max(lo_f, a), min(hi_f, b), max(lo_r, c), min(hi_r, d)
+        if max(lo_f, lo_r) > min(hi_f, hi_r):   # already empty: the other plants can't help
+            break
+    return lo_f, hi_f, lo_r, hi_r
 
 
 @inline
@@ -248,7 +580,7 @@ def decide(fd: np.ndarray, x: np.ndarray, u_ref: float, p: float, mem: np.ndarra
     """One call of the certified filter (module docstring).
 
     ``fd`` is :meth:`CertifiedSet.pack`'s data, ``mem[0]`` the last certified
-    command (held when none is certified).  Returns ``(u, flags, h_freq,
+    command (held when no new one is certified).  Returns ``(u, flags, h_freq,
     h_rocof, margin_freq, margin_rocof, y_freq, y_rocof, lo, hi)``; the margins
     are the distances from ``u`` to the ends of each relay's own interval.
     """
@@ -260,41 +592,19 @@ def decide(fd: np.ndarray, x: np.ndarray, u_ref: float, p: float, mem: np.ndarra
         u = mem[0]
         return u, INVALID | (ACTIVE if u != u_ref else 0), nan, nan, nan, nan, nan, nan, \
             nan, nan
-    n = int(fd[N_ROWS])
-    a0, b0, g0, l0 = HEAD, HEAD + n, HEAD + 2 * n, HEAD + 7 * n
-    lo_f, hi_f, lo_r, hi_r = -np.inf, np.inf, -np.inf, np.inf   # per output
-    for i in range(0, n, 2):                  # rows alternate: frequency, ROCOF
-        s_f, s_r = 0.0, 0.0
-        for k in range(5):
-            s_f += fd[g0 + 5 * i + k] * x[k]
-            s_r += fd[g0 + 5 * i + 5 + k] * x[k]
-        s_f, s_r = s_f + p * fd[l0 + i], s_r + p * fd[l0 + i + 1]
-        lo_f, hi_f = max(lo_f, fd[a0 + i] - s_f), min(hi_f, fd[b0 + i] - s_f)
-        lo_r, hi_r = max(lo_r, fd[a0 + i + 1] - s_r), min(hi_r, fd[b0 + i + 1] - s_r)
-    centre = fd[EQ_PER_P] * p                                # room at the equilibrium
-    lo_f, hi_f = max(lo_f, centre - fd[EQ_HALF]), min(hi_f, centre + fd[EQ_HALF])
-    t0 = l0 + n                                              # terminal ellipsoid
-    e = _terminal_deviation(fd, t0, x, p)
-    qb, qc = 0.0, -fd[RHO] ** 2
-    for r in range(5):
-        pe = 0.0
-        for k in range(5):
-            pe += fd[t0 + 35 + 5 * r + k] * e[k]
-        qb += 2.0 * pe * fd[t0 + 30 + r]
-        qc += pe * e[r]
-    disc = qb * qb - 4 * fd[A_QUAD] * qc
-    if disc >= 0:
-        root = math.sqrt(disc)
-        e_lo, e_hi = (-qb - root) / (2 * fd[A_QUAD]), (-qb + root) / (2 * fd[A_QUAD])
-    else:
-        e_lo, e_hi = np.inf, -np.inf
-    lo_f, hi_f, lo_r, hi_r = max(lo_f, e_lo), min(hi_f, e_hi), max(lo_r, e_lo), min(hi_r, e_hi)
+    lo_f, hi_f, lo_r, hi_r = _interval(fd, x, p, False)
     lo = max(lo_f, lo_r, fd[U_MIN])
     hi = min(hi_f, hi_r, fd[U_MAX])
     certified = lo <= hi
-    u = min(max(u_ref, lo), hi) if certified else mem[0]
-    mem[0] = u
     flags = 0
+    if certified:
+        u = min(max(u_ref, lo), hi)
+    else:                                   # hold; check the held command at its own level
+        u = mem[0]
+        lo_f, hi_f, lo_r, hi_r = _interval(fd, x, p, True)
+        if not (max(lo_f, lo_r) <= u <= min(hi_f, hi_r)):
+            flags |= OUTSIDE
+    mem[0] = u
     if u != u_ref:
         flags |= ACTIVE
         if certified:
@@ -302,9 +612,7 @@ def decide(fd: np.ndarray, x: np.ndarray, u_ref: float, p: float, mem: np.ndarra
             for lim, bit in ((fd[U_MIN], BIND_UMIN), (fd[U_MAX], BIND_UMAX)):
                 if math.isfinite(lim) and abs(u - lim) <= 1e-9 * (1 + abs(lim)):
                     flags |= bit
-    if not certified:
-        flags |= OUTSIDE
-    m_f = min(u - lo_f, hi_f - u) if certified else nan
-    m_r = min(u - lo_r, hi_r - u) if certified else nan
+    m_f = min(u - lo_f, hi_f - u)
+    m_r = min(u - lo_r, hi_r - u)
     return (u, flags, fd[F_LIM] ** 2 - x[3] ** 2, fd[R_LIM] ** 2 - x[4] ** 2, m_f, m_r, x[3],
             x[4], lo, hi)
