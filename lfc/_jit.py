@@ -9,6 +9,12 @@ its scratch space), so it needs none, and counting references on every array the
 inlined functions touch cost half of its time (measured: 28.8 against 14.1 ns
 per scenario-step with the paper's filter).
 
+``maxnum`` / ``minnum``: LLVM's ``maxnum`` / ``minnum`` of two floats (the larger
+/ smaller; a NaN argument is ignored).  Written with Python's ``max`` / ``min``,
+a running maximum over an array is not vectorized by LLVM; with these it is
+(the certified filter's row loop: 1.95 against 1.35 ns per row, measured on
+575 rows).
+
 The cache.  numba keys a cached function on its own source file only, but these
 functions inline each other across modules (the engine inlines the filters), so
 an edit of one file would leave its callers' machine code stale.  Importing this
@@ -24,7 +30,9 @@ import hashlib
 from pathlib import Path
 
 import numba as nb
-from numba.core import caching
+from llvmlite import ir
+from numba.core import caching, types
+from numba.extending import intrinsic
 
 _PACKAGE = Path(__file__).resolve().parent
 
@@ -59,3 +67,20 @@ if _PackageCacheLocator not in caching.CacheImpl._locator_classes:
 jit = nb.njit(cache=True, nogil=True)
 inline = nb.njit(cache=True, nogil=True, inline="always")
 kernel = nb.njit(cache=True, nogil=True, _nrt=False)
+
+
+def _float_intrinsic(name: str):
+    """A numba intrinsic calling the LLVM intrinsic ``name`` on two float64s."""
+    @intrinsic
+    def call(typingctx, a, b):
+        def codegen(context, builder, signature, args):
+            double = ir.DoubleType()
+            fn = builder.module.declare_intrinsic(name, [double],
+                                                  ir.FunctionType(double, [double, double]))
+            return builder.call(fn, args)
+        return types.float64(types.float64, types.float64), codegen
+    return call
+
+
+maxnum = _float_intrinsic("llvm.maxnum")
+minnum = _float_intrinsic("llvm.minnum")

@@ -41,6 +41,9 @@ READINGS = {"outside_rule": OUTSIDE_RULES, "conflict": CONFLICT_RULES,
 CHIRP_F0 = 0.1  # Hz, where every chirp starts
 PLANT = ("M", "D", "tau_g", "tau_t", "droop")   # optional columns: the row's own plant
 NOISE = ("noise_w", "noise_rocof")             # optional: measurement noise std (pu, pu/s)
+FLAGS = ("declare_noise", "relay_noise")       # optional booleans (simulate_batch)
+FILTER_COLUMNS = ("alpha", "Ts", "method", "uncertainty", "declare_noise", "trips_per_hour",
+                  *NOISE, "outside_rule", "conflict", "prediction")  # what selects a filter
 BATCH_METRICS = ("tripped", "first_trip_relay", "first_trip_t", "max_abs_dw_meas",
                  "max_abs_rocof_meas", "scc_active_fraction", "max_abs_modification",
                  "mean_abs_modification", "alarms", "final_abs_dw_meas")
@@ -113,6 +116,37 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
         if bad.any():
             raise ValueError(f"column {col!r} must be finite and {what} (or NaN); row "
                              f"{scenarios.index[bad][0]!r} has {scenarios[col][bad].iloc[0]!r}")
+    if "uncertainty" in scenarios.columns:
+        box = pd.to_numeric(scenarios["uncertainty"], errors="coerce")
+        bad = scenarios["uncertainty"].notna() & ~((box >= 0) & (box < 1))
+        if bad.any():
+            raise ValueError(f"column 'uncertainty' must be in [0, 1) or NaN; row "
+                             f"{scenarios.index[bad][0]!r} has "
+                             f"{scenarios['uncertainty'][bad].iloc[0]!r}")
+    if "trips_per_hour" in scenarios.columns:
+        rate = pd.to_numeric(scenarios["trips_per_hour"], errors="coerce")
+        declared = (scenarios["declare_noise"].astype(bool) if "declare_noise" in scenarios
+                    else pd.Series(False, scenarios.index))
+        bad = scenarios["trips_per_hour"].notna() & ~((rate > 0) & np.isfinite(rate) & declared)
+        if bad.any():
+            raise ValueError(f"column 'trips_per_hour' must be finite and > 0 (or NaN), on rows "
+                             f"with declare_noise; row {scenarios.index[bad][0]!r} has "
+                             f"{scenarios['trips_per_hour'][bad].iloc[0]!r}")
+    noisy = np.zeros(len(scenarios), bool)
+    for col in NOISE:
+        if col in scenarios.columns:
+            noisy |= pd.to_numeric(scenarios[col], errors="coerce").fillna(0).to_numpy() > 0
+    for col in FLAGS:
+        if col not in scenarios.columns:
+            continue
+        bad = ~scenarios[col].isin([True, False, 0, 1])
+        if bad.any():
+            raise ValueError(f"column {col!r} must be True or False; row "
+                             f"{scenarios.index[bad][0]!r} has {scenarios[col][bad].iloc[0]!r}")
+        bad = scenarios[col].astype(bool).to_numpy() & ~noisy
+        if bad.any():
+            raise ValueError(f"column {col!r} is True on row {scenarios.index[bad][0]!r}, which "
+                             f"has no measurement noise ({', '.join(NOISE)} all 0)")
     if "seed" in scenarios.columns:
         seeds = pd.to_numeric(scenarios["seed"], errors="coerce")
         bad = ~(np.isfinite(seeds) & (seeds == np.round(seeds)) & (seeds >= 0))
@@ -133,14 +167,14 @@ def run_chunk(params: LFCParams, scenarios: pd.DataFrame, duration: float,
     check_timing(duration, dt, control_period)
     sc = Scenarios(params, duration=duration, dt=dt, control_period=control_period,
                    relays=relays)
-    filters: dict = {}
     for row in scenarios.to_dict("records"):
         signal = scenario_signal(row, duration)
         channel = {"pc": "pc_attack", "wref": "wref_attack", "load": "load"}[row["channel"]]
         noise = tuple(float(row.get(c, 0.0)) for c in NOISE)
-        sc.add(plant=_plant(params, row), scc=_filter(params, relays, row, filters),
+        sc.add(plant=_plant(params, row), scc=_filter(params, relays, row),
                estimator="kalman" if any(noise) else None, noise_std=noise,
-               seed=int(row.get("seed", 0)), **({channel: signal} if signal else {}))
+               seed=int(row.get("seed", 0)), relay_noise=bool(row.get("relay_noise", False)),
+               **({channel: signal} if signal else {}))
     run = sc.run()
     m = dict(zip(METRICS, run.metrics.T))
     tripped = ~np.isnan(m["first_trip_t"])
@@ -164,9 +198,13 @@ def _plant(params: LFCParams, row: dict) -> LFCParams:
     return replace(params, **own) if own else params
 
 
-def _filter(params: LFCParams, relays: RelaySettings, row: dict, cache: dict
-            ) -> SafetyFilter | None:
-    """The row's filter (None without SCC), one object per distinct setting."""
+_BUILT: dict = {}   # filters built in this process, by setting (a certified box takes seconds)
+
+
+def _filter(params: LFCParams, relays: RelaySettings, row: dict) -> SafetyFilter | None:
+    """The row's filter (None without SCC): one object per distinct setting and
+    process, kept for later chunks (:func:`_execute` builds them before the
+    workers fork, so they inherit them)."""
     if pd.isna(row["alpha"]):
         return None
     method = row.get("method", "paper")
@@ -177,12 +215,16 @@ def _filter(params: LFCParams, relays: RelaySettings, row: dict, cache: dict
         noise = tuple(float(row.get(c, 0.0)) for c in NOISE)
         declared = bool(row.get("declare_noise", False)) and any(noise)
         box = row.get("uncertainty")
+        rate = row.get("trips_per_hour")
         options = {"uncertainty": 0.0 if box is None or pd.isna(box) else float(box),
-                   "noise_std": noise if declared else None}
-    key = (method, tuple(sorted(options.items())))
-    if key not in cache:
-        cache[key] = SafetyFilter(params, relays, method=method, **options)
-    return cache[key]
+                   "noise_std": noise if declared else None,
+                   "trips_per_hour": None if rate is None or pd.isna(rate) else float(rate)}
+    key = (params, relays, method, tuple(sorted(options.items())))
+    if key not in _BUILT:
+        if len(_BUILT) >= 64:
+            _BUILT.clear()
+        _BUILT[key] = SafetyFilter(params, relays, method=method, **options)
+    return _BUILT[key]
 
 
 def simulate_batch(params: LFCParams, scenarios: pd.DataFrame, *, duration: float,
@@ -211,7 +253,10 @@ def simulate_batch(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
         > 0: the generator side uses a Kalman estimate, as
         ``simulate(estimator="kalman")`` does), and the certified filter's
         ``uncertainty`` (its plant box, NaN or 0: the design model only) and
-        ``declare_noise`` (True: it covers the row's noise, ``noise_std``).  A row equals
+        ``declare_noise`` (True: it covers the row's noise, ``noise_std``) with
+        its ``trips_per_hour`` (NaN: none), and
+        ``relay_noise`` (True: the relays read through the row's noise too, as
+        ``simulate(relay_noise=True)``).  A row equals
         :func:`lfc.simulate` with the same plant, noise and seed.  Other
         columns are carried through.
     duration, dt, control_period : float
@@ -281,8 +326,12 @@ def _execute(todo: list, args: tuple, executor: Executor | None):
         for i, chunk, path in todo:
             yield finish(i, run_chunk(params, chunk, duration, relays, dt, cp), path)
         return
-    if executor is None:   # load the compiled code once, before the workers fork
+    if executor is None:   # compiled code and filters once, before the workers fork
         run_chunk(params, todo[0][1].iloc[:1], duration, relays, dt, cp)
+        for _, chunk, _ in todo:
+            for row in chunk.drop_duplicates(
+                    subset=[c for c in FILTER_COLUMNS if c in chunk]).to_dict("records"):
+                _filter(params, relays, row)
     pool = executor or ProcessPoolExecutor(max_workers=os.cpu_count() or 1)
     try:
         futures = {pool.submit(run_chunk, params, chunk, duration, relays, dt, cp): (i, path)

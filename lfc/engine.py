@@ -114,13 +114,16 @@ def _run(n_steps: int, ratio: int, dt: float, k_i_period: float, ad: np.ndarray,
          params: np.ndarray, offsets: np.ndarray, st: np.ndarray, sv: np.ndarray,
          noise: np.ndarray, ka: np.ndarray, kb: np.ndarray, kc: np.ndarray, kg: np.ndarray,
          kdim: np.ndarray, methods: np.ndarray, fdata: np.ndarray, foff: np.ndarray,
-         limits: np.ndarray, delays: np.ndarray, stop_on_trip: bool, metrics: np.ndarray,
+         limits: np.ndarray, delays: np.ndarray, relay_noise: np.ndarray, stop_on_trip: bool,
+         metrics: np.ndarray,
          trace_x: np.ndarray, trace_ctrl: np.ndarray, trace_trips: np.ndarray,
          ends: np.ndarray, work: np.ndarray) -> None:
     """Advance every scenario from equilibrium for ``n_steps`` plant steps.
 
     ``index`` (N, 5): each scenario's plant, Kalman filter (-1: none), noise
-    table row (-1: none), filter (-1: none) and load feed-forward (0/1).
+    table row (-1: none), filter (-1: none) and load feed-forward (0/1);
+    ``relay_noise`` (N, 3) the std of the relays' own measurement noise on
+    ``(dw_meas, rocof_meas)`` (pu, pu/s; drawn at every plant step) and its seed.
     Writes ``metrics`` (N, len(METRICS)) and, when the trace arrays have rows
     (N = 1), every state, control sample and trip; ``ends`` the last sample kept.
     ``work`` (8, N_KF) is scratch space: the kernel allocates nothing.
@@ -149,6 +152,10 @@ def _run(n_steps: int, ratio: int, dt: float, k_i_period: float, ad: np.ndarray,
         active = alarms = outside = 0
         end = n_steps
         stopped = False
+        r0, r1 = relay_noise[i, 0], relay_noise[i, 1]
+        noisy_relays = r0 > 0.0 or r1 > 0.0
+        if noisy_relays:
+            np.random.seed(int(relay_noise[i, 2]))
         trips = relay_sample(0.0, 0.0, 0.0, limits, delays, start, due)   # sample 0 (x = 0)
         if trace_x.shape[0]:
             trace_trips[0] = trips
@@ -185,7 +192,12 @@ def _run(n_steps: int, ratio: int, dt: float, k_i_period: float, ad: np.ndarray,
                 n4 = A[4, 0] * x0 + A[4, 1] * x1 + A[4, 2] * x2 + A[4, 3] * x3 + A[4, 4] * x4 \
                     + Bu[4] * u + Bl[4] * pl
                 x0, x1, x2, x3, x4 = n0, n1, n2, n3, n4
-                trips = relay_sample((k + 1) * dt, x3, x4, limits, delays, start, due)
+                if noisy_relays:
+                    trips = relay_sample((k + 1) * dt, x3 + r0 * np.random.standard_normal(),
+                                         x4 + r1 * np.random.standard_normal(), limits, delays,
+                                         start, due)
+                else:
+                    trips = relay_sample((k + 1) * dt, x3, x4, limits, delays, start, due)
                 if trace_x.shape[0]:
                     trace_x[k + 1, 0], trace_x[k + 1, 1], trace_x[k + 1, 2] = x0, x1, x2
                     trace_x[k + 1, 3], trace_x[k + 1, 4] = x3, x4
@@ -347,6 +359,7 @@ class Scenarios:
         self._plants, self._kf, self._filters = _Table(), _Table(), _Table()
         self._rows: list[tuple] = []
         self._noise: list[np.ndarray] = []
+        self._relay_noise: list[tuple] = []
         self._sig: list[tuple] = []
         self._st: list[np.ndarray] = []
         self._sv: list[np.ndarray] = []
@@ -355,7 +368,7 @@ class Scenarios:
     def add(self, *, plant: LFCParams | None = None, pc_attack=None, wref_attack=None,
             load=None, scc: SafetyFilter | None = None, estimator=None,
             noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0,
-            load_feedforward: bool = False) -> int:
+            load_feedforward: bool = False, relay_noise: bool = False) -> int:
         """One scenario (arguments as in :func:`lfc.simulate`; ``plant`` defaults
         to the design model).  Returns its row number."""
         plant = plant or self.design
@@ -365,6 +378,9 @@ class Scenarios:
                                                    else ("kalman", tuple(noise_std)),
                                                    lambda: kf)
         noisy = check_noise(noise_std)
+        if relay_noise and not noisy:
+            raise ValueError("relay_noise=True needs noise_std > 0 (the relays' measurement "
+                             "noise)")
         if noisy:
             self._noise.append(make_noise(noise_std, self.n_ctrl, seed))
         f_i = -1 if scc is None else self._filters.index(id(scc), lambda: scc)
@@ -376,6 +392,7 @@ class Scenarios:
         self._n_samples += len(st)
         self._rows.append((p_i, e_i, len(self._noise) - 1 if noisy else -1, f_i,
                            int(load_feedforward)))
+        self._relay_noise.append((*(noise_std if relay_noise else (0.0, 0.0)), seed))
         return len(self._rows) - 1
 
     def run(self, *, trace: bool = False, stop_on_trip: bool = False) -> Run:
@@ -404,8 +421,9 @@ class Scenarios:
         tc = np.full((self.n_ctrl if trace else 0, N_CTRL), np.nan)
         _run(self.n_steps, self.ratio, self.dt, self.design.k_i * self.period, ad, bu, bl,
              np.array(self._rows, np.int64).reshape(n, 5), kinds, params, offsets, st, sv,
-             noise, ka, kb, kc, kg, kdim, methods, fdata, foff, limits, delays, stop_on_trip,
-             metrics, tx, tc, tt, ends, np.zeros((8, N_KF)))
+             noise, ka, kb, kc, kg, kdim, methods, fdata, foff, limits, delays,
+             np.array(self._relay_noise, float).reshape(n, 3), stop_on_trip, metrics, tx, tc,
+             tt, ends, np.zeros((8, N_KF)))
         return Run(metrics, ends, tx, tc, tt)
 
 

@@ -108,7 +108,7 @@ def simulate(params: LFCParams, *, duration: float, pc_attack: Signal | None = N
              scc: SafetyFilter | None = None, relays: RelaySettings | None = None,
              estimator=None, noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0,
              dt: float = 1e-3, control_period: float = 0.01, stop_on_trip: bool = False,
-             load_feedforward: bool = False) -> SimResult:
+             load_feedforward: bool = False, relay_noise: bool = False) -> SimResult:
     """Simulate the closed loop from equilibrium.
 
     Parameters
@@ -134,7 +134,7 @@ def simulate(params: LFCParams, *, duration: float, pc_attack: Signal | None = N
         (its measurement-noise model taken from ``noise_std`` where > 0).
     noise_std : (float, float)
         Std of white noise on the controller's ``dw_meas`` (pu) and
-        ``rocof_meas`` (pu/s) readings. The relays see the noise-free signals.
+        ``rocof_meas`` (pu/s) readings.
     seed : int
         Seed of the noise generator.
     dt : float
@@ -146,6 +146,11 @@ def simulate(params: LFCParams, *, duration: float, pc_attack: Signal | None = N
     load_feedforward : bool
         With ``estimator=None``, give the filter the true dPL (an idealized load
         measurement) instead of 0 (E7: dPL is not measured at the generator).
+    relay_noise : bool
+        The relays read ``dw_meas`` and ``rocof_meas`` through white noise of
+        std ``noise_std`` too, drawn independently at every plant step (seeded
+        by ``seed``); default False: the relays see the noise-free signals.
+        ``trace`` and the metrics keep the noise-free signals.
 
     Returns
     -------
@@ -157,7 +162,7 @@ def simulate(params: LFCParams, *, duration: float, pc_attack: Signal | None = N
                    relays=relays)
     sc.add(pc_attack=pc_attack, wref_attack=wref_attack, load=load, scc=scc,
            estimator=estimator, noise_std=noise_std, seed=seed,
-           load_feedforward=load_feedforward)
+           load_feedforward=load_feedforward, relay_noise=relay_noise)
     run = sc.run(trace=True, stop_on_trip=stop_on_trip)
     end = int(run.ends[0])
     t = sc.t[:end + 1]

@@ -50,6 +50,38 @@ def test_batch_rows_equal_simulate_seed_for_seed_with_noise_kalman_and_own_plant
         assert m["max_abs_rocof_meas"] == r.max_abs_rocof_meas, i
 
 
+def test_batch_rows_equal_simulate_with_noisy_relays_and_the_robust_filter():
+    """Rows with ``relay_noise`` (the relays' own noise, seeded by ``seed``) and a
+    certified filter declaring a box and the noise equal ``simulate``."""
+    rows = pd.DataFrame({"waveform": "square", "channel": "pc", "amplitude": [1.0, 1.0, 0.6],
+                         "freq_hz": 0.3, "start": 1.0, "alpha": 1.0, "Ts": 0.25,
+                         "method": "certified", "noise_w": 1e-4, "noise_rocof": 1e-3,
+                         "seed": [4, 5, 6], "relay_noise": [True, True, False],
+                         "declare_noise": [False, True, True],
+                         "uncertainty": [np.nan, 0.1, 0.1]})
+    res = simulate_batch(P, rows, duration=8.0, chunk_size=2, progress=False)
+    for i, row in rows.iterrows():
+        scc = lfc.SafetyFilter(P, method="certified",
+                               uncertainty=0.0 if np.isnan(row.uncertainty) else row.uncertainty,
+                               noise_std=(1e-4, 1e-3) if row.declare_noise else None)
+        m = lfc.simulate(P, duration=8.0, scc=scc, noise_std=(1e-4, 1e-3), seed=int(row.seed),
+                         estimator="kalman", relay_noise=bool(row.relay_noise),
+                         pc_attack=lfc.Square(row.amplitude, 0.3, start=1.0)).metrics()
+        r = res.loc[i]
+        assert m["tripped"] == r.tripped and m["alarms"] == r.alarms, i
+        assert m["max_abs_rocof_meas"] == r.max_abs_rocof_meas, i
+    assert res.tripped[0] and not res.tripped[1:].any()   # undeclared noise trips; declared not
+
+
+def test_relay_noise_needs_noise():
+    with pytest.raises(ValueError, match="relay_noise"):
+        lfc.simulate(P, duration=1.0, relay_noise=True)
+    rows = pd.DataFrame({"waveform": "none", "channel": "pc", "amplitude": 0.0, "freq_hz": 0.0,
+                         "start": 0.0, "alpha": np.nan, "Ts": 0.25, "relay_noise": [True]})
+    with pytest.raises(ValueError, match="relay_noise"):
+        simulate_batch(P, rows, duration=1.0, progress=False)
+
+
 def test_the_plant_need_not_be_the_design_model():
     """A row's own plant changes the run; the filter keeps the design model."""
     base = {"waveform": "square", "channel": "pc", "amplitude": 1.0, "freq_hz": 0.3,

@@ -12,6 +12,12 @@ generation with :func:`lfc.simulate_batch` (``vectorized=True`` in scipy's
   or slope of a ramp on ω_ref);
 * :func:`freeform_search`: a free-form attack on P_c, one value per control
   period, bounded by ``±amplitude``.
+
+Both can search the plant and the noise too (``Search``): each attack's plant
+anywhere in a box around the design model (M, D, τ_G, τ_T, R within
+``±box``; the defender keeps the design model) and, with measurement noise
+(the generator side then uses a Kalman estimate), its noise seed among
+``n_seeds``.
 """
 
 from __future__ import annotations
@@ -24,6 +30,7 @@ from scipy.optimize import differential_evolution
 
 from lfc.batch import simulate_batch
 from lfc.experiments.scenarios import ATTACK_START
+from lfc.filters.certified import BOX
 from lfc.model import LFCParams
 from lfc.relays import RelaySettings
 
@@ -40,18 +47,71 @@ FAMILIES = {
 @dataclass(frozen=True)
 class Defender:
     """A filter setting to attack: ``method`` "none", "paper" (with ``alpha``,
-    ``Ts``) or "certified"."""
+    ``Ts``; the default reading) or "certified" (with its plant box
+    ``uncertainty`` and, with ``declare_noise``, the measurement noise covered)."""
 
     name: str
     method: str = "paper"
     alpha: float = 20.0
     Ts: float = 0.25
+    uncertainty: float = 0.0
+    declare_noise: bool = False
 
     def columns(self) -> dict:
         """The scenario-table columns that select this filter."""
         if self.method == "none":
             return {"alpha": np.nan, "Ts": self.Ts, "method": "paper"}
-        return {"alpha": self.alpha, "Ts": self.Ts, "method": self.method}
+        extra = ({"uncertainty": self.uncertainty, "declare_noise": self.declare_noise}
+                 if self.method == "certified" else {})
+        return {"alpha": self.alpha, "Ts": self.Ts, "method": self.method, **extra}
+
+
+@dataclass(frozen=True)
+class Search:
+    """What the red team may choose besides the attack: the plant within ``±box``
+    of the design model (relative, each of ``BOX``) and, when ``noise_std`` is
+    not zero (pu, pu/s; the generator side uses a Kalman estimate), the noise
+    seed among ``n_seeds``.  The default searches the attack only."""
+
+    box: float = 0.0
+    noise_std: tuple[float, float] = (0.0, 0.0)
+    n_seeds: int = 1
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.box < 1.0:
+            raise ValueError(f"box must be in [0, 1), got {self.box!r}")
+        if self.n_seeds < 1:
+            raise ValueError(f"n_seeds must be >= 1, got {self.n_seeds!r}")
+
+    @property
+    def noisy(self) -> bool:
+        return any(s > 0 for s in self.noise_std)
+
+    def bounds(self) -> list[tuple[float, float]]:
+        """Bounds of the extra search variables: plant factors, then the seed."""
+        plant = [(1 - self.box, 1 + self.box)] * len(BOX) if self.box > 0 else []
+        return plant + ([(0, self.n_seeds - 1)] if self.noisy and self.n_seeds > 1 else [])
+
+    def columns(self, params: LFCParams, extra: np.ndarray) -> dict:
+        """Scenario columns for the extra variables ``extra`` (k, S)."""
+        out, k = {}, 0
+        if self.box > 0:
+            for k, name in enumerate(BOX):
+                out[name] = getattr(params, name) * extra[k]
+            k = len(BOX)
+        if self.noisy:
+            out["noise_w"], out["noise_rocof"] = self.noise_std
+            out["seed"] = np.round(extra[k]).astype(int) if len(extra) > k else 0
+        return out
+
+    def describe(self, params: LFCParams, extra: np.ndarray) -> dict:
+        """The plant factors and seed of a found attack, for the result row."""
+        cols = self.columns(params, np.asarray(extra, float)[:, None])
+        plant = ", ".join(f"{n} ×{float(extra[i]):.3f}" for i, n in enumerate(BOX)) \
+            if self.box > 0 else "design model"
+        factors = tuple(map(float, extra[:len(BOX)])) if self.box > 0 else ()
+        return {"plant": plant, "plant_factors": factors,
+                "seed": int(np.ravel(cols.get("seed", [0]))[0])}
 
 
 def severity(results, relays: RelaySettings) -> np.ndarray:
@@ -69,32 +129,46 @@ def _family_table(family: str, theta: np.ndarray, defender: Defender) -> pd.Data
                          "freq_hz": freq, "start": ATTACK_START, **defender.columns()})
 
 
-def _search(table_of, bounds, params, relays, duration, seed, maxiter, popsize):
-    """Differential evolution maximizing severity; returns (best theta, severity, row)."""
+def _search(table_of, n_attack, bounds, params, relays, duration, seed, maxiter, popsize,
+            search: Search):
+    """Differential evolution maximizing severity over the attack's ``n_attack``
+    variables and ``search``'s extra ones; returns (best theta, severity, row)."""
+    extra = search.bounds()
+    integrality = [False] * (n_attack + len(extra))
+    if search.noisy and search.n_seeds > 1:
+        integrality[-1] = True
+
+    def table(theta: np.ndarray) -> pd.DataFrame:
+        theta = np.asarray(theta, float)
+        return table_of(theta[:n_attack]).assign(**search.columns(params, theta[n_attack:]))
+
     def objective(theta: np.ndarray) -> np.ndarray:
-        res = simulate_batch(params, table_of(theta), duration=duration,
-                             relays=relays, chunk_size=10_000, progress=False)
+        res = simulate_batch(params, table(theta), duration=duration, relays=relays,
+                             chunk_size=max(1, -(-theta.shape[1] // 2)), progress=False)
         return -severity(res, relays)
 
-    sol = differential_evolution(objective, bounds, seed=seed, maxiter=maxiter,
+    sol = differential_evolution(objective, list(bounds) + extra, seed=seed, maxiter=maxiter,
                                  popsize=popsize, vectorized=True, updating="deferred",
-                                 polish=False, tol=0)
-    best = simulate_batch(params, table_of(sol.x[:, None]), duration=duration, relays=relays,
+                                 polish=False, tol=0, integrality=integrality)
+    best = simulate_batch(params, table(sol.x[:, None]), duration=duration, relays=relays,
                           progress=False)
     return sol.x, float(severity(best, relays)[0]), best.iloc[0]
 
 
 def family_search(params: LFCParams, defender: Defender, family: str, *,
                   relays: RelaySettings | None = None, duration: float = 10.0,
-                  seed: int = 0, maxiter: int = 15, popsize: int = 10) -> dict:
-    """Worst attack of one family against ``defender`` (see module docstring)."""
+                  seed: int = 0, maxiter: int = 15, popsize: int = 10,
+                  search: Search = Search()) -> dict:
+    """Worst attack of one family against ``defender`` (see module docstring),
+    over the plants and noise seeds ``search`` allows."""
     relays = relays or RelaySettings()
     bounds = FAMILIES[family][2]
-    theta, sev, row = _search(lambda th: _family_table(family, th, defender), bounds, params,
-                              relays, duration, seed, maxiter, popsize)
+    theta, sev, row = _search(lambda th: _family_table(family, th, defender), len(bounds),
+                              bounds, params, relays, duration, seed, maxiter, popsize, search)
     return {"defender": defender.name, "search": family, "severity": sev,
             "tripped": bool(row.tripped), "first_trip": row.first_trip_relay,
-            "attack": ", ".join(f"{v:.4g}" for v in theta)}
+            "attack": ", ".join(f"{v:.4g}" for v in theta[:len(bounds)]),
+            **search.describe(params, theta[len(bounds):])}
 
 
 def _samples_table(values: np.ndarray, period: float, defender: Defender) -> pd.DataFrame:
@@ -108,20 +182,21 @@ def _samples_table(values: np.ndarray, period: float, defender: Defender) -> pd.
 def freeform_search(params: LFCParams, defender: Defender, *, amplitude: float = 2.0,
                     relays: RelaySettings | None = None, attack_duration: float = 2.0,
                     duration: float = 6.0, control_period: float = 0.01, seed: int = 0,
-                    maxiter: int = 20, popsize: int = 1) -> dict:
+                    maxiter: int = 20, popsize: int = 1, search: Search = Search()) -> dict:
     """Worst free-form attack on P_c: one value in ``±amplitude`` per control
-    period for ``attack_duration`` s (then held), run for ``duration`` s; the
-    result's ``values`` (pu, one per control period from ``ATTACK_START``)
-    replay it."""
+    period for ``attack_duration`` s (then held), run for ``duration`` s, over
+    the plants and noise seeds ``search`` allows; the result's ``values`` (pu,
+    one per control period from ``ATTACK_START``) replay it on its ``plant``."""
     relays = relays or RelaySettings()
     n = int(round(attack_duration / control_period))
-    theta, sev, row = _search(lambda v: _samples_table(v, control_period, defender),
+    theta, sev, row = _search(lambda v: _samples_table(v, control_period, defender), n,
                               [(-amplitude, amplitude)] * n, params, relays, duration, seed,
-                              maxiter, popsize)
+                              maxiter, popsize, search)
+    values = theta[:n]
     return {"defender": defender.name, "search": f"free-form on P_c (±{amplitude:g} pu)",
             "severity": sev, "tripped": bool(row.tripped), "first_trip": row.first_trip_relay,
-            "attack": f"{n} values, max |value| {np.abs(theta).max():.3g} pu",
-            "values": tuple(map(float, theta))}
+            "attack": f"{n} values, max |value| {np.abs(values).max():.3g} pu",
+            "values": tuple(map(float, values)), **search.describe(params, theta[n:])}
 
 
 def piecewise_attack_table(*, n: int, amplitude: float, duration: float, seed: int,
