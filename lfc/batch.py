@@ -42,8 +42,8 @@ CHIRP_F0 = 0.1  # Hz, where every chirp starts
 PLANT = ("M", "D", "tau_g", "tau_t", "droop")   # optional columns: the row's own plant
 NOISE = ("noise_w", "noise_rocof")             # optional: measurement noise std (pu, pu/s)
 FLAGS = ("declare_noise", "relay_noise")       # optional booleans (simulate_batch)
-FILTER_COLUMNS = ("alpha", "Ts", "method", "uncertainty", "declare_noise", "trips_per_hour",
-                  *NOISE, "outside_rule", "conflict", "prediction")  # what selects a filter
+FILTER_COLUMNS = ("alpha", "Ts", "method", "uncertainty", "margin", "declare_noise",
+                  "trips_per_hour", *NOISE, *READINGS)  # the columns that select a filter
 BATCH_METRICS = ("tripped", "first_trip_relay", "first_trip_t", "max_abs_dw_meas",
                  "max_abs_rocof_meas", "scc_active_fraction", "max_abs_modification",
                  "mean_abs_modification", "alarms", "final_abs_dw_meas")
@@ -116,13 +116,14 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
         if bad.any():
             raise ValueError(f"column {col!r} must be finite and {what} (or NaN); row "
                              f"{scenarios.index[bad][0]!r} has {scenarios[col][bad].iloc[0]!r}")
-    if "uncertainty" in scenarios.columns:
-        box = pd.to_numeric(scenarios["uncertainty"], errors="coerce")
-        bad = scenarios["uncertainty"].notna() & ~((box >= 0) & (box < 1))
+    for col in ("uncertainty", "margin"):
+        if col not in scenarios.columns:
+            continue
+        values = pd.to_numeric(scenarios[col], errors="coerce")
+        bad = scenarios[col].notna() & ~((values >= 0) & (values < 1))
         if bad.any():
-            raise ValueError(f"column 'uncertainty' must be in [0, 1) or NaN; row "
-                             f"{scenarios.index[bad][0]!r} has "
-                             f"{scenarios['uncertainty'][bad].iloc[0]!r}")
+            raise ValueError(f"column {col!r} must be in [0, 1) or NaN; row "
+                             f"{scenarios.index[bad][0]!r} has {scenarios[col][bad].iloc[0]!r}")
     if "trips_per_hour" in scenarios.columns:
         rate = pd.to_numeric(scenarios["trips_per_hour"], errors="coerce")
         declared = (scenarios["declare_noise"].astype(bool) if "declare_noise" in scenarios
@@ -215,8 +216,9 @@ def _filter(params: LFCParams, relays: RelaySettings, row: dict) -> SafetyFilter
         noise = tuple(float(row.get(c, 0.0)) for c in NOISE)
         declared = bool(row.get("declare_noise", False)) and any(noise)
         box = row.get("uncertainty")
-        rate = row.get("trips_per_hour")
+        rate, margin = row.get("trips_per_hour"), row.get("margin")
         options = {"uncertainty": 0.0 if box is None or pd.isna(box) else float(box),
+                   "margin": 0.0 if margin is None or pd.isna(margin) else float(margin),
                    "noise_std": noise if declared else None,
                    "trips_per_hour": None if rate is None or pd.isna(rate) else float(rate)}
     key = (params, relays, method, tuple(sorted(options.items())))
@@ -252,7 +254,8 @@ def simulate_batch(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
         noise ``noise_w`` (pu), ``noise_rocof`` (pu/s) with its ``seed`` (noise
         > 0: the generator side uses a Kalman estimate, as
         ``simulate(estimator="kalman")`` does), and the certified filter's
-        ``uncertainty`` (its plant box, NaN or 0: the design model only) and
+        ``uncertainty`` (its plant box, NaN or 0: the design model only),
+        ``margin`` (NaN: 0) and
         ``declare_noise`` (True: it covers the row's noise, ``noise_std``) with
         its ``trips_per_hour`` (NaN: none), and
         ``relay_noise`` (True: the relays read through the row's noise too, as

@@ -1,2 +1,2 @@
 """Experiments built on the core: the paper's figure scenarios, attack-surface maps and
-readings, the red team, robustness and cost-of-safety runs, and the E12 limits."""
+readings, the red team, cost-of-safety runs, and the E12 limits."""

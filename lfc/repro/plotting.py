@@ -323,3 +323,26 @@ def readings_figure(summary, title: str) -> Figure:
         ax.legend(fontsize=8, loc="lower right")
     fig.suptitle(title)
     return fig
+
+
+def box_figure(worst, limit_label: str, title: str) -> Figure:
+    """Worst severity per plant of a parameter box against each filter:
+    ``worst`` has columns ``filter``, ``M`` (s), ``kind`` ("design", "corner",
+    "interior") and ``severity``; plants by inertia on x, the relay setting
+    (severity 1) dashed."""
+    fig, ax = plt.subplots(figsize=(9, 4.5), layout="constrained")
+    markers = {"design": "*", "corner": "o", "interior": "x"}
+    for i, (name, sel) in enumerate(worst.groupby("filter", sort=False)):
+        color = f"C{i}"
+        for kind, part in sel.groupby("kind", sort=False):
+            jitter = (i - 0.5) * 0.02
+            ax.scatter(part.M + jitter, part.severity, color=color, marker=markers[kind],
+                       s=60 if kind == "design" else 25, label=f"{name}, {kind} plant"
+                       + ("s" if kind != "design" else ""))
+    ax.axhline(1.0, color="k", ls="--", lw=1, label=limit_label)
+    ax.set_xlabel("Inertia M of the plant (s)")
+    ax.set_ylabel("Worst severity over the attacks:\nmax(|ROCOF| / setting, |Δω̂| / F)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1))
+    ax.set_title(title)
+    return fig
