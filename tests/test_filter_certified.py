@@ -87,8 +87,9 @@ def test_scalar_and_batch_agree():
     states, refs = rng.normal(size=(200, 5)) * STATE_SCALE, rng.normal(size=200)
     batch = lfc.SafetyFilter(P, RELAYS, method="certified")
     u_b, flags = batch.filter_batch(states, refs)
+    scalar = lfc.SafetyFilter(P, RELAYS, method="certified")
     for i in range(200):
-        scalar = lfc.SafetyFilter(P, RELAYS, method="certified")
+        scalar.reset()
         u, info = scalar.filter(states[i], refs[i])
         assert u == pytest.approx(u_b[i], abs=1e-12)
         assert info.outside == flags["outside"][i] and info.active == flags["active"][i]
