@@ -11,6 +11,8 @@ maps, red team) builds on it, ``lfc.repro`` (notebooks, figures, command line)
 on both; ``lfc.testbed`` (ANDES) and the cvxpy references are optional extras.
 """
 
+__version__ = "0.3.0"   # also in pyproject.toml (tests/test_engine.py checks they match)
+
 from lfc.batch import simulate_batch
 from lfc.estimation import KalmanFilter
 from lfc.filters import FilterInfo, SafetyFilter

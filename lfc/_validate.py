@@ -1,32 +1,45 @@
-"""Argument checks shared by the parameter classes (clear ``ValueError`` messages)."""
+"""Argument checks shared by the parameter classes (clear ``ValueError`` messages).
+
+A number is a real (Python or numpy) that is not a bool: ``True`` is not a time
+constant.
+"""
 
 from __future__ import annotations
 
 import math
+from numbers import Real
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, Real) and not isinstance(value, bool)
 
 
 def check_positive(name: str, value: float) -> None:
     """Raise ``ValueError`` unless ``value`` is a finite number > 0."""
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+    if not (_is_number(value) and math.isfinite(value) and value > 0):
         raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
 
 
 def check_nonnegative(name: str, value: float) -> None:
     """Raise ``ValueError`` unless ``value`` is a finite number >= 0."""
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+    if not (_is_number(value) and math.isfinite(value) and value >= 0):
         raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
 
 
 def check_finite(name: str, value: float) -> None:
     """Raise ``ValueError`` unless ``value`` is a finite number."""
-    if not (isinstance(value, (int, float)) and math.isfinite(value)):
+    if not (_is_number(value) and math.isfinite(value)):
         raise ValueError(f"{name} must be a finite number, got {value!r}")
 
 
-def check_range(name: str, value: float, low: float, high: float) -> None:
-    """Raise ``ValueError`` unless ``low < value < high`` (open interval)."""
-    if not (isinstance(value, (int, float)) and low < value < high):
-        raise ValueError(f"{name} must lie in ({low}, {high}), got {value!r}")
+def check_range(name: str, value: float, low: float, high: float, *,
+                closed: bool = False) -> None:
+    """Raise ``ValueError`` unless ``low < value < high`` (``closed``:
+    ``low <= value <= high``)."""
+    inside = _is_number(value) and (low <= value <= high if closed else low < value < high)
+    if not inside:
+        interval = f"[{low}, {high}]" if closed else f"({low}, {high})"
+        raise ValueError(f"{name} must lie in {interval}, got {value!r}")
 
 
 def check_multiple(name: str, value: float, of_name: str, of: float) -> int:

@@ -10,14 +10,24 @@ Large tables are split into chunks run by a ``concurrent.futures.Executor``
 (default: a process pool with one worker per core; a Dask cluster's
 ``Client.get_executor()`` works the same).  With ``out`` every finished chunk
 is written to its own CSV file at once, so an interrupted run loses at most the
-chunks in flight and a rerun computes only the missing ones.
+chunks in flight and a rerun computes only the missing ones.  A chunk file is
+named by a hash of its scenarios, the run's settings, the package version and
+the core's source code (results of other code are never reused); it starts
+with a line holding its row count and a SHA-256 of the rest, checked when it is
+read (a damaged file is recomputed, with a :class:`ChunkWarning` naming it);
+it is written under a unique temporary name and renamed into place, so
+concurrent runs on one folder are safe.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
+import io
 import math
 import os
+import uuid
+import warnings
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from dataclasses import replace
 from pathlib import Path
@@ -54,7 +64,8 @@ def scenario_signal(row: pd.Series, duration: float) -> Signal | None:
 
     ``amplitude`` is in pu (pu/s for a ramp), ``freq_hz`` the frequency (the
     end frequency of a chirp, which starts at ``CHIRP_F0``), ``start`` and the
-    optional ``stop`` in s (a chirp's default stop is ``duration``).  A
+    optional ``stop`` in s (a chirp's default stop is ``duration``; a step with a
+    stop is a pulse; a ramp holds its value after it).  A
     ``"samples"`` row (free-form attacks) carries a sequence ``values`` (pu),
     one every ``sample_period`` s from ``start``, interpolated linearly (so a
     sequence on the control grid is applied exactly as given).
@@ -69,7 +80,7 @@ def scenario_signal(row: pd.Series, duration: float) -> Signal | None:
     if w == "chirp":
         return Chirp(a, CHIRP_F0, f, start=start, stop=min(stop, duration))
     if w == "step":
-        return Step(a, start=start)
+        return Step(a, start=start, stop=stop)
     if w == "ramp":
         return Ramp(a, start=start, stop=stop)
     if w == "samples":  # free-form: one value per sample_period from start, held after
@@ -93,13 +104,37 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
     for col in ("amplitude", "freq_hz", "start", "Ts"):
         values = pd.to_numeric(scenarios[col], errors="coerce")
         scc = scenarios["alpha"].notna()
-        bad = ~np.isfinite(values) if col != "Ts" else scc & ~(values > 0)
+        bad = ~np.isfinite(values) if col != "Ts" else scc & ~(np.isfinite(values) & (values > 0))
         if col in ("freq_hz", "start"):
             bad |= values < 0
         if bad.any():
             raise ValueError(f"column {col!r} must be finite{' and > 0' if col == 'Ts' else ''}"
                              f"{' and >= 0' if col in ('freq_hz', 'start') else ''}; row "
                              f"{scenarios.index[bad][0]!r} has {scenarios[col][bad].iloc[0]!r}")
+    if "stop" in scenarios.columns:
+        stop = pd.to_numeric(scenarios["stop"], errors="coerce")
+        start = pd.to_numeric(scenarios["start"], errors="coerce")
+        given = scenarios["stop"].notna() & ~np.isposinf(stop)
+        bad = given & ~(stop > start)
+        if bad.any():
+            raise ValueError(f"column 'stop' must be > start (or NaN: none); row "
+                             f"{scenarios.index[bad][0]!r} has {scenarios['stop'][bad].iloc[0]!r}")
+        bad = given & scenarios["waveform"].isin(["samples", "none"])
+        if bad.any():
+            raise ValueError(f"column 'stop' has no meaning for a "
+                             f"{scenarios['waveform'][bad].iloc[0]!r} row (row "
+                             f"{scenarios.index[bad][0]!r}): leave it NaN")
+    if (scenarios["waveform"] == "samples").any():
+        rows = scenarios[scenarios["waveform"] == "samples"]
+        missing = [c for c in ("values", "sample_period") if c not in scenarios.columns]
+        if missing:
+            raise ValueError(f"'samples' rows need the column(s) {missing}")
+        period = pd.to_numeric(rows["sample_period"], errors="coerce")
+        bad = ~(np.isfinite(period) & (period > 0))
+        if bad.any():
+            raise ValueError(f"column 'sample_period' must be finite and > 0 on 'samples' "
+                             f"rows; row {rows.index[bad][0]!r} has "
+                             f"{rows['sample_period'][bad].iloc[0]!r}")
     for col, allowed in (("method", METHODS), *READINGS.items()):
         if col not in scenarios.columns:
             continue
@@ -298,8 +333,9 @@ def simulate_batch(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
     results, todo = {}, []
     for i, chunk in enumerate(chunks):
         path = None if folder is None else folder / f"chunk_{i:05d}_{_digest(chunk, args)}.csv"
-        if path is not None and path.exists():
-            results[i] = pd.read_csv(path, index_col=0).set_axis(chunk.index)
+        stored = _read_chunk(path, len(chunk)) if path is not None and path.exists() else None
+        if stored is not None:
+            results[i] = stored.set_axis(chunk.index)
         else:
             todo.append((i, chunk, path))
     with tqdm(total=len(scenarios), initial=sum(map(len, results.values())), unit="scenario",
@@ -319,9 +355,7 @@ def _execute(todo: list, args: tuple, executor: Executor | None):
     """Yield (chunk number, metrics) as chunks finish, writing each to its file."""
     def finish(i: int, metrics: pd.DataFrame, path: Path | None) -> tuple[int, pd.DataFrame]:
         if path is not None:
-            tmp = path.with_suffix(".tmp")
-            metrics.to_csv(tmp)
-            tmp.replace(path)
+            _write_chunk(path, metrics)
         return i, metrics
 
     params, duration, relays, dt, cp = args
@@ -347,7 +381,66 @@ def _execute(todo: list, args: tuple, executor: Executor | None):
             pool.shutdown(cancel_futures=True)
 
 
+class ChunkWarning(UserWarning):
+    """A chunk file of ``simulate_batch(out=...)`` was damaged and is recomputed."""
+
+
+CHUNK_MAGIC = "# lfc-chunk"
+
+
+def _write_chunk(path: Path, metrics: pd.DataFrame) -> None:
+    """Write ``metrics`` with its row count and checksum, atomically (a unique
+    temporary file renamed into place)."""
+    body = metrics.to_csv()
+    header = (f"{CHUNK_MAGIC} rows={len(metrics)} "
+              f"sha256={hashlib.sha256(body.encode()).hexdigest()}\n")
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.{uuid.uuid4().hex}.tmp")
+    try:
+        tmp.write_text(header + body, encoding="utf-8")
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def _read_chunk(path: Path, rows: int) -> pd.DataFrame | None:
+    """The metrics stored in ``path``, or None — with a :class:`ChunkWarning`
+    naming the file — if it is unreadable, damaged or not of ``rows`` rows."""
+    def damaged(why: str) -> None:
+        warnings.warn(f"chunk file {path} is damaged ({why}); recomputing it", ChunkWarning,
+                      stacklevel=4)
+
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        return damaged(f"unreadable: {err}")
+    header, _, body = text.partition("\n")
+    fields = dict(f.split("=", 1) for f in header.removeprefix(CHUNK_MAGIC).split() if "=" in f)
+    if not header.startswith(CHUNK_MAGIC) or set(fields) != {"rows", "sha256"}:
+        return damaged("no lfc-chunk header")
+    if fields["rows"] != str(rows):
+        return damaged(f"{fields['rows']} rows stored, {rows} expected")
+    if hashlib.sha256(body.encode()).hexdigest() != fields["sha256"]:
+        return damaged("checksum mismatch: cut short or changed")
+    metrics = pd.read_csv(io.StringIO(body), index_col=0)
+    if len(metrics) != rows or list(metrics.columns) != list(BATCH_METRICS):
+        return damaged("unexpected rows or columns")
+    return metrics
+
+
+@functools.lru_cache(maxsize=1)
+def code_digest() -> str:
+    """Hash of the package version and the core's source (``lfc/*.py``,
+    ``lfc/filters/*.py``): what a chunk's results depend on besides its inputs."""
+    from lfc import __version__
+    root = Path(__file__).resolve().parent
+    digest = hashlib.sha256(__version__.encode())
+    for path in sorted([*root.glob("*.py"), *root.glob("filters/*.py")]):
+        digest.update(path.relative_to(root).as_posix().encode() + path.read_bytes())
+    return digest.hexdigest()
+
+
 def _digest(chunk: pd.DataFrame, args: tuple) -> str:
-    """Short hash of a chunk's scenarios and the run's settings (stale files never match)."""
-    text = chunk.to_csv() + repr(args)
+    """Short hash of a chunk's scenarios, the run's settings and the code (stale
+    files never match)."""
+    text = chunk.to_csv() + repr(args) + code_digest()
     return hashlib.sha256(text.encode()).hexdigest()[:12]

@@ -144,7 +144,7 @@ def _run(n_steps: int, ratio: int, dt: float, k_i_period: float, ad: np.ndarray,
         method = methods[f_i] if f_i >= 0 else -1
         fd = fdata[foff[f_i]:foff[f_i + 1]] if f_i >= 0 else empty
         load_kind, load_value = kinds_i[LOAD], params_i[LOAD, 0]
-        load_start = params_i[LOAD, 2]
+        load_start, load_stop = params_i[LOAD, 2], params_i[LOAD, 3]
         x[:], mem[:], gstate[:], kstate[:], due[:] = 0.0, 0.0, 0.0, 0.0, 0.0
         start[:] = np.nan
         first_t, first_r = math.nan, -1.0
@@ -176,7 +176,7 @@ def _run(n_steps: int, ratio: int, dt: float, k_i_period: float, ad: np.ndarray,
             x0, x1, x2, x3, x4 = x[0], x[1], x[2], x[3], x[4]
             for k in range(k0, min(k0 + ratio, n_steps)):
                 if load_kind == STEP:
-                    pl = load_value if k * dt >= load_start else 0.0
+                    pl = load_value if load_start <= k * dt < load_stop else 0.0
                 elif load_kind == NONE:
                     pl = 0.0
                 else:

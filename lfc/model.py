@@ -152,8 +152,24 @@ def discretize(params: LFCParams, period: float) -> tuple[np.ndarray, np.ndarray
     -------
     Ad : ndarray, shape (5, 5)
     Bd : ndarray, shape (5, 2)
+
+    Raises
+    ------
+    ValueError
+        If the discretization is not finite (a parameter so extreme that the
+        plant cannot be simulated), naming the parameter.
     """
-    return zoh(*lfc_matrices(params), period)
+    with np.errstate(over="ignore", invalid="ignore"):   # checked just below
+        Ad, Bd = zoh(*lfc_matrices(params), period)
+    if not (np.all(np.isfinite(Ad)) and np.all(np.isfinite(Bd))):
+        rates = {"tau_g": 1 / params.tau_g, "tau_t": 1 / params.tau_t, "M": 1 / params.M,
+                 "droop": 1 / (params.droop * params.tau_g), "tau_w": 1 / params.tau_w,
+                 "tau_rocof": 1 / params.tau_rocof, "D": params.D / params.M}
+        name = max(rates, key=rates.get)
+        raise ValueError(f"{name}={getattr(params, name)!r} makes the plant too fast to "
+                         f"simulate at a {period} s step (its discretization is not finite); "
+                         f"use a physical value")
+    return Ad, Bd
 
 
 def zoh(A: np.ndarray, B: np.ndarray, period: float) -> tuple[np.ndarray, np.ndarray]:

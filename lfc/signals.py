@@ -41,7 +41,7 @@ def value_at(kind: int, params: np.ndarray, row: int, t: float, st: np.ndarray,
     if kind == NONE or kind == GRID or t < start:
         return 0.0
     if kind == STEP:
-        return a
+        return a if t < stop else 0.0
     if kind == RAMP:
         return a * (min(t, stop) - start)
     if kind == SAMPLES:
@@ -169,17 +169,19 @@ class Square(_Periodic):
 
 @dataclass(frozen=True)
 class Step(Signal):
-    """``value`` (pu) from ``start`` (s) on: a bias attack or a load step."""
+    """``value`` (pu) from ``start`` (s) on — a bias attack or a load step — or,
+    with a finite ``stop`` (s), a pulse on ``[start, stop)``."""
 
     value: float
     start: float = 0.0
+    stop: float = math.inf
 
     def __post_init__(self) -> None:
         check_finite("value", self.value)
-        check_finite("start", self.start)
+        _check_window(self.start, self.stop)
 
     def spec(self):
-        return STEP, _params(self.value, 0.0, self.start, math.inf), _EMPTY, _EMPTY
+        return STEP, _params(self.value, 0.0, self.start, self.stop), _EMPTY, _EMPTY
 
 
 @dataclass(frozen=True)

@@ -100,7 +100,11 @@ class SimResult:
 def check_timing(duration: float, dt: float, control_period: float) -> int:
     """Validate a run's timing (s); return plant steps per control period."""
     check_positive("duration", duration)
-    return check_multiple("control_period", control_period, "dt", dt)
+    ratio = check_multiple("control_period", control_period, "dt", dt)
+    if duration < dt * (1 - 1e-9):
+        raise ValueError(f"duration must be at least one plant step (dt = {dt} s), "
+                         f"got {duration!r}")
+    return ratio
 
 
 def simulate(params: LFCParams, *, duration: float, pc_attack: Signal | None = None,

@@ -198,27 +198,33 @@ def test_default_meets_the_frequency_constraint_where_the_two_conflict():
     assert (flags["margin"][conflicting, 1] < 0).all()
 
 
-@pytest.mark.parametrize("x, u_ref, expected", [
-    ([np.nan, 0, 0, 0, 0], 0.2, 0.2),
-    ([0, 0, np.inf, 0, 0], -0.1, -0.1),
-    ([0, 0, 0, 0, 0], np.nan, 0.0),
-    ([0, 0, 0, 0, 0], np.inf, 0.0),
-    ([1e200, 0, 0, 0, 0], 0.1, 0.1),
+@pytest.mark.parametrize("x, u_ref", [
+    ([np.nan, 0, 0, 0, 0], 0.2),
+    ([0, 0, np.inf, 0, 0], -0.1),
+    ([0, 0, 0, 0, 0], np.nan),
+    ([0, 0, 0, 0, 0], np.inf),
+    ([1e200, 0, 0, 0, 0], 0.1),
+    ([0, 0, 0, 0, 0], 1e160),
 ])
-def test_non_finite_input_gives_finite_flagged_command(x, u_ref, expected):
+def test_invalid_input_holds_the_last_applied_command(x, u_ref):
+    """A command that cannot be evaluated is never passed through: the last
+    applied command is held (0 at first), flagged."""
     for solver in ("exact", "cvxpy"):
-        u, info = SafetyFilter(P, solver=solver).filter(np.array(x, float), u_ref)
-        assert u == expected and info.invalid_input and info.alarm
-        assert "non-finite" in info.reason
+        filt = SafetyFilter(P, solver=solver)
+        assert filt.filter(np.array(x, float), u_ref)[0] == 0.0
+        u0, _ = filt.filter(np.zeros(5), 0.03)
+        u, info = filt.filter(np.array(x, float), u_ref)
+        assert u == u0 == pytest.approx(0.03, abs=1e-6) and info.invalid_input and info.alarm
+        assert "invalid input" in info.reason
 
 
 def test_non_finite_reference_clipped_to_actuator_limit():
     u, info = SafetyFilter(P, u_min=-1, u_max=0.05).filter(np.zeros(5), 0.1)
     assert u == 0.05 and info.active and info.binding == ("u_max",)
-    u, info = SafetyFilter(P, u_min=-1, u_max=1).filter(np.zeros(5), np.inf)
+    u, info = SafetyFilter(P, u_min=0.2, u_max=1).filter(np.zeros(5), np.inf)
+    assert u == 0.2 and info.invalid_input         # the held command, within the limits
+    u, info = SafetyFilter(P).filter(np.zeros(5), 0.1, p_load=np.nan)
     assert u == 0.0 and info.invalid_input
-    u, _ = SafetyFilter(P).filter(np.zeros(5), 0.1, p_load=np.nan)
-    assert u == 0.1
 
 
 def test_cvxpy_failure_falls_back_to_exact(monkeypatch):

@@ -2,7 +2,10 @@
 
 ``tests/data/filter_regression.npz`` was recorded by :func:`record`: the paper's
 filter (with the "push" reading of E9) at commit bbe860e, before the Baseline and
-Engine issues; the certified filter's entries again in the Robust issue, which
+Engine issues, and again in the Reliability issue, which changed only its answer
+to invalid input (the first 20 states: it now holds the last applied command
+instead of passing the incoming one through; every other state unchanged, checked
+before re-recording); the certified filter's entries again in the Robust issue, which
 changed its definition on purpose (a continuous-time certificate over 8 s, the
 parameter box and the estimation bound; issue note).  Every later version of the
 filters must give the same commands and flags on these states.  A change of

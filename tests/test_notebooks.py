@@ -194,7 +194,14 @@ def test_sweep_table_and_resume(tmp_path):
 @pytest.mark.parametrize("args, message", [
     (["-p", "alpah", "3"], "unknown parameter 'alpah'"),
     (["-p", "duration", "-1"], "'duration' must be > 0"),
-    (["-p", "amplitude", "big"], "'amplitude' must be of type float"),
+    (["-p", "amplitude", "big"], "'amplitude' must be a finite number"),
+    (["-p", "amplitude", "nan"], "'amplitude' must be a finite number"),
+    (["-p", "amplitude", "0.5", "-p", "amplitude", "0.5"], "lists 0.5 more than once"),
+    (["-p", "amplitude", "0.5", "0.5"], "lists 0.5 more than once"),
+    (["-p", "seed", "1.5"], "'seed' must be an integer"),
+    (["-p", "edge_durations", "[]"], "must be a non-empty list"),
+    (["-p", "edge_durations", "['a']"], "must be a finite number"),
+    (["-p", "alpha", "3", "--jobs", "0"], "--jobs must be an integer >= 1"),
     (["-p", "plant", "simscape"], "plant must be one of"),
     (["-p", "plant", "linear", "testbed", "simscape"], "plant must be one of"),
 ])
@@ -203,6 +210,25 @@ def test_sweep_rejects_bad_parameters_before_running(args, message, tmp_path, ca
     assert main(["sweep", nb, *args, "--out", str(tmp_path / "s")]) == 2
     assert message in capsys.readouterr().err
     assert not (tmp_path / "s").exists()
+
+
+def test_a_repeated_parameter_adds_its_values(tmp_path):
+    from lfc.repro.cli import _grid
+    assert _grid([["alpha", "3"], ["alpha", "20"], ["Ts", "0.25"]]) == {"alpha": [3, 20],
+                                                                        "Ts": [0.25]}
+
+
+def test_a_notebook_run_directly_fails_fast_on_an_unknown_parameter(tmp_path):
+    """papermill itself ignores a name the notebook does not take (it injects it
+    anyway); the notebook's first cell refuses it."""
+    nb = runner.NOTEBOOKS_DIR / runner.FIGURES["kalman"]
+    with pytest.raises(runner.pm.PapermillExecutionError, match="unknown parameter.*alpah"):
+        runner.pm.execute_notebook(str(nb), str(tmp_path / "out.ipynb"),
+                                   parameters={"alpah": 3.0, "results_dir": str(tmp_path)},
+                                   cwd=str(nb.parent), progress_bar=False)
+    executed = json.loads((tmp_path / "out.ipynb").read_text())
+    ran = [c for c in executed["cells"] if c["cell_type"] == "code" and c.get("outputs")]
+    assert len(ran) == 1        # the error is in the first cell after the parameters
 
 
 def test_reproduce_rejects_unknown_figure():

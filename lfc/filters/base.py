@@ -16,6 +16,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from lfc._jit import inline
 from lfc.model import LFCParams
 from lfc.relays import RelaySettings
 
@@ -29,6 +30,18 @@ _FLAG_BITS = dict(zip(ALARM_FLAGS, (ACTIVE, INFEASIBLE, OUTSIDE, INVALID, SOLVER
 _BINDING = (("frequency", BIND_FREQ), ("rocof", BIND_ROCOF), ("certified", BIND_CERT),
             ("u_min", BIND_UMIN), ("u_max", BIND_UMAX))
 MEMORY = 2  # floats of memory per scenario, for every method
+MAX_ABS_INPUT = 1e6  # pu, pu/s: a state, command or load beyond is a corrupted message
+
+
+@inline
+def valid_input(x: np.ndarray, u_ref: float, p: float) -> bool:
+    """Whether a filter can evaluate this call: every state, the command and the
+    load finite and within ``MAX_ABS_INPUT`` (larger values would overflow the
+    barrier and certificate arithmetic; no real measurement is near them)."""
+    ok = abs(u_ref) <= MAX_ABS_INPUT and abs(p) <= MAX_ABS_INPUT   # False for NaN
+    for v in x:
+        ok = ok and abs(v) <= MAX_ABS_INPUT
+    return ok
 
 
 class FilterInfo(NamedTuple):

@@ -72,7 +72,7 @@ from scipy.stats import chi2, norm
 from lfc._jit import inline, maxnum, minnum
 from lfc._validate import check_nonnegative, check_positive, check_range
 from lfc.filters.base import (ACTIVE, BIND_CERT, BIND_UMAX, BIND_UMIN, INVALID, OUTSIDE,
-                              Backend, check_limits)
+                              Backend, check_limits, valid_input)
 from lfc.model import LFCParams, lfc_matrices, output_matrix
 from lfc.relays import RelaySettings
 
@@ -101,18 +101,28 @@ def box_plants(params: LFCParams, uncertainty: float | dict) -> list[LFCParams]:
                              f"choose from {BOX}")
         factors = {}
         for name, pair in uncertainty.items():
-            low, high = pair
+            try:
+                low, high = (float(v) for v in pair)
+            except (TypeError, ValueError):
+                low = high = math.nan
             if not (0 < low <= 1 <= high < math.inf):
                 raise ValueError(f"uncertainty[{name!r}] must be factors (low, high) with "
                                  f"0 < low <= 1 <= high, got {pair!r}")
             factors[name] = (float(low), float(high))
     else:
-        check_range("uncertainty", uncertainty, -1e-300, 1.0)
+        if not _is_box_width(uncertainty):
+            raise ValueError(f"uncertainty must be a relative half-width in [0, 1) or a dict "
+                             f"of factors, got {uncertainty!r}")
         factors = {name: (1 - uncertainty, 1 + uncertainty) for name in BOX} \
             if uncertainty > 0 else {}
     corners = [replace(params, **{n: getattr(params, n) * f for n, f in zip(factors, combo)})
                for combo in itertools.product(*factors.values())]
     return [params] + [c for c in corners if c != params]
+
+
+def _is_box_width(value: object) -> bool:
+    return (isinstance(value, (int, float)) and not isinstance(value, bool)
+            and 0.0 <= value < 1.0)
 
 
 def grid(horizon: float) -> np.ndarray:
@@ -136,7 +146,9 @@ class CertifiedSet:
         Design model.
     relays : RelaySettings
     horizon : float
-        Look-ahead before the terminal ellipsoid (s), in [0.2, 60]. Default 8 s:
+        Look-ahead before the terminal ellipsoid (s), in [0.2, 20] (longer adds
+        samples where the held command no longer moves ROCOF, whose steady state
+        is 0: the ellipsoid covers them). Default 8 s:
         long enough for the weakly damped corners of a ±20 % box (damping 0.09)
         to settle toward the terminal set.
     load_bound : float
@@ -171,8 +183,8 @@ class CertifiedSet:
                  trips_per_hour: float | None = None, relay_rate: float = 1000.0,
                  tightening: float = 0.005, u_min: float = -math.inf,
                  u_max: float = math.inf) -> None:
-        check_range("horizon", horizon, 0.2 - 1e-12, 60.0 + 1e-12)
-        check_range("tightening", tightening, 1e-4 - 1e-12, 0.1 + 1e-12)
+        check_range("horizon", horizon, 0.2, 20.0, closed=True)
+        check_range("tightening", tightening, 1e-4, 0.1, closed=True)
         check_nonnegative("load_bound", load_bound)
         check_range("confidence", confidence, 0.0, 1.0)
         check_positive("relay_rate", relay_rate)
@@ -257,7 +269,8 @@ class _PlantBlock:
         rest = np.eye(5)[None] - E
         hu, hl = C @ rest @ q[:, 0], C @ rest @ q[:, 1]
         if np.any(np.abs(hu) < 1e-15):
-            raise ValueError("horizon too short: the command has no effect on some sample")
+            raise ValueError("the held command has no effect on an output at some sample of "
+                             "the horizon (a plant far from the design); shorten horizon")
         sub = (times <= 0.05) | (np.arange(len(times)) % 3 == 0)   # fewer rows: a superset
         V = _derivative_bound(A, B, C, G[sub], hu[sub], hl[sub], limits, q)
         tau = _intersample(gains, V, fine, times)          # (n, 2) per sample
@@ -486,8 +499,8 @@ class CertifiedFilter(Backend):
 
     def reason(self, flags: int) -> str:
         if flags & INVALID:
-            return ("invalid input (non-finite state, command or load); last certified "
-                    "command held")
+            return ("invalid input (non-finite or beyond 1e6: a corrupted message); last "
+                    "certified command held")
         if flags & OUTSIDE:
             return ("nothing is certified and the last command fails its own check (load "
                     "beyond load_bound, a plant outside the box or a larger estimation "
@@ -586,10 +599,7 @@ def decide(fd: np.ndarray, x: np.ndarray, u_ref: float, p: float, mem: np.ndarra
     are the distances from ``u`` to the ends of each relay's own interval.
     """
     nan = math.nan
-    valid = math.isfinite(u_ref) and math.isfinite(p)
-    for v in x:
-        valid = valid and math.isfinite(v)
-    if not valid:
+    if not valid_input(x, u_ref, p):
         u = mem[0]
         return u, INVALID | (ACTIVE if u != u_ref else 0), nan, nan, nan, nan, nan, nan, \
             nan, nan

@@ -65,7 +65,7 @@ from lfc._validate import check_positive
 from lfc.filters.base import (ACTIVE, BIND_FREQ, BIND_ROCOF, BIND_UMAX, BIND_UMIN, INFEASIBLE,
                               INVALID, KIND_FREQ_HI, KIND_FREQ_LO, KIND_ROCOF_HI,
                               KIND_ROCOF_LO, OUTSIDE, SOLVER_ERROR, Backend, check_choice,
-                              check_limits)
+                              check_limits, valid_input)
 from lfc.model import LFCParams, discretize, lfc_matrices, output_matrix
 from lfc.relays import RelaySettings
 
@@ -168,8 +168,9 @@ class PaperFilter(Backend):
     def reason(self, flags: int) -> str:
         parts = []
         if flags & INVALID:
-            parts.append("non-finite input: barrier not evaluated, command passed through "
-                         "(0 if not finite) within the actuator limits")
+            parts.append("invalid input (non-finite or beyond 1e6: a corrupted message): "
+                         "barrier not evaluated, last applied command held within the "
+                         "actuator limits")
         if flags & OUTSIDE:
             parts.append("prediction outside the safe set (h <= 0): " + (
                 "pushing back" if self.outside_rule == "push" else "not letting it get worse"))
@@ -248,17 +249,15 @@ def decide(fd: np.ndarray, x: np.ndarray, u_ref: float, p: float, mem: np.ndarra
     """
     u_min, u_max = fd[U_MIN], fd[U_MAX]
     nan = math.nan
-    valid = math.isfinite(u_ref) and math.isfinite(p)
-    for v in x:
-        valid = valid and math.isfinite(v)
+    valid = valid_input(x, u_ref, p)
     if valid:
         u_pred = mem[0] if fd[APPLIED] == 1.0 else u_ref
         y0, h0, g0, c0, k0, b0 = _row(fd, 0, x, u_pred, p)
         y1, h1, g1, c1, k1, b1 = _row(fd, 1, x, u_pred, p)
         valid = (math.isfinite(c0) and math.isfinite(g0) and math.isfinite(c1)
                  and math.isfinite(g1))
-    if not valid:
-        u = min(max(u_ref if math.isfinite(u_ref) else 0.0, u_min), u_max)
+    if not valid:                  # hold the last command applied (0 at first)
+        u = min(max(mem[0], u_min), u_max)
         u = u if math.isfinite(u) else 0.0
         mem[0] = u
         return u, INVALID | (ACTIVE if u != u_ref else 0), nan, nan, nan, nan, nan, nan, nan, nan

@@ -12,22 +12,42 @@ from lfc.repro import runner
 from lfc.repro.notebook import PLANTS
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse, with a usage error as one line on stderr (exit 2)."""
+
+    def error(self, message: str):
+        self.exit(2, f"error: {message} (python -m lfc --help)\n")
+
+
+def _jobs(text: str) -> int:
+    """``--jobs``: an integer >= 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"--jobs must be an integer >= 1, got {text!r}")
+    return value
+
+
 def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="python -m lfc", description=__doc__)
+    ap = _Parser(prog="python -m lfc", description=__doc__)
     sub = ap.add_subparsers(dest="command", required=True)
     rep = sub.add_parser("reproduce", help="regenerate the paper's figures (notebooks)")
     rep.add_argument("--only", nargs="+", choices=list(runner.FIGURES), metavar="NAME",
                      help=f"a subset of {list(runner.FIGURES)}")
     rep.add_argument("--plant", default="all", choices=(*PLANTS, "all"),
                      help="'all' (default): every plant each figure supports")
-    rep.add_argument("--jobs", type=int, default=2, help="notebooks run in parallel")
+    rep.add_argument("--jobs", type=_jobs, default=2, help="notebooks run in parallel")
     rep.add_argument("--figures-dir", type=Path, default=runner.ROOT / "figures")
     rep.add_argument("--build-dir", type=Path, default=runner.ROOT / "build")
     sw = sub.add_parser("sweep", help="run a notebook over a parameter grid")
     sw.add_argument("notebook", type=Path)
     sw.add_argument("-p", "--param", nargs="+", action="append", default=[],
-                    metavar=("NAME", "VALUE"), help="a parameter and its values")
-    sw.add_argument("--jobs", type=int, default=None, help="worker processes (default: cores)")
+                    metavar=("NAME", "VALUE"),
+                    help="a parameter and its values (repeating a name adds values)")
+    sw.add_argument("--jobs", type=_jobs, default=None,
+                    help="worker processes (default: cores)")
     sw.add_argument("--out", type=Path, default=None,
                     help="default build/sweeps/<notebook name>")
     sw.add_argument("--dask", metavar="ADDRESS", help="run on a Dask scheduler at ADDRESS")
@@ -36,7 +56,7 @@ def _parser() -> argparse.ArgumentParser:
     bt.add_argument("--duration", type=float, required=True, help="simulated time (s)")
     bt.add_argument("--out", type=Path, required=True,
                     help="folder: per-chunk files (resume) and results.csv")
-    bt.add_argument("--chunk-size", type=int, default=500)
+    bt.add_argument("--chunk-size", type=_jobs, default=500, help="scenarios per chunk (>= 1)")
     bt.add_argument("--dask", metavar="ADDRESS", help="run on a Dask scheduler at ADDRESS")
     rd = sub.add_parser("readme", help="copy figures/<name>.md into the README's "
                         "<!-- name:start --> sections (reproduce never edits the README)")
@@ -50,7 +70,10 @@ def _executor(address: str | None):
     if not address:
         return None
     from distributed import Client
-    return Client(address).get_executor()
+    try:
+        return Client(address, timeout="5s").get_executor()
+    except (OSError, TimeoutError) as err:
+        raise ValueError(f"cannot reach the Dask scheduler at {address!r}: {err}") from err
 
 
 def _batch(args) -> int:
@@ -58,9 +81,13 @@ def _batch(args) -> int:
 
     from lfc.batch import simulate_batch
     from lfc.model import LFCParams
-    if not args.scenarios.exists():
-        raise ValueError(f"scenario table not found: {args.scenarios}")
-    table = simulate_batch(LFCParams(), pd.read_csv(args.scenarios), duration=args.duration,
+    if not args.scenarios.is_file():
+        raise ValueError(f"scenario table not found (or not a file): {args.scenarios}")
+    try:
+        scenarios = pd.read_csv(args.scenarios)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as err:
+        raise ValueError(f"cannot read the scenario table {args.scenarios}: {err}") from err
+    table = simulate_batch(LFCParams(), scenarios, duration=args.duration,
                            chunk_size=args.chunk_size, out=args.out / "chunks",
                            executor=_executor(args.dask))
     table.to_csv(args.out / "results.csv", index=False)
@@ -83,7 +110,12 @@ def _readme(check: bool) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+    """Run the command line; return the exit code (2: a usage or input error,
+    printed as one line on stderr; 130: interrupted)."""
+    try:
+        args = _parser().parse_args(argv)
+    except SystemExit as done:          # --help (0) or a usage error (2), already printed
+        return int(done.code or 0)
     try:
         if args.command == "reproduce":
             outcomes = runner.reproduce(args.only, args.plant, args.jobs, args.figures_dir,
@@ -98,18 +130,38 @@ def main(argv: list[str] | None = None) -> int:
             return _batch(args)
         if args.command == "readme":
             return _readme(args.check)
-        grid = {}
-        for name, *values in args.param:
-            if not values:
-                raise ValueError(f"parameter {name!r} has no values")
-            grid[name] = [runner.parse_value(v) for v in values]
-        table = runner.sweep(args.notebook, grid, args.out, args.jobs,
+        table = runner.sweep(args.notebook, _grid(args.param), args.out, args.jobs,
                              executor=_executor(args.dask))
         print(table.to_string(index=False))
         return 0
-    except (ValueError, RuntimeError) as err:
-        print(f"error: {err}", file=sys.stderr)
+    except (ValueError, RuntimeError, OSError) as err:
+        print(f"error: {_one_line(err)}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("interrupted: finished runs and chunks are kept; rerun the same command to "
+              "resume", file=sys.stderr)
+        return 130
+
+
+def _grid(params: list[list[str]]) -> dict[str, list]:
+    """The sweep grid of ``-p NAME VALUE...`` options: a repeated name adds its
+    values; a value given twice for one name is refused."""
+    grid: dict[str, list] = {}
+    for name, *values in params:
+        if not values:
+            raise ValueError(f"parameter {name!r} has no values")
+        grid.setdefault(name, []).extend(runner.parse_value(v) for v in values)
+    for name, values in grid.items():
+        seen = [repr(v) for v in values]
+        twice = sorted({v for v in seen if seen.count(v) > 1})
+        if twice:
+            raise ValueError(f"parameter {name!r} lists {', '.join(twice)} more than once")
+    return grid
+
+
+def _one_line(err: BaseException) -> str:
+    """The error's message on one line."""
+    return " ".join(str(err).split()) or type(err).__name__
 
 
 if __name__ == "__main__":

@@ -3,6 +3,7 @@ documented deviations and the README's generated tables."""
 
 from __future__ import annotations
 
+import ast
 import json
 import re
 from dataclasses import dataclass
@@ -14,10 +15,39 @@ from lfc.model import LFCParams
 from lfc.relays import RelaySettings
 from lfc.simulate import SimResult
 
-__all__ = ["DEVIATIONS", "PLANTS", "PLANT_LABELS", "Deviation", "check_plant", "figure_name",
-           "markdown_table", "readme_mismatches", "record_claims", "save_table", "setup", "sync_readme",
+__all__ = ["DEVIATIONS", "PLANTS", "PLANT_LABELS", "Deviation", "check_parameters", "check_plant",
+           "figure_name", "markdown_table", "readme_mismatches", "record_claims", "save_table", "setup", "sync_readme",
            "update_markdown_section", "write_metrics"]
 PLANT_LABELS = {"linear": "linear model", "testbed": "ANDES testbed"}
+
+
+def check_parameters(namespace: dict) -> None:
+    """Fail fast on a name papermill injected that the notebook does not know.
+
+    Call as ``check_parameters(globals())`` in the first cell after the
+    parameters: it reads the kernel's input history (``In``), finds papermill's
+    injected cell (``# Parameters``) and the parameters cell before it, and
+    raises ``ValueError`` listing the injected names the parameters cell does
+    not assign (a typo would otherwise be ignored and the default used)."""
+    cells = [c for c in namespace.get("In", []) if c]
+    injected = [i for i, c in enumerate(cells) if c.lstrip().startswith("# Parameters")]
+    if not injected or injected[-1] == 0:
+        return
+    known = _assigned(cells[injected[-1] - 1])
+    unknown = sorted(_assigned(cells[injected[-1]]) - known)
+    if unknown:
+        raise ValueError(f"unknown parameter(s) {unknown} for this notebook; it takes "
+                         f"{sorted(known)}")
+
+
+def _assigned(source: str) -> set[str]:
+    """Names assigned at the top level of ``source``."""
+    names = set()
+    for node in ast.parse(source).body:
+        if isinstance(node, (ast.Assign, ast.AnnAssign)):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            names |= {t.id for t in targets if isinstance(t, ast.Name)}
+    return names
 
 
 def setup(plant: str, supported: tuple[str, ...] = PLANTS) -> tuple[LFCParams, RelaySettings]:

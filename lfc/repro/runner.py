@@ -12,9 +12,11 @@ from __future__ import annotations
 import ast
 import itertools
 import json
+import math
 import os
 import re
 import time
+import warnings
 from concurrent.futures import (Executor, ProcessPoolExecutor, ThreadPoolExecutor,
                                 as_completed)
 from dataclasses import dataclass, field
@@ -111,12 +113,14 @@ def reproduce(only: list[str] | None = None, plant: str = "all", jobs: int = 2,
         raise ValueError(f"unknown figure(s) {unknown}; choose from {list(FIGURES)}")
     if plant != "all":
         check_plant(plant)
+    if not (isinstance(jobs, int) and jobs >= 1):
+        raise ValueError(f"jobs must be an integer >= 1, got {jobs!r}")
     runs = [(n, p) for n in names for p in FIGURE_PLANTS[n] if plant in ("all", p)]
     if not runs:
         raise ValueError(f"none of {names} runs on plant {plant!r} (see FIGURE_PLANTS)")
     if any(p == "testbed" for _, p in runs):
         _prepare_testbed()
-    pool = executor or ThreadPoolExecutor(max_workers=max(1, jobs))
+    pool = executor or ThreadPoolExecutor(max_workers=jobs)
     futures = {}
     labels = [figure_name(n, p) for n, p in runs]
     for (name, run_plant), label in zip(runs, labels):
@@ -164,7 +168,9 @@ def parse_value(text: str) -> object:
 
 
 def validate_parameters(notebook: Path, parameters: dict[str, list]) -> dict:
-    """Fail before any run: unknown names, wrong types, non-positive times or gains.
+    """Fail before any run: unknown names, values listed twice, wrong types
+    (an integer parameter takes integers; a list takes a non-empty list of its
+    default's element type), non-finite numbers, non-positive times or gains.
 
     Returns the notebook's parameters as papermill inspects them."""
     known = pm.inspect_notebook(str(notebook))
@@ -172,6 +178,12 @@ def validate_parameters(notebook: Path, parameters: dict[str, list]) -> dict:
         if name not in known:
             raise ValueError(f"unknown parameter {name!r} for {notebook.name}; "
                              f"known: {sorted(known)}")
+        if not isinstance(values, (list, tuple)) or not values:
+            raise ValueError(f"parameter {name!r} needs a non-empty list of values, "
+                             f"got {values!r}")
+        seen = [repr(v) for v in values]
+        if len(set(seen)) < len(seen):
+            raise ValueError(f"parameter {name!r} lists a value more than once: {values!r}")
         default = parse_value(known[name]["default"])
         for value in values:
             _check_type(name, value, default)
@@ -185,17 +197,29 @@ def validate_parameters(notebook: Path, parameters: dict[str, list]) -> dict:
 
 
 def _check_type(name: str, value: object, default: object) -> None:
+    """``value`` has ``default``'s type (ints for an int, any finite number for a
+    float, a non-empty list of the default's element type for a list)."""
     if default is None:
+        return
+    if isinstance(default, list):
+        if not (isinstance(value, list) and value):
+            raise ValueError(f"parameter {name!r} must be a non-empty list, got {value!r}")
+        if default:
+            for v in value:
+                _check_type(name, v, default[0])
         return
     if isinstance(default, bool) or isinstance(value, bool):
         ok = isinstance(value, bool) and isinstance(default, bool)
-    elif isinstance(default, (int, float)):
-        ok = isinstance(value, (int, float))
+    elif isinstance(default, int):
+        ok = isinstance(value, int)
+    elif isinstance(default, float):
+        ok = isinstance(value, (int, float)) and math.isfinite(value)
     else:
         ok = isinstance(value, type(default))
     if not ok:
-        raise ValueError(f"parameter {name!r} must be of type {type(default).__name__}, "
-                         f"got {value!r}")
+        kind = {int: "an integer", float: "a finite number"}.get(type(default),
+                                                                 type(default).__name__)
+        raise ValueError(f"parameter {name!r} must be {kind}, got {value!r}")
 
 
 def run_id(point: dict) -> str:
@@ -217,18 +241,20 @@ def sweep(notebook: str | Path, grid: dict[str, list], out: Path | None = None,
     run and panel with the parameters as columns, is written to ``out/sweep.csv``.
     """
     notebook = Path(notebook).resolve()
-    if not notebook.exists():
+    if not notebook.is_file():
         raise ValueError(f"notebook not found: {notebook}")
+    if jobs is not None and not (isinstance(jobs, int) and jobs >= 1):
+        raise ValueError(f"jobs must be an integer >= 1, got {jobs!r}")
     known = validate_parameters(notebook, grid)
     if "testbed" in grid.get("plant", []) or known.get("plant", {}).get("default") == '"testbed"':
         _prepare_testbed()
     out = Path(out or ROOT / "build" / "sweeps" / notebook.stem).resolve()
     points = [dict(zip(grid, combo)) for combo in itertools.product(*grid.values())]
-    pool = executor or ProcessPoolExecutor(max_workers=max(1, jobs or os.cpu_count() or 1))
+    pool = executor or ProcessPoolExecutor(max_workers=jobs or os.cpu_count() or 1)
     futures = {}
     for point in points:
         folder = out / run_id(point)
-        if (folder / "done.json").exists():
+        if _finished(folder):
             continue
         params = {"check_claims": False, **point, "figures_dir": str(folder),
                   "results_dir": str(folder)}
@@ -252,12 +278,30 @@ def _sweep_one(notebook: Path, folder: Path, params: dict, point: dict) -> str:
     return ""
 
 
+def _finished(folder: Path) -> bool:
+    """Whether a sweep run finished: its ``done.json`` (written last) and a
+    readable ``metrics.json``.  A damaged one is reported and run again."""
+    if not (folder / "done.json").exists():
+        return False
+    try:
+        json.loads((folder / "done.json").read_text())
+        metrics = json.loads((folder / "metrics.json").read_text())
+        if isinstance(metrics, dict) and all(isinstance(m, dict) for m in metrics.values()):
+            return True
+    except (OSError, ValueError):
+        pass
+    warnings.warn(f"sweep run {folder} is damaged (done.json or metrics.json unreadable); "
+                  "running it again", stacklevel=3)
+    (folder / "done.json").unlink(missing_ok=True)
+    return False
+
+
 def collect(out: Path, points: list[dict]) -> pd.DataFrame:
     """One row per finished run and panel: parameters, panel name, flat metrics."""
     rows = []
     for point in points:
         folder = out / run_id(point)
-        if not (folder / "done.json").exists():
+        if not _finished(folder):
             continue
         for panel, m in json.loads((folder / "metrics.json").read_text()).items():
             trip = m.get("first_trip") or {}
