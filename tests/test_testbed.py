@@ -7,11 +7,12 @@ import numpy as np
 import pytest
 
 import lfc
-from lfc.experiments.scenarios import FIG4_AMPLITUDE, fig7_fault
+from lfc.experiments.scenarios import ATTACK_START, FIG4_AMPLITUDE
 from lfc.model import STATES
 from lfc.simulate import METRIC_KEYS
 from lfc.testbed import (FaultSpec, MicrogridCase, OvercurrentSettings, TestbedError,
                          build_system, phase_a_current, simulate_testbed)
+from lfc.testbed import fit as fitting
 from lfc.testbed.fit import OUTPUTS, design_model, fit_design_model
 
 CASE = MicrogridCase()
@@ -35,6 +36,29 @@ def test_builds_power_flow_converges_and_starts_at_nominal():
     assert set(STATES) <= set(r.trace.columns)
     assert r.trace.dw_meas.abs().max() < 1e-6 and r.trace.dw.abs().max() < 1e-6
     assert not r.metrics()["tripped"] and set(r.metrics()) == set(METRIC_KEYS)
+
+
+def test_the_fit_is_cached_on_disk_checked_and_refit_when_damaged(fit, tmp_path, monkeypatch):
+    monkeypatch.setenv("LFC_CACHE_DIR", str(tmp_path))
+    path = fitting._cache_path(CASE)
+    assert path.parent == tmp_path and fitting._read_report(path) is None
+    fitting._write_report(path, fit)
+    assert fitting._read_report(path) == fit                      # exact round trip
+    other = MicrogridCase(droop=0.04)
+    assert fitting._cache_path(other) != path                     # another case, another file
+    text = path.read_text()
+    for damaged in (text[: len(text) // 2], text.replace("3.95", "3.96", 1), "{}"):
+        assert damaged != text
+        path.write_text(damaged)
+        with pytest.warns(RuntimeWarning, match="damaged cache file .*testbed-fit"):
+            assert fitting._read_report(path) is None
+    fitting._fitted.cache_clear()
+    try:
+        with pytest.warns(RuntimeWarning, match="damaged"):
+            assert fitting.fit_report(CASE) == fit                # refit, and rewritten
+        assert fitting._read_report(path) == fit
+    finally:
+        fitting._fitted.cache_clear()
 
 
 def test_fitted_model_small_signal_error_is_small_and_reported(fit):
@@ -94,9 +118,11 @@ def test_fault_trips_over_current_relay_within_its_curve_and_recovers(params, xf
 
 
 def test_scc_leaves_fault_protection_unchanged(params):
-    runs = fig7_fault(params, duration=2.0)
-    assert (runs["scc"].line_trips.trip_t.iloc[0]
-            == runs["no_scc"].line_trips.trip_t.iloc[0])
+    fault = FaultSpec(5, ATTACK_START)
+    bare = simulate_testbed(params, duration=2.0, fault=fault)
+    safe = simulate_testbed(params, duration=2.0, fault=fault,
+                            scc=lfc.SafetyFilter(params, alpha=20.0))
+    assert safe.line_trips.trip_t.iloc[0] == bare.line_trips.trip_t.iloc[0]
 
 
 def test_iec_standard_inverse_curve():

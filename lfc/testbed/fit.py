@@ -7,12 +7,24 @@ load and the outputs ``dPm, dw, dw_meas, rocof_meas``.  The linear model
 inputs, and its seven parameters (M, D, τ_G, τ_T, R, τ_ω, τ_ν) are fitted by
 least squares on the outputs, each scaled by its peak.  The fit error is the
 RMS of those scaled residuals per output.
+
+The fit takes about 4 s (two ANDES runs), so :func:`fit_report` keeps it on
+disk: ``$LFC_CACHE_DIR`` (default ``~/.cache/lfc-scc``), one JSON file per
+case, named by a hash of the case, the ANDES version and the package's source
+(a stale file never matches) and holding a SHA-256 of its contents (a damaged
+file is recomputed with a ``RuntimeWarning`` that names it).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+import hashlib
+import json
+import os
+import tempfile
+import warnings
+from dataclasses import asdict, dataclass, replace
 from functools import lru_cache
+from pathlib import Path
 
 import control as ct
 import numpy as np
@@ -138,4 +150,63 @@ def fit_report(case: MicrogridCase | None = None) -> FitReport:
 
 @lru_cache(maxsize=4)
 def _fitted(case: MicrogridCase) -> FitReport:
-    return fit_design_model(case)
+    path = _cache_path(case)
+    report = _read_report(path)
+    if report is None:
+        report = fit_design_model(case)
+        _write_report(path, report)
+    return report
+
+
+def _cache_path(case: MicrogridCase) -> Path:
+    """The cache file of ``case``'s fit (module docstring)."""
+    import andes
+
+    from lfc.batch import code_digest
+    root = Path(__file__).resolve().parent
+    digest = hashlib.sha256((repr(case) + andes.__version__ + code_digest()).encode())
+    for path in sorted(root.glob("*.py")):
+        digest.update(path.name.encode() + path.read_bytes())
+    folder = Path(os.environ.get("LFC_CACHE_DIR") or Path.home() / ".cache" / "lfc-scc")
+    return folder / f"testbed-fit-{digest.hexdigest()[:16]}.json"
+
+
+def _payload(report: FitReport) -> str:
+    return json.dumps({"params": asdict(report.params), "initial": asdict(report.initial),
+                       "error": report.error, "initial_error": report.initial_error},
+                      sort_keys=True)
+
+
+def _read_report(path: Path) -> FitReport | None:
+    """The cached fit at ``path``; None if absent, damaged (with a warning)."""
+    if not path.exists():
+        return None
+    try:
+        stored = json.loads(path.read_text())
+        payload = stored["payload"]
+        if hashlib.sha256(payload.encode()).hexdigest() != stored["sha256"]:
+            raise ValueError("checksum mismatch")
+        data = json.loads(payload)
+        return FitReport(LFCParams(**data["params"]), LFCParams(**data["initial"]),
+                         data["error"], data["initial_error"])
+    except (OSError, ValueError, KeyError, TypeError) as err:
+        warnings.warn(f"damaged cache file {path} ({err}); fitting again", RuntimeWarning,
+                      stacklevel=2)
+        return None
+
+
+def _write_report(path: Path, report: FitReport) -> None:
+    """Write atomically (unique temporary name, then rename); a cache that
+    cannot be written is skipped."""
+    payload = _payload(report)
+    text = json.dumps({"payload": payload,
+                       "sha256": hashlib.sha256(payload.encode()).hexdigest()})
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except OSError as err:
+        warnings.warn(f"could not write cache file {path} ({err})", RuntimeWarning,
+                      stacklevel=2)
