@@ -1,56 +1,62 @@
 """Every notebook through papermill with short parameters; reproduce and sweep."""
 
+import ast
 import json
 import subprocess
+from pathlib import Path
 
 import pandas as pd
 import pytest
 
+from lfc.experiments import scenarios
 from lfc.repro import runner
 from lfc.repro.cli import main
-from lfc.repro.notebook import figure_name, record_claims
+from lfc.repro.manifest import CHAPTERS, chapter
+from lfc.repro.notebook import record_claims
 from lfc.simulate import METRIC_KEYS
 
-SHORT = {"duration": 3.0}
 PANELS = {"tutorial": {"no_scc", "scc"}, "fig4": {"a", "b", "c", "d"},
           "fig5": {"no_scc", "scc"}, "fig6": {"no_scc", "scc"}, "fig7": {"no_scc", "scc"},
           "kalman": {"no_scc", "scc_true", "scc_kalman"}}
-FIGURE_FILES = {"tutorial": "tutorial_attack", "fig4": "fig4_rocof_attack",
-                "fig5": "fig5_bias_attack", "fig6": "fig6_load_step", "fig7": "fig7_fault",
-                "kalman": "kalman_scc"}
 EXTRA_METRICS = {"fig7": {"oc_trip_t"}}
-RUNS = [(name, plant) for name, plants in runner.FIGURE_PLANTS.items() for plant in plants
-        if name not in ("surface", "redteam")]
-SMALL_SURFACE = {"amplitudes": [0.1, 0.5], "freqs": [0.5, 1.0], "biases": [0.02, 0.04],
-                 "tradeoff_alphas": [20.0], "tradeoff_Ts": [0.25], "load_steps": [0.1, 0.25],
-                 "readings_load_steps": [0.1], "duration": 10.0, "jobs": 1,
-                 "check_claims": False}
+RUNS = [(c.name, plant) for c in CHAPTERS for plant in c.plants
+        if c.name not in ("surface", "redteam")]
+
+
+def images(notebook: Path) -> int:
+    """How many PNG images the executed notebook shows inline."""
+    cells = json.loads(notebook.read_text())["cells"]
+    return sum("image/png" in o.get("data", {}) for c in cells for o in c.get("outputs", []))
 
 
 @pytest.mark.parametrize("name, plant", RUNS)
-def test_notebook_runs_and_writes_figure_and_metrics(name, plant, tmp_path):
-    nb = runner.NOTEBOOKS_DIR / runner.FIGURES[name]
-    runner.execute(nb, tmp_path / nb.name, {**SHORT, "check_claims": False, "plant": plant,
+def test_notebook_runs_shows_and_writes_its_figures_and_metrics(name, plant, tmp_path):
+    c = chapter(name)
+    nb = runner.NOTEBOOKS_DIR / c.notebook
+    runner.execute(nb, tmp_path / nb.name, {**c.short, "check_claims": False, "plant": plant,
                                             "figures_dir": str(tmp_path / "fig"),
                                             "results_dir": str(tmp_path / "res")})
-    for ext in ("png", "pdf"):
-        path = tmp_path / "fig" / f"{figure_name(FIGURE_FILES[name], plant)}.{ext}"
-        assert path.stat().st_size > 1000
+    for png in c.figure_files(plant):
+        assert (tmp_path / "fig" / png).stat().st_size > 1000
+        assert (tmp_path / "fig" / png.replace(".png", ".pdf")).stat().st_size > 1000
+    assert images(tmp_path / nb.name) >= len(c.figures)       # inline, in the notebook
     metrics = json.loads((tmp_path / "res" / "metrics.json").read_text())
     assert set(metrics) == PANELS[name]
     for panel in metrics.values():
         assert set(panel) == set(METRIC_KEYS) | {"parameters"} | EXTRA_METRICS.get(name, set())
-        assert panel["parameters"]["duration"] == 3.0
+        assert panel["parameters"]["duration"] == c.short["duration"]   # what ran
         assert panel["parameters"]["plant"] == plant
     assert json.loads((tmp_path / "res" / "claims.json").read_text())
 
 
 def test_attack_surface_notebook_writes_maps_tables_and_claims(tmp_path):
-    nb = runner.NOTEBOOKS_DIR / runner.FIGURES["surface"]
-    runner.execute(nb, tmp_path / nb.name, {**SMALL_SURFACE, "figures_dir": str(tmp_path / "fig"),
+    c = chapter("surface")
+    nb = runner.NOTEBOOKS_DIR / c.notebook
+    runner.execute(nb, tmp_path / nb.name, {**c.short, "figures_dir": str(tmp_path / "fig"),
                                             "results_dir": str(tmp_path / "res")})
-    for name in ("readings", "attack_surface", "bias_surface", "alpha_ts_tradeoff"):
-        assert (tmp_path / "fig" / f"{name}.png").stat().st_size > 1000
+    for png in c.figure_files("linear"):
+        assert (tmp_path / "fig" / png).stat().st_size > 1000
+    assert images(tmp_path / nb.name) >= len(c.figures)
     surface = pd.read_csv(tmp_path / "res" / "surface.csv")
     assert len(surface) == 2 * 3 * 2 * 2  # waveforms x (no SCC, 2 alphas) x amplitudes x freqs
     assert len(pd.read_csv(tmp_path / "res" / "bias.csv")) == 3 * 2
@@ -66,15 +72,6 @@ def test_attack_surface_notebook_writes_maps_tables_and_claims(tmp_path):
             } <= set(claims)
 
 
-SMALL_RED_TEAM = {"families": ["square on P_c"], "family_maxiter": 2, "family_popsize": 3,
-                  "search_duration": 4.0, "n_seeds": 2, "freeform_attack_duration": 0.2,
-                  "freeform_duration": 2.0, "freeform_maxiter": 1, "map_amplitudes": [0.5, 1.0],
-                  "map_freqs": [0.3, 1.0], "plant_steps": [5e-4, 1e-3], "n_interior": 1,
-                  "n_box_attacks": 2, "box_duration": 5.0, "n_noise_seeds": 2,
-                  "margins": [0.1, 0.3], "load_steps": [0.1], "testbed": False,
-                  "check_claims": False}
-
-
 def tracked_changes() -> str:
     """``git status`` of the tracked files (empty when nothing changed)."""
     out = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
@@ -86,12 +83,13 @@ def tracked_changes() -> str:
 
 def test_red_team_notebook_writes_results_figures_and_the_comparison_table(tmp_path):
     before = tracked_changes()
-    nb = runner.NOTEBOOKS_DIR / runner.FIGURES["redteam"]
-    runner.execute(nb, tmp_path / nb.name, {**SMALL_RED_TEAM,
-                                            "figures_dir": str(tmp_path / "fig"),
+    c = chapter("redteam")
+    nb = runner.NOTEBOOKS_DIR / c.notebook
+    runner.execute(nb, tmp_path / nb.name, {**c.short, "figures_dir": str(tmp_path / "fig"),
                                             "results_dir": str(tmp_path / "res")})
-    for name in ("red_team", "certified_vs_paper", "robust_box"):
-        assert (tmp_path / "fig" / f"{name}.png").stat().st_size > 1000
+    for png in c.figure_files("linear"):
+        assert (tmp_path / "fig" / png).stat().st_size > 1000
+    assert images(tmp_path / nb.name) >= len(c.figures)
     red = pd.read_csv(tmp_path / "res" / "red_team.csv")
     assert set(red.defender) == {"paper α=20", "certified", "robust"}
     table = (tmp_path / "fig" / "comparison.md").read_text()
@@ -164,8 +162,9 @@ def test_reproduce_only_fig4(tmp_path, capsys):
                  "--build-dir", str(tmp_path / "build")])
     out = capsys.readouterr().out
     assert code == 0 and "(a) attack trips ROCOF without SCC" in out
-    rows = [line for line in out.splitlines() if line.strip().startswith("fig4")]
-    assert len(rows) == 5 and all(line.split()[-2] == "yes" for line in rows)
+    rows = [line for line in out.splitlines() if line.strip().startswith("fig4 ")]
+    assert len(rows) == 6 and all(line.split()[-1] == "yes" for line in rows[:5])
+    assert "wall on" in out                  # the time of each notebook is reported
     assert (tmp_path / "fig" / "fig4_rocof_attack.png").exists()
     assert (tmp_path / "build" / "reproduce" / "fig4" / "02_fig4_rocof_attack.ipynb").exists()
 
@@ -234,3 +233,36 @@ def test_a_notebook_run_directly_fails_fast_on_an_unknown_parameter(tmp_path):
 def test_reproduce_rejects_unknown_figure():
     with pytest.raises(ValueError, match="unknown figure"):
         runner.reproduce(["fig9"])
+
+
+DEFAULTS = {  # notebook parameter -> the scenario constant it must equal (one definition)
+    "fig4": {"amplitude": scenarios.FIG4_AMPLITUDE, "weak_amplitude": scenarios.FIG4_WEAK,
+             "freq_hz": scenarios.FIG4_FREQ, "duration": scenarios.FIG4_DURATION},
+    "fig5": {"bias": scenarios.FIG5_BIAS, "duration": scenarios.FIG5_DURATION},
+    "fig6": {"load_step": scenarios.FIG6_LOAD, "duration": scenarios.FIG6_DURATION},
+    "kalman": {"amplitude": scenarios.FIG4_AMPLITUDE, "freq_hz": scenarios.FIG4_FREQ},
+    "tutorial": {"amplitude": scenarios.FIG4_AMPLITUDE, "freq_hz": scenarios.FIG4_FREQ},
+}
+
+
+@pytest.mark.parametrize("name", list(DEFAULTS))
+def test_notebook_defaults_are_the_documented_scenario(name):
+    found = runner.pm.inspect_notebook(str(runner.NOTEBOOKS_DIR / chapter(name).notebook))
+    for param, value in DEFAULTS[name].items():
+        assert ast.literal_eval(found[param]["default"]) == value, param
+
+
+@pytest.mark.parametrize("c", CHAPTERS, ids=lambda c: c.name)
+def test_each_chapter_reads_as_a_chapter(c):
+    """Markdown first; imports only in the first code cell after the parameters;
+    short code cells; the scenario run on the page (a simulate call), not hidden
+    in a helper."""
+    cells = json.loads((runner.NOTEBOOKS_DIR / c.notebook).read_text())["cells"]
+    assert cells[0]["cell_type"] == "markdown"
+    code = ["".join(x["source"]) for x in cells if x["cell_type"] == "code"]
+    assert all(not x.get("outputs") for x in cells if x["cell_type"] == "code")   # committed clean
+    body = code[2:]                                  # after the parameters and the imports
+    assert not any(line.startswith(("import ", "from ")) for cell in body
+                   for line in cell.splitlines()), c.name
+    assert max(len(cell.splitlines()) for cell in body) <= 30, c.name
+    assert any("simulate" in cell for cell in code), c.name

@@ -29,3 +29,15 @@ def test_sync_copies_tables_and_reports_what_changed(tmp_path):
     assert sync_readme(readme, tables) == ["t"]
     assert readme.read_text() == "a\n<!-- t:start -->\n| x |\n|---|\n| 1 |\n<!-- t:end -->\nb\n"
     assert readme_mismatches(readme, tables) == [] and sync_readme(readme, tables) == []
+
+
+def test_the_readmes_figures_are_the_manifests():
+    """Every figure the manifest says a notebook writes is shown in the README, and
+    the README shows no other (``lfc.repro.manifest``: one list)."""
+    import re
+
+    from lfc.repro.manifest import CHAPTERS
+    shown = set(re.findall(r"figures/([\w]+\.png)", README.read_text()))
+    written = {png for c in CHAPTERS for plant in c.plants for png in c.figure_files(plant)}
+    assert shown == written
+    assert all((runner.ROOT / "figures" / png).exists() for png in written)

@@ -209,7 +209,8 @@ def test_property_a_scenario_table_is_refused_or_simulated_correctly(rows, bad, 
     (lambda: lfc.LFCParams(M=True), "M must be a finite number"),
     (lambda: lfc.simulate(P, duration=1.0, dt=np.nan), "dt must be a finite number"),
     (lambda: lfc.Step(0.1, 2.0, stop=1.0), "stop must be > start"),
-    (lambda: lfc.SafetyFilter(P, method="certified", horizon=60.0), r"horizon must lie in \[0.2, 20"),
+    (lambda: lfc.SafetyFilter(P, method="certified", horizon=60.0),
+     r"horizon must lie in \[0.2, 20"),
     (lambda: lfc.simulate(P, duration=1.0, relay_noise=True), "relay_noise=True needs noise_std"),
 ])
 def test_the_core_refuses_what_it_cannot_simulate(call, message):
@@ -320,7 +321,8 @@ def test_cli_usage_error_is_one_line(capsys):
     one_line_error(capsys)
 
 
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=40, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(args=st.lists(st.sampled_from(["--duration", "-1", "0", "nan", "1e-5", "0.5", "--out",
                                       "--chunk-size", "0", "2", "x", "--dask", "", "-p"]),
                      max_size=6))

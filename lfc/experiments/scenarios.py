@@ -1,4 +1,8 @@
-"""The paper's figure scenarios on documented defaults (used by notebooks and tests).
+"""The paper's figure scenarios: documented defaults, the plants, and their simulators.
+
+The notebooks build each scenario on the page from these constants (their
+parameter defaults equal them: ``tests/test_notebooks.py`` checks it); the
+tests use the same constants.
 
 The paper gives no attack amplitudes, start times or durations.  The defaults
 below are chosen on the default ``LFCParams`` so that each figure's situation
@@ -22,10 +26,8 @@ from __future__ import annotations
 
 from typing import Callable
 
-from lfc.filters import SafetyFilter
 from lfc.model import LFCParams
 from lfc.relays import RelaySettings
-from lfc.signals import Sinusoid, Step
 from lfc.simulate import SimResult, simulate
 
 PLANTS = ("linear", "testbed")
@@ -64,69 +66,6 @@ def design_params(plant: str) -> LFCParams:
         return LFCParams()
     from lfc.testbed.fit import design_model
     return design_model()
-
-
-def fig4_rocof_attack(params: LFCParams | None = None, *, alphas: tuple[float, float] = (3.0, 20.0),
-                      amplitude: float = FIG4_AMPLITUDE, weak_amplitude: float = FIG4_WEAK,
-                      freq_hz: float = FIG4_FREQ, Ts: float = 0.25,
-                      duration: float = FIG4_DURATION, plant: str = "linear",
-                      **sim) -> dict[str, SimResult]:
-    """Fig. 4 panels: (a) no SCC, (b) SCC alphas[0], (c) SCC alphas[1], (d) weak attack, SCC alphas[1].
-
-    ``sim`` is passed on to the plant's simulator (``relays``, ``control_period``,
-    ``estimator``, ``noise_std``, ``seed``, ...).
-    """
-    run = simulator(plant)
-    params = params or design_params(plant)
-    relays = sim.pop("relays", None) or RelaySettings()
-    strong = Sinusoid(amplitude, freq_hz, start=ATTACK_START)
-    weak = Sinusoid(weak_amplitude, freq_hz, start=ATTACK_START)
-    scc = [SafetyFilter(params, relays, alpha=a, Ts=Ts) for a in alphas]
-    runs = {"a": (strong, None), "b": (strong, scc[0]), "c": (strong, scc[1]),
-            "d": (weak, scc[1])}
-    return {k: run(params, duration=duration, pc_attack=atk, scc=f, relays=relays, **sim)
-            for k, (atk, f) in runs.items()}
-
-
-def with_and_without_scc(params: LFCParams | None, *, alpha: float, Ts: float,
-                         duration: float, plant: str = "linear",
-                         **sim) -> dict[str, SimResult]:
-    """Run one scenario without SCC (``"no_scc"``) and with it (``"scc"``).
-
-    ``sim`` is passed on to the plant's simulator (signals, ``relays``, timing, ...).
-    """
-    run = simulator(plant)
-    params = params or design_params(plant)
-    relays = sim.pop("relays", None) or RelaySettings()
-    scc = SafetyFilter(params, relays, alpha=alpha, Ts=Ts)
-    return {name: run(params, duration=duration, scc=f, relays=relays, **sim)
-            for name, f in (("no_scc", None), ("scc", scc))}
-
-
-def fig5_bias_attack(params: LFCParams | None = None, *, alpha: float = 20.0,
-                     bias: float = FIG5_BIAS, Ts: float = 0.25,
-                     duration: float = FIG5_DURATION, **sim) -> dict[str, SimResult]:
-    """Fig. 5: a bias on dw_ref, without SCC (``"no_scc"``) and with it (``"scc"``)."""
-    return with_and_without_scc(params, alpha=alpha, Ts=Ts, duration=duration,
-                                wref_attack=Step(bias, start=ATTACK_START), **sim)
-
-
-def fig6_load_step(params: LFCParams | None = None, *, alpha: float = 20.0,
-                   load_step: float = FIG6_LOAD, Ts: float = 0.25,
-                   duration: float = FIG6_DURATION, **sim) -> dict[str, SimResult]:
-    """Fig. 6: a sudden load addition, without SCC (``"no_scc"``) and with it (``"scc"``)."""
-    return with_and_without_scc(params, alpha=alpha, Ts=Ts, duration=duration,
-                                load=Step(load_step, start=ATTACK_START), **sim)
-
-
-def fig7_fault(params: LFCParams | None = None, *, alpha: float = 20.0, Ts: float = 0.25,
-               duration: float = FIG7_DURATION, fault=None, **sim) -> dict[str, SimResult]:
-    """Fig. 7 (testbed only): a three-phase fault at B5 at ``ATTACK_START``,
-    cleared by the over-current relay, without SCC (``"no_scc"``) and with it."""
-    from lfc.testbed import FaultSpec
-    fault = fault or FaultSpec(bus=5, t=ATTACK_START)
-    return with_and_without_scc(params, alpha=alpha, Ts=Ts, duration=duration,
-                                plant="testbed", fault=fault, **sim)
 
 
 def rocof_limit_load_step(params: LFCParams, relays: RelaySettings) -> float:

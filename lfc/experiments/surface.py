@@ -120,8 +120,8 @@ def first_failures(results: pd.DataFrame) -> pd.DataFrame:
         tripped = grp[grp.tripped].sort_values("amplitude", kind="stable")
         first = tripped.iloc[0] if len(tripped) else None
         rows.append({"SCC": scc_label(np.nan if alpha < 0 else alpha),
-                     "smallest amplitude that trips (pu)": float(first.amplitude) if first is not None
-                     else np.nan,
+                     "smallest amplitude that trips (pu)":
+                         float(first.amplitude) if first is not None else np.nan,
                      "first relay": first.first_trip_relay if first is not None else "none",
                      "amplitudes that trip": f"{len(tripped)} of {len(grp)}"})
     return pd.DataFrame(rows)

@@ -1,11 +1,13 @@
 """Command line: ``python -m lfc reproduce``, ``sweep`` (notebooks over a grid),
-``batch`` (a scenario table through the batched simulator) and ``readme`` (copy the
-generated tables of the last reproduce into the README)."""
+``batch`` (a scenario table through the batched simulator), ``book`` (the executed
+notebooks as HTML) and ``readme`` (copy the generated tables of the last reproduce
+into the README)."""
 
 from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
 
 from lfc.repro import runner
@@ -58,6 +60,12 @@ def _parser() -> argparse.ArgumentParser:
                     help="folder: per-chunk files (resume) and results.csv")
     bt.add_argument("--chunk-size", type=_jobs, default=500, help="scenarios per chunk (>= 1)")
     bt.add_argument("--dask", metavar="ADDRESS", help="run on a Dask scheduler at ADDRESS")
+    bk = sub.add_parser("book", help="render the last reproduce's notebooks as HTML in "
+                        "build/book/ (executing any that are missing)")
+    bk.add_argument("--only", nargs="+", choices=list(runner.FIGURES), metavar="NAME",
+                    help=f"a subset of {list(runner.FIGURES)}")
+    bk.add_argument("--figures-dir", type=Path, default=runner.ROOT / "figures")
+    bk.add_argument("--build-dir", type=Path, default=runner.ROOT / "build")
     rd = sub.add_parser("readme", help="copy figures/<name>.md into the README's "
                         "<!-- name:start --> sections (reproduce never edits the README)")
     rd.add_argument("--check", action="store_true",
@@ -118,9 +126,14 @@ def main(argv: list[str] | None = None) -> int:
         return int(done.code or 0)
     try:
         if args.command == "reproduce":
+            t0 = time.perf_counter()
             outcomes = runner.reproduce(args.only, args.plant, args.jobs, args.figures_dir,
                                         args.build_dir)
-            print(runner.summary_table(outcomes).to_string(index=False))
+            wall = time.perf_counter() - t0
+            print(runner.summary_table(outcomes).drop(columns="wall time (s)")
+                  .to_string(index=False))
+            print(f"\nNotebooks ({wall:.0f} s wall on {args.jobs} jobs):")
+            print(runner.times_table(outcomes).to_string(index=False))
             notes = runner.deviation_notes(outcomes)
             if notes:
                 print("\nDocumented deviations (README, 'Where the testbed differs'):")
@@ -130,6 +143,11 @@ def main(argv: list[str] | None = None) -> int:
             return _batch(args)
         if args.command == "readme":
             return _readme(args.check)
+        if args.command == "book":
+            from lfc.repro.book import build_book
+            index = build_book(args.only, args.build_dir, args.figures_dir)
+            print(f"the book: {index}")
+            return 0
         table = runner.sweep(args.notebook, _grid(args.param), args.out, args.jobs,
                              executor=_executor(args.dask))
         print(table.to_string(index=False))

@@ -16,28 +16,46 @@ from lfc.relays import RelaySettings
 from lfc.simulate import SimResult
 
 __all__ = ["DEVIATIONS", "PLANTS", "PLANT_LABELS", "Deviation", "check_parameters", "check_plant",
-           "figure_name", "markdown_table", "readme_mismatches", "record_claims", "save_table", "setup", "sync_readme",
-           "update_markdown_section", "write_metrics"]
+           "figure_name", "markdown_table", "notebook_parameters", "readme_mismatches",
+           "record_claims", "save_table", "setup", "sync_readme", "update_markdown_section",
+           "write_metrics"]
 PLANT_LABELS = {"linear": "linear model", "testbed": "ANDES testbed"}
+
+
+def _parameter_cells(namespace: dict) -> tuple[str, str]:
+    """The sources of the notebook's parameters cell and of papermill's injected
+    cell (``""`` when nothing was injected), from the kernel's input history
+    (``In``): the injected cell starts with ``# Parameters`` and follows the
+    parameters cell; without it the parameters cell is the first one run."""
+    cells = [c for c in namespace.get("In", []) if c]
+    injected = [i for i, c in enumerate(cells) if c.lstrip().startswith("# Parameters")]
+    if injected and injected[-1] > 0:
+        return cells[injected[-1] - 1], cells[injected[-1]]
+    return (cells[0] if cells else ""), ""
 
 
 def check_parameters(namespace: dict) -> None:
     """Fail fast on a name papermill injected that the notebook does not know.
 
     Call as ``check_parameters(globals())`` in the first cell after the
-    parameters: it reads the kernel's input history (``In``), finds papermill's
-    injected cell (``# Parameters``) and the parameters cell before it, and
-    raises ``ValueError`` listing the injected names the parameters cell does
-    not assign (a typo would otherwise be ignored and the default used)."""
-    cells = [c for c in namespace.get("In", []) if c]
-    injected = [i for i, c in enumerate(cells) if c.lstrip().startswith("# Parameters")]
-    if not injected or injected[-1] == 0:
-        return
-    known = _assigned(cells[injected[-1] - 1])
-    unknown = sorted(_assigned(cells[injected[-1]]) - known)
+    parameters: it reads the parameters cell and papermill's injected cell
+    (:func:`_parameter_cells`) and raises ``ValueError`` listing the injected
+    names the parameters cell does not assign (a typo would otherwise be
+    ignored and the default used)."""
+    defaults, injected = _parameter_cells(namespace)
+    known = _assigned(defaults)
+    unknown = sorted(_assigned(injected) - known)
     if unknown:
         raise ValueError(f"unknown parameter(s) {unknown} for this notebook; it takes "
                          f"{sorted(known)}")
+
+
+def notebook_parameters(namespace: dict) -> dict:
+    """The notebook's parameters and their values in this run (defaults and
+    injected ones alike), for ``metrics.json``: nothing copied by hand."""
+    defaults, injected = _parameter_cells(namespace)
+    names = _assigned(defaults) | _assigned(injected)
+    return {n: namespace[n] for n in sorted(names) if n in namespace}
 
 
 def _assigned(source: str) -> set[str]:

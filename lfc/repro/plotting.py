@@ -132,14 +132,16 @@ def fault_figure(runs: dict[str, SimResult], currents: dict[str, tuple[np.ndarra
     return fig
 
 
-def save_figure(fig: Figure, directory: str | Path, name: str) -> list[Path]:
-    """Write ``name.png`` (150 dpi) and ``name.pdf`` with no timestamps (reproducible)."""
+def save_figure(fig: Figure, directory: str | Path, name: str) -> None:
+    """Write ``name.png`` (150 dpi) and ``name.pdf`` with no timestamps (reproducible).
+
+    Returns nothing, so a notebook cell that ends with it shows just the figure
+    (the inline backend draws it at the end of the cell)."""
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
-    paths = [out / f"{name}.png", out / f"{name}.pdf"]
-    fig.savefig(paths[0], dpi=150, metadata={"Software": None})
-    fig.savefig(paths[1], metadata={"CreationDate": None, "Creator": None, "Producer": None})
-    return paths
+    fig.savefig(out / f"{name}.png", dpi=150, metadata={"Software": None})
+    fig.savefig(out / f"{name}.pdf",
+                metadata={"CreationDate": None, "Creator": None, "Producer": None})
 
 
 TRIP_COLORS = {"none": "#eeeeee", "OF2": "tab:red", "UF2": "tab:blue", "ROCOF": "tab:orange"}
@@ -218,7 +220,8 @@ def bias_figure(results, relays: RelaySettings, title: str) -> Figure:
     ax.set_ylim(-0.7, len(alphas) - 0.3)
     _limits_v(ax, [relays.of2 - 1, relays.uf2 - 1], f"bias = OF2 − 1 / UF2 − 1 "
               f"({relays.of2 - 1:+.3g} / {relays.uf2 - 1:+.3g} pu)")
-    ax.set_xlabel("Bias on the frequency reference $\\omega_{ref}$ (pu); numbers: first trip time (s)")
+    ax.set_xlabel("Bias on the frequency reference $\\omega_{ref}$ (pu); "
+                  "numbers: first trip time (s)")
     _trip_legend(fig)
     ax.legend(fontsize=8, loc="lower left")
     ax.set_title(title)

@@ -1,0 +1,117 @@
+"""The paper's claims, each defined once: a function per figure from its runs
+(name -> :class:`~lfc.simulate.SimResult`) to ``{claim: holds}``.
+
+The notebooks call them in their last cell (and ``record_claims`` asserts them);
+``tests/test_paper_claims.py`` checks them on the notebooks' own runs.  Panel
+names are the figures': Fig. 4 ``a`` (no SCC), ``b`` and ``c`` (SCC at two
+α), ``d`` (a weak attack); the others ``no_scc`` and ``scc``.
+"""
+
+from __future__ import annotations
+
+from lfc.relays import RelaySettings
+from lfc.simulate import SimResult
+
+Runs = dict[str, SimResult]
+
+
+def _bools(claims: dict) -> dict[str, bool]:
+    return {k: bool(v) for k, v in claims.items()}
+
+
+def _first_relay(run: SimResult) -> str | None:
+    return (run.metrics()["first_trip"] or {}).get("relay")
+
+
+def tutorial_claims(runs: Runs, qp_gap: float) -> dict[str, bool]:
+    """The tutorial: the printed QP in cvxpy equals the closed form (``qp_gap``,
+    pu), the attack trips without the filter and not with it, and every
+    intervention is logged."""
+    scc = runs["scc"]
+    return _bools({
+        "paper's cvxpy QP equals the exact solution": bool(qp_gap < 1e-6),
+        "attack trips without the filter": runs["no_scc"].metrics()["tripped"],
+        "filter prevents the trip": not scc.metrics()["tripped"],
+        "every intervention is logged":
+            scc.metrics()["alarms"] >= scc.controls.scc_active.sum() > 0,
+    })
+
+
+def fig4_claims(runs: Runs, alphas: tuple[float, float]) -> dict[str, bool]:
+    """Fig. 4: (a) trips ROCOF, (b) and (c) do not, the smaller α (``alphas`` of
+    (b), (c)) keeps the larger margin, (d) neither trips nor activates the SCC."""
+    m = {k: r.metrics() for k, r in runs.items()}
+    return _bools({
+        "(a) attack trips ROCOF without SCC": _first_relay(runs["a"]) == "ROCOF",
+        "(b) SCC prevents the trip": not m["b"]["tripped"],
+        "(c) SCC prevents the trip": not m["c"]["tripped"],
+        "smaller alpha keeps the larger ROCOF margin":
+            (alphas[0] < alphas[1]) <= (m["b"]["max_abs_rocof_meas"]
+                                        <= m["c"]["max_abs_rocof_meas"]),
+        "(d) weak attack: no trip, SCC never active":
+            not m["d"]["tripped"] and m["d"]["scc_active_fraction"] == 0,
+    })
+
+
+def fig5_claims(runs: Runs, relays: RelaySettings) -> dict[str, bool]:
+    """Fig. 5: the bias trips OF2 without the SCC; with it nothing trips and the
+    frequency stays below the OF2 setting."""
+    return _bools({
+        "bias trips OF2 without SCC": _first_relay(runs["no_scc"]) == "OF2",
+        "with SCC no relay trips": not runs["scc"].metrics()["tripped"],
+        "with SCC frequency stays below OF2":
+            bool(runs["scc"].trace.dw_meas.max() < relays.of2 - 1),
+    })
+
+
+def fig6_claims(runs: Runs) -> dict[str, bool]:
+    """Fig. 6: on a legitimate load step the SCC never intervenes, the response is
+    identical with and without it, nothing trips, and local control restores
+    the frequency (|Δω| < 1e-3 pu at the end)."""
+    scc = runs["scc"]
+    return _bools({
+        "SCC never intervenes on a load step": scc.metrics()["alarms"] == 0,
+        "identical response with and without SCC": scc.trace.equals(runs["no_scc"].trace),
+        "no relay trips": not scc.metrics()["tripped"],
+        "local control restores the frequency": bool(abs(scc.trace.dw.iloc[-1]) < 1e-3),
+    })
+
+
+def recovered_after_clearing(run: SimResult) -> bool:
+    """Whether, after the breaker opened, the measured frequency deviation ends
+    below half its peak and the generator voltage within 0.95–1.05 pu."""
+    after = run.trace[run.trace.t > run.line_trips.open_t.iloc[0]]
+    peak, end = after.dw_meas.abs().max(), abs(after.dw_meas.iloc[-1])
+    return bool(end < 0.5 * peak and 0.95 <= after.v_gen.iloc[-1] <= 1.05)
+
+
+def fig7_claims(runs: Runs) -> dict[str, bool]:
+    """Fig. 7 (testbed): the over-current relay opens line B6–B5 (once) at the same
+    time with and without the SCC, frequency and voltage recover
+    (:func:`recovered_after_clearing`), and the SCC adds no generator relay trip."""
+    no_scc, scc = runs["no_scc"], runs["scc"]
+    cleared = all(len(r.line_trips) == 1 for r in runs.values())
+    return _bools({
+        "over-current relay opens line B6-B5": cleared,
+        "SCC leaves the over-current protection unchanged":
+            cleared and scc.line_trips.trip_t.iloc[0] == no_scc.line_trips.trip_t.iloc[0],
+        "frequency and voltage recover after clearing":
+            cleared and all(recovered_after_clearing(r) for r in runs.values()),
+        "SCC adds no generator relay trip":
+            set(map(tuple, scc.trips.values)) <= set(map(tuple, no_scc.trips.values)),
+    })
+
+
+def kalman_claims(runs: Runs, rms: tuple[float, float],
+                  noise_std: tuple[float, float]) -> dict[str, bool]:
+    """The SCC on a Kalman estimate: the attack trips ROCOF without the SCC, the
+    SCC prevents it on the true state and on the estimate, and the estimate's
+    RMS error (``rms``: frequency pu, ROCOF pu/s) is below the sensor noise."""
+    return _bools({
+        "attack trips ROCOF without SCC": _first_relay(runs["no_scc"]) == "ROCOF",
+        "SCC on the true state prevents the trip": not runs["scc_true"].metrics()["tripped"],
+        "SCC on the Kalman estimate prevents the trip":
+            not runs["scc_kalman"].metrics()["tripped"],
+        "estimate error below the sensor noise":
+            bool(rms[0] < noise_std[0] and rms[1] < noise_std[1]),
+    })
