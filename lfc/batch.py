@@ -21,12 +21,10 @@ concurrent runs on one folder are safe.
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import io
 import math
 import os
-import uuid
 import warnings
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from dataclasses import replace
@@ -36,6 +34,7 @@ import numpy as np
 import pandas as pd
 from tqdm.auto import tqdm
 
+from lfc._files import code_digest, write_atomic
 from lfc.engine import METRICS, Scenarios
 from lfc.filters import CONFLICT_RULES, METHODS, OUTSIDE_RULES, PREDICTIONS, SafetyFilter
 from lfc.model import LFCParams
@@ -394,12 +393,7 @@ def _write_chunk(path: Path, metrics: pd.DataFrame) -> None:
     body = metrics.to_csv()
     header = (f"{CHUNK_MAGIC} rows={len(metrics)} "
               f"sha256={hashlib.sha256(body.encode()).hexdigest()}\n")
-    tmp = path.with_name(f"{path.name}.{os.getpid()}.{uuid.uuid4().hex}.tmp")
-    try:
-        tmp.write_text(header + body, encoding="utf-8")
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    write_atomic(path, header + body)
 
 
 def _read_chunk(path: Path, rows: int) -> pd.DataFrame | None:
@@ -425,18 +419,6 @@ def _read_chunk(path: Path, rows: int) -> pd.DataFrame | None:
     if len(metrics) != rows or list(metrics.columns) != list(BATCH_METRICS):
         return damaged("unexpected rows or columns")
     return metrics
-
-
-@functools.lru_cache(maxsize=1)
-def code_digest() -> str:
-    """Hash of the package version and the core's source (``lfc/*.py``,
-    ``lfc/filters/*.py``): what a chunk's results depend on besides its inputs."""
-    from lfc import __version__
-    root = Path(__file__).resolve().parent
-    digest = hashlib.sha256(__version__.encode())
-    for path in sorted([*root.glob("*.py"), *root.glob("filters/*.py")]):
-        digest.update(path.relative_to(root).as_posix().encode() + path.read_bytes())
-    return digest.hexdigest()
 
 
 def _digest(chunk: pd.DataFrame, args: tuple) -> str:

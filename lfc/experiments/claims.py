@@ -29,7 +29,7 @@ def tutorial_claims(runs: Runs, qp_gap: float) -> dict[str, bool]:
     intervention is logged."""
     scc = runs["scc"]
     return _bools({
-        "paper's cvxpy QP equals the exact solution": bool(qp_gap < 1e-6),
+        "paper's cvxpy QP equals the exact solution": qp_gap < 1e-6,
         "attack trips without the filter": runs["no_scc"].metrics()["tripped"],
         "filter prevents the trip": not scc.metrics()["tripped"],
         "every intervention is logged":
@@ -60,7 +60,7 @@ def fig5_claims(runs: Runs, relays: RelaySettings) -> dict[str, bool]:
         "bias trips OF2 without SCC": _first_relay(runs["no_scc"]) == "OF2",
         "with SCC no relay trips": not runs["scc"].metrics()["tripped"],
         "with SCC frequency stays below OF2":
-            bool(runs["scc"].trace.dw_meas.max() < relays.of2 - 1),
+            runs["scc"].trace.dw_meas.max() < relays.of2 - 1,
     })
 
 
@@ -73,7 +73,7 @@ def fig6_claims(runs: Runs) -> dict[str, bool]:
         "SCC never intervenes on a load step": scc.metrics()["alarms"] == 0,
         "identical response with and without SCC": scc.trace.equals(runs["no_scc"].trace),
         "no relay trips": not scc.metrics()["tripped"],
-        "local control restores the frequency": bool(abs(scc.trace.dw.iloc[-1]) < 1e-3),
+        "local control restores the frequency": abs(scc.trace.dw.iloc[-1]) < 1e-3,
     })
 
 
@@ -113,5 +113,5 @@ def kalman_claims(runs: Runs, rms: tuple[float, float],
         "SCC on the Kalman estimate prevents the trip":
             not runs["scc_kalman"].metrics()["tripped"],
         "estimate error below the sensor noise":
-            bool(rms[0] < noise_std[0] and rms[1] < noise_std[1]),
+            rms[0] < noise_std[0] and rms[1] < noise_std[1],
     })

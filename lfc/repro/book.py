@@ -10,7 +10,6 @@ linking to its chapter, and whether the chapter's claims were reproduced.
 from __future__ import annotations
 
 import html
-import json
 import shutil
 from pathlib import Path
 
@@ -59,15 +58,10 @@ def build_book(only: list[str] | None = None, build_dir: Path = runner.ROOT / "b
             for png in c.figure_files(plant):
                 if (figures_dir / png).exists():
                     shutil.copyfile(figures_dir / png, out / "figures" / png)
-            entries.append((c, plant, label, _claims(executed.parent)))
+            entries.append((c, plant, label, runner.read_json(executed.parent / "claims.json")))
     index = out / "index.html"
     index.write_text(_index(entries, out), encoding="utf-8")
     return index
-
-
-def _claims(results: Path) -> dict[str, bool]:
-    path = results / "claims.json"
-    return json.loads(path.read_text()) if path.exists() else {}
 
 
 def _index(entries: list, out: Path) -> str:

@@ -130,8 +130,7 @@ def main(argv: list[str] | None = None) -> int:
             outcomes = runner.reproduce(args.only, args.plant, args.jobs, args.figures_dir,
                                         args.build_dir)
             wall = time.perf_counter() - t0
-            print(runner.summary_table(outcomes).drop(columns="wall time (s)")
-                  .to_string(index=False))
+            print(runner.summary_table(outcomes).to_string(index=False))
             print(f"\nNotebooks ({wall:.0f} s wall on {args.jobs} jobs):")
             print(runner.times_table(outcomes).to_string(index=False))
             notes = runner.deviation_notes(outcomes)

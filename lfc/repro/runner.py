@@ -1,8 +1,8 @@
 """Execute the notebooks with papermill: reproduce every figure, or sweep parameters.
 
-Runs go to an executor: ``reproduce`` uses a thread pool (each papermill run
-drives its own kernel process, so threads give real parallelism); ``sweep``
-defaults to a local process pool with one worker per core.  Any
+Runs go to an executor: by default a thread pool (each papermill run drives its
+own kernel process, so threads give real parallelism), ``jobs`` threads for
+``reproduce`` and one per core for ``sweep``.  Any
 ``concurrent.futures.Executor`` can be passed, e.g. a Dask cluster's
 ``distributed.Client(address).get_executor()``.
 """
@@ -96,12 +96,14 @@ def _run_one(name: str, notebook: Path, results: Path, parameters: dict) -> RunO
         ok = True
     except pm.PapermillExecutionError as err:
         ok, error = False, f"{err.ename}: {err.evalue}"
-    claims_file = results / "claims.json"
-    claims = json.loads(claims_file.read_text()) if claims_file.exists() else {}
-    dev_file = results / "deviations.json"
-    deviations = json.loads(dev_file.read_text()) if dev_file.exists() else {}
+    claims, deviations = read_json(results / "claims.json"), read_json(results / "deviations.json")
     held = all(v or c in deviations for c, v in claims.items())
     return RunOutcome(name, ok and held, time.perf_counter() - t0, claims, error, deviations)
+
+
+def read_json(path: Path) -> dict:
+    """A results file of a notebook run (``claims.json``, ...), ``{}`` if absent."""
+    return json.loads(path.read_text()) if path.exists() else {}
 
 
 def _progress(futures: dict, desc: str) -> list:
@@ -159,14 +161,14 @@ def _prepare_testbed() -> None:
 
 
 def summary_table(outcomes: list[RunOutcome]) -> pd.DataFrame:
-    """One row per claim: figure, claim, reproduced (yes/no), wall time (s)."""
+    """One row per claim: figure, claim, reproduced (yes/no); the notebooks'
+    times are :func:`times_table`."""
     rows = []
     for o in outcomes:
         claims = o.claims or {o.error or "notebook did not run": False}
         for claim, ok in claims.items():
             verdict = "yes" if ok else ("no (documented)" if claim in o.deviations else "no")
-            rows.append({"figure": o.name, "claim": claim, "reproduced": verdict,
-                         "wall time (s)": round(o.seconds, 1)})
+            rows.append({"figure": o.name, "claim": claim, "reproduced": verdict})
     return pd.DataFrame(rows)
 
 

@@ -20,7 +20,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import tempfile
 import warnings
 from dataclasses import asdict, dataclass, replace
 from functools import lru_cache
@@ -162,13 +161,10 @@ def _cache_path(case: MicrogridCase) -> Path:
     """The cache file of ``case``'s fit (module docstring)."""
     import andes
 
-    from lfc.batch import code_digest
-    root = Path(__file__).resolve().parent
-    digest = hashlib.sha256((repr(case) + andes.__version__ + code_digest()).encode())
-    for path in sorted(root.glob("*.py")):
-        digest.update(path.name.encode() + path.read_bytes())
+    from lfc._files import code_digest
+    key = hashlib.sha256((repr(case) + andes.__version__ + code_digest("testbed")).encode())
     folder = Path(os.environ.get("LFC_CACHE_DIR") or Path.home() / ".cache" / "lfc-scc")
-    return folder / f"testbed-fit-{digest.hexdigest()[:16]}.json"
+    return folder / f"testbed-fit-{key.hexdigest()[:16]}.json"
 
 
 def _payload(report: FitReport) -> str:
@@ -196,17 +192,15 @@ def _read_report(path: Path) -> FitReport | None:
 
 
 def _write_report(path: Path, report: FitReport) -> None:
-    """Write atomically (unique temporary name, then rename); a cache that
-    cannot be written is skipped."""
+    """Write atomically (:func:`lfc._files.write_atomic`); a cache that cannot be
+    written is skipped with a warning."""
+    from lfc._files import write_atomic
     payload = _payload(report)
     text = json.dumps({"payload": payload,
                        "sha256": hashlib.sha256(payload.encode()).hexdigest()})
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        os.replace(tmp, path)
+        write_atomic(path, text)
     except OSError as err:
         warnings.warn(f"could not write cache file {path} ({err})", RuntimeWarning,
                       stacklevel=2)

@@ -1,0 +1,36 @@
+"""Files the package writes and later trusts: atomic writes, and the digest of
+the code that produced them (a file written by other code never matches)."""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import os
+import uuid
+from pathlib import Path
+
+
+def write_atomic(path: Path, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` through a unique temporary file renamed
+    into place: a reader never sees half a file, and concurrent writers never
+    share a temporary name."""
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.{uuid.uuid4().hex}.tmp")
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+@functools.lru_cache(maxsize=None)
+def code_digest(*packages: str) -> str:
+    """SHA-256 of the package version and the core's source (``lfc/*.py``,
+    ``lfc/filters/*.py``) plus ``lfc/<package>/*.py`` for each of ``packages``
+    (e.g. ``"testbed"``): what stored results depend on besides their inputs."""
+    from lfc import __version__
+    root = Path(__file__).resolve().parent
+    digest = hashlib.sha256(__version__.encode())
+    for folder in ("", "filters", *packages):
+        for path in sorted((root / folder).glob("*.py")):
+            digest.update(path.relative_to(root).as_posix().encode() + path.read_bytes())
+    return digest.hexdigest()
