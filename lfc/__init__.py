@@ -17,12 +17,15 @@ from lfc.batch import simulate_batch
 from lfc.estimation import KalmanFilter
 from lfc.filters import FilterInfo, SafetyFilter
 from lfc.model import LFCParams, discretize, lfc_matrices, lfc_model
+from lfc.multiarea import MultiAreaParams, multiarea_matrices
 from lfc.relays import RelayBank, RelaySettings
 from lfc.signals import Chirp, Ramp, Samples, Sinusoid, Square, Step
 from lfc.simulate import SimResult, simulate
+from lfc.simulate_multiarea import MultiAreaResult, simulate_multiarea, simulate_multiarea_batch
 
 __all__ = [
-    "Chirp", "FilterInfo", "KalmanFilter", "LFCParams", "Ramp", "RelayBank", "RelaySettings",
-    "SafetyFilter", "Samples", "SimResult", "Sinusoid", "Square", "Step", "discretize",
-    "lfc_matrices", "lfc_model", "simulate", "simulate_batch",
+    "Chirp", "FilterInfo", "KalmanFilter", "LFCParams", "MultiAreaParams", "MultiAreaResult",
+    "Ramp", "RelayBank", "RelaySettings", "SafetyFilter", "Samples", "SimResult", "Sinusoid",
+    "Square", "Step", "discretize", "lfc_matrices", "lfc_model", "multiarea_matrices",
+    "simulate", "simulate_batch", "simulate_multiarea", "simulate_multiarea_batch",
 ]

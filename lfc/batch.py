@@ -211,11 +211,17 @@ def run_chunk(params: LFCParams, scenarios: pd.DataFrame, duration: float,
                seed=int(row.get("seed", 0)), relay_noise=bool(row.get("relay_noise", False)),
                **({channel: signal} if signal else {}))
     run = sc.run()
-    m = dict(zip(METRICS, run.metrics.T))
+    return metrics_frame(run.metrics, sc.n_ctrl, scenarios.index)
+
+
+def metrics_frame(metrics: np.ndarray, n_ctrl: int, index) -> pd.DataFrame:
+    """The engine's ``metrics`` (N, len(METRICS)) as the columns ``BATCH_METRICS``
+    (``n_ctrl`` control periods per scenario, ``index`` the rows' labels)."""
+    m = dict(zip(METRICS, np.asarray(metrics).T))
     tripped = ~np.isnan(m["first_trip_t"])
     relay = np.array(RELAY_NAMES, dtype=object)[np.maximum(m["first_trip_relay"], 0)
                                                  .astype(int)]
-    n_ctrl = max(sc.n_ctrl, 1)
+    n_ctrl = max(n_ctrl, 1)
     return pd.DataFrame({
         "tripped": tripped, "first_trip_relay": np.where(tripped, relay, None),
         "first_trip_t": m["first_trip_t"], "max_abs_dw_meas": m["max_abs_dw_meas"],
@@ -224,7 +230,7 @@ def run_chunk(params: LFCParams, scenarios: pd.DataFrame, duration: float,
         "max_abs_modification": m["max_abs_modification"],
         "mean_abs_modification": m["sum_abs_modification"] / n_ctrl,
         "alarms": m["alarms"].astype(int), "final_abs_dw_meas": m["final_abs_dw_meas"]},
-        index=scenarios.index)
+        index=index)
 
 
 def _plant(params: LFCParams, row: dict) -> LFCParams:

@@ -36,7 +36,8 @@ from lfc.model import LFCParams, discretize
 from lfc.relays import RelaySettings, relay_sample
 from lfc.signals import GRID, N_PARAMS, NONE, SAMPLES, STEP, Signal, value_at
 
-PC, WREF, LOAD = range(3)           # signal channels
+PC, WREF, LOAD, ACE = range(4)      # signal channels (ACE: an attack on the area control error)
+N_CHANNELS = 4
 N_KF = 6                            # largest Kalman state (5 states + the load)
 N_CTRL = 15                         # trace columns per control period (see CTRL_COLUMNS)
 CTRL_COLUMNS = ("u_ref", "u", "flags", "h_freq", "h_rocof", "margin_freq", "margin_rocof",
@@ -65,11 +66,15 @@ def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise0: flo
                      ka: np.ndarray, kb: np.ndarray, kc: np.ndarray, kg: np.ndarray,
                      kstate: np.ndarray, feedforward: bool, method: int, fd: np.ndarray,
                      mem: np.ndarray, gstate: np.ndarray, x_hat: np.ndarray,
-                     ctrl: np.ndarray) -> tuple:
+                     ctrl: np.ndarray, tie: float, k_tie_period: float) -> tuple:
     """The generator side at control sample ``j`` (time ``t``, s) of one scenario.
 
     ``x`` is the plant's state in design-model coordinates and ``p_true`` the true
     load (pu); ``noise0``, ``noise1`` the measurement noise of this sample.
+    In an interconnected grid (:mod:`lfc.multiarea`) ``p_true`` is the area's net
+    disturbance (load plus tie-line export) and the integrator is the area's AGC:
+    ``gstate[0] += k_i_period (wref - dw_meas) - k_tie_period tie`` with ``tie``
+    the measured tie-line export plus any ACE attack (0 and 0 for one area).
     ``est`` >= 0 selects the Kalman filter ``(ka, kb, kc, kg)`` with state
     ``kstate`` (prior, then posterior; 2 x N_KF); ``method`` < 0 runs without a
     filter.
@@ -96,7 +101,7 @@ def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise0: flo
     else:
         u, flags, h0, h1, m0, m1, q0, q1, d0, d1 = u_ref, 0, nan, nan, nan, nan, nan, nan, \
             nan, nan
-    gstate[0] += k_i_period * (wref - y0)
+    gstate[0] += k_i_period * (wref - y0) - k_tie_period * tie
     if est >= 0:
         kf_predict(ka, kb, kstate, u)
     if ctrl.shape[0]:
@@ -167,7 +172,7 @@ def _run(n_steps: int, ratio: int, dt: float, k_i_period: float, ad: np.ndarray,
                 j, t, x, p_true, noise[q_i, j, 0] if q_i >= 0 else 0.0,
                 noise[q_i, j, 1] if q_i >= 0 else 0.0, kinds_i, params_i, offsets_i, st, sv,
                 k_i_period, e_i, ka_i, kb_i, kc_i, kg_i, kstate, ff == 1, method, fd, mem,
-                gstate, x_hat, trace_ctrl)
+                gstate, x_hat, trace_ctrl, 0.0, 0.0)
             active += (flags & ACTIVE) != 0
             alarms += (flags & ALARM_BITS) != 0
             outside += (flags & OUTSIDE) != 0
@@ -241,11 +246,15 @@ def check_noise(noise_std: tuple[float, float]) -> bool:
     return any(s > 0 for s in noise_std)
 
 
-def make_noise(noise_std: tuple[float, float], n: int, seed: int) -> np.ndarray:
+def make_noise(noise_std: tuple[float, float], n: int, seed: int | tuple[int, ...]
+               ) -> np.ndarray:
     """Seeded white noise for ``n`` controller readings of (dw_meas, rocof_meas):
-    shape (n, 2), std ``noise_std`` (pu, pu/s), checked by :func:`check_noise`."""
+    shape (n, 2), std ``noise_std`` (pu, pu/s), checked by :func:`check_noise`;
+    ``seed`` an int or a tuple of ints (the area ``a > 0`` of a multi-area
+    scenario uses ``(seed, a)``, area 0 ``seed``)."""
     check_noise(noise_std)
-    return np.random.default_rng(seed).standard_normal((n, 2)) * np.asarray(noise_std, float)
+    return np.random.default_rng(list(seed) if isinstance(seed, tuple) else seed)\
+        .standard_normal((n, 2)) * np.asarray(noise_std, float)
 
 
 def make_estimator(estimator: object, params: LFCParams, control_period: float,
@@ -281,16 +290,19 @@ def sample_signal(signal, t: np.ndarray, name: str) -> np.ndarray:
     return values
 
 
-def scenario_signals(pc_attack, wref_attack, load, tc: np.ndarray, t: np.ndarray) -> tuple:
-    """One scenario's signals as the engine reads them: ``(kinds (3,), params (3, 6),
-    offsets (3, 2), sample times, sample values)``.  A :class:`~lfc.signals.Signal`
-    is passed as its spec; any other callable is sampled on its grid (control
-    samples ``tc`` for the attacks, plant samples ``t`` for the load)."""
-    kinds, params = np.zeros(3, np.int64), np.zeros((3, N_PARAMS))
-    offsets, st, sv = np.zeros((3, 2), np.int64), [], []
+def scenario_signals(pc_attack, wref_attack, load, tc: np.ndarray, t: np.ndarray,
+                     ace_attack=None) -> tuple:
+    """One scenario's (or area's) signals as the engine reads them: ``(kinds (4,),
+    params (4, 6), offsets (4, 2), sample times, sample values)``, channels
+    ``PC, WREF, LOAD, ACE``.  A :class:`~lfc.signals.Signal` is passed as its
+    spec; any other callable is sampled on its grid (control samples ``tc`` for
+    the attacks, plant samples ``t`` for the load)."""
+    kinds, params = np.zeros(N_CHANNELS, np.int64), np.zeros((N_CHANNELS, N_PARAMS))
+    offsets, st, sv = np.zeros((N_CHANNELS, 2), np.int64), [], []
     for c, (signal, name, grid) in enumerate(((pc_attack, "pc_attack", tc),
                                              (wref_attack, "wref_attack", tc),
-                                             (load, "load", t))):
+                                             (load, "load", t),
+                                             (ace_attack, "ace_attack", tc))):
         if signal is None:
             times, values = np.zeros(0), np.zeros(0)          # kind NONE: zero
         elif isinstance(signal, Signal):
@@ -398,9 +410,9 @@ class Scenarios:
     def run(self, *, trace: bool = False, stop_on_trip: bool = False) -> Run:
         """Run every scenario added; ``trace`` keeps everything (one scenario only)."""
         n = len(self._rows)
-        kinds = np.array([s[0] for s in self._sig], np.int64).reshape(n, 3)
-        params = np.array([s[1] for s in self._sig]).reshape(n, 3, N_PARAMS)
-        offsets = np.array([s[2] for s in self._sig], np.int64).reshape(n, 3, 2)
+        kinds = np.array([s[0] for s in self._sig], np.int64).reshape(n, N_CHANNELS)
+        params = np.array([s[1] for s in self._sig]).reshape(n, N_CHANNELS, N_PARAMS)
+        offsets = np.array([s[2] for s in self._sig], np.int64).reshape(n, N_CHANNELS, 2)
         st = np.concatenate(self._st) if self._st else np.zeros(0)
         sv = np.concatenate(self._sv) if self._sv else np.zeros(0)
         plants = self._plants.items
@@ -489,6 +501,6 @@ class GeneratorSide:
                                    params, offsets, st, sv, self.k_i_period, self.est, self.ka,
                                    self.kb, self.kc, self.kg, self.kstate, self.feedforward,
                                    self.method, self.data, self.memory, self.gstate,
-                                   self.x_hat, self.ctrl)
+                                   self.x_hat, self.ctrl, 0.0, 0.0)
         self.n_done = j + 1
         return u

@@ -11,7 +11,11 @@ generation with :func:`lfc.simulate_batch` (``vectorized=True`` in scipy's
   (amplitude and frequency of sinusoids, squares, chirps on P_c; size of a bias
   or slope of a ramp on ω_ref);
 * :func:`freeform_search`: a free-form attack on P_c, one value per control
-  period, bounded by ``±amplitude``.
+  period, bounded by ``±amplitude``;
+* :func:`coordinated_search`: an interconnected grid (:mod:`lfc.multiarea`),
+  one family's parameters chosen separately for every area at once (a
+  coordinated attack; families also on the ACE each area's AGC integrates),
+  severity the worst over the areas, with :func:`lfc.simulate_multiarea_batch`.
 
 Both can search the plant and the noise too (``Search``): each attack's plant
 anywhere in a box around the design model (M, D, τ_G, τ_T, R within
@@ -28,11 +32,13 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import differential_evolution
 
-from lfc.batch import simulate_batch
+from lfc.batch import scenario_signal, simulate_batch
 from lfc.experiments.scenarios import ATTACK_START
 from lfc.filters.certified import BOX
 from lfc.model import LFCParams
+from lfc.multiarea import MultiAreaParams
 from lfc.relays import RelaySettings
+from lfc.simulate_multiarea import simulate_multiarea_batch
 
 # family -> (channel, waveform, bounds of (amplitude, freq_hz)); one bound: freq unused
 FAMILIES = {
@@ -42,6 +48,8 @@ FAMILIES = {
     "bias on ω_ref": ("wref", "step", [(-0.2, 0.2)]),
     "ramp on ω_ref": ("wref", "ramp", [(-0.05, 0.05)]),
 }
+# families of the coordinated search: the above, and a bias on the ACE an AGC integrates
+MULTI_FAMILIES = {**FAMILIES, "bias on ACE": ("ace", "step", [(-3.0, 3.0)])}
 
 
 @dataclass(frozen=True)
@@ -197,6 +205,53 @@ def freeform_search(params: LFCParams, defender: Defender, *, amplitude: float =
             "severity": sev, "tripped": bool(row.tripped), "first_trip": row.first_trip_relay,
             "attack": f"{n} values, max |value| {np.abs(values).max():.3g} pu",
             "values": tuple(map(float, values)), **search.describe(params, theta[n:])}
+
+
+def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
+                       relays: RelaySettings | None = None, duration: float = 20.0,
+                       seed: int = 0, maxiter: int = 5, popsize: int = 5,
+                       jobs: int = 2) -> dict:
+    """Worst coordinated attack of one family (``MULTI_FAMILIES``) on an
+    interconnected grid: differential evolution over the family's parameters in
+    every area at once (an area may get amplitude 0: single-area attacks are
+    included), maximizing the worst :func:`severity` over the areas.
+
+    ``filters`` is :func:`lfc.simulate_multiarea`'s ``{area: "paper" |
+    "certified" | SafetyFilter}``.  Returns the family, the worst severity, the
+    area it is reached in, whether any area tripped and the attack per area.
+    """
+    if family not in MULTI_FAMILIES:
+        raise ValueError(f"family must be one of {list(MULTI_FAMILIES)}, got {family!r}")
+    relays = relays or RelaySettings()
+    channel, waveform, bounds = MULTI_FAMILIES[family]
+    k, n = len(bounds), params.n_areas
+
+    def attacks(theta: np.ndarray) -> dict:
+        return {a: {channel: scenario_signal(
+            {"waveform": waveform, "amplitude": float(theta[k * a]),
+             "freq_hz": float(theta[k * a + 1]) if k > 1 else 0.0, "start": ATTACK_START},
+            duration)} for a in range(n)}
+
+    def run(thetas: np.ndarray) -> pd.DataFrame:
+        out = simulate_multiarea_batch(
+            params, [{"attacks": attacks(th), "filters": filters} for th in thetas.T],
+            duration=duration, relays=relays, jobs=jobs)
+        out["severity"] = severity(out, relays)
+        return out
+
+    def objective(thetas: np.ndarray) -> np.ndarray:
+        return -run(thetas).groupby("scenario").severity.max().to_numpy()
+
+    sol = differential_evolution(objective, list(bounds) * n, seed=seed, maxiter=maxiter,
+                                 popsize=popsize, vectorized=True, updating="deferred",
+                                 polish=False, tol=0)
+    best = run(sol.x[:, None])
+    worst = best.loc[best.severity.idxmax()]
+    return {"search": family, "severity": float(worst.severity), "area": int(worst.area),
+            "tripped": bool(best.tripped.any()),
+            "attack": "; ".join(f"area {a}: " + ", ".join(f"{v:.4g}" for v in
+                                                           sol.x[k * a:k * (a + 1)])
+                                for a in range(n))}
 
 
 def piecewise_attack_table(*, n: int, amplitude: float, duration: float, seed: int,

@@ -1,0 +1,193 @@
+"""Interconnected areas: tie-lines, the area control error (ACE) and AGC.
+
+Each area is the single-area model of :mod:`lfc.model` (its own
+:class:`~lfc.model.LFCParams`, all on one common MVA base and nominal
+frequency).  Tie-line ``l`` between areas ``i`` and ``j`` carries the export
+deviation ``dP_l`` (pu) from ``i`` to ``j``:
+
+    dP_l' = T_ij (dw_i - dw_j)
+
+with ``T_ij`` the synchronizing coefficient in pu power per pu frequency per
+second, the convention of Saadat (1999), *Power System Analysis*, sec. 12.7,
+whose block diagram feeds ``P_s / s`` with the per-unit frequency difference.
+Area ``i`` exports ``dP_tie,i = sum_l (+dP_l if it starts the line, -dP_l if
+it ends it)``; the export enters its swing equation exactly as a load does,
+``M dw_i' = dPm_i - D dw_i - dP_L,i - dP_tie,i``, so ``w_i = dP_L,i +
+dP_tie,i`` is the area's **net disturbance**.
+
+AGC integrates the area control error ``ACE_i = dP_tie,i + B_i dw_i`` (the
+frequency bias ``B_i`` defaults to ``D_i + 1/R_i``, the area's natural
+response): ``d dPc_i/dt = -k_agc,i (ACE_i - B_i dw_ref,i)``.  Its default gain
+``k_agc,i = k_i / B_i`` makes one area exactly the single-area model's local
+integral controller, ``d dPc/dt = k_i (dw_ref - dw_meas)``.
+
+States: the areas' ``[dPg, dPm, dw, dw_meas, rocof_meas]`` one after another,
+then one export deviation per tie-line.  Inputs: every area's command
+``dPc_i``, then every area's load ``dP_L,i``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from lfc.model import STATES, LFCParams, lfc_matrices, zoh
+
+N_AREA_STATES = len(STATES)
+SAADAT_T = 2.0   # pu: Saadat (1999), Examples 12.5-12.7, "synchronizing power coefficient"
+
+
+@dataclass(frozen=True)
+class MultiAreaParams:
+    """An interconnected grid of LFC areas (module docstring).
+
+    Parameters
+    ----------
+    areas : tuple of LFCParams
+        One per area, on one common MVA base and nominal frequency.
+    tie : tuple of (i, j, T_ij)
+        Tie-lines: area indices ``i != j`` and the synchronizing coefficient
+        ``T_ij > 0`` (pu power per pu frequency per s).  At most one line per
+        pair of areas.
+    bias : tuple of float, optional
+        Frequency bias ``B_i`` of each area's ACE (pu power per pu frequency),
+        > 0.  Default ``D_i + 1/R_i``.
+    k_agc : tuple of float, optional
+        AGC integral gain on ACE of each area (1/s), >= 0.  Default
+        ``k_i / B_i``: one area is then exactly :func:`lfc.simulate`'s loop.
+    """
+
+    areas: tuple[LFCParams, ...]
+    tie: tuple[tuple[int, int, float], ...] = ()
+    bias: tuple[float, ...] | None = None
+    k_agc: tuple[float, ...] | None = None
+
+    def __post_init__(self) -> None:
+        areas = tuple(self.areas) if isinstance(self.areas, (list, tuple)) else ()
+        if not areas or not all(isinstance(a, LFCParams) for a in areas):
+            raise ValueError(f"areas must be a non-empty sequence of LFCParams, got "
+                             f"{self.areas!r}")
+        for name in ("f_nominal", "s_base_mva"):
+            values = {getattr(a, name) for a in areas}
+            if len(values) > 1:
+                raise ValueError(f"every area must share one {name} (a common per-unit base), "
+                                 f"got {sorted(values)}")
+        n = len(areas)
+        ties, pairs = [], set()
+        for k, line in enumerate(self.tie):
+            try:
+                i, j, coef = line
+                i, j, coef = int(i), int(j), float(coef)
+            except (TypeError, ValueError):
+                raise ValueError(f"tie[{k}] must be (i, j, T_ij), got {line!r}") from None
+            if not (0 <= i < n and 0 <= j < n and i != j):
+                raise ValueError(f"tie[{k}] must join two different areas in [0, {n - 1}], "
+                                 f"got {line!r}")
+            if not (math.isfinite(coef) and coef > 0):
+                raise ValueError(f"tie[{k}]'s T_ij must be a finite number > 0 (pu), got "
+                                 f"{coef!r}")
+            if frozenset((i, j)) in pairs:
+                raise ValueError(f"tie[{k}] repeats the line between areas {i} and {j}")
+            pairs.add(frozenset((i, j)))
+            ties.append((i, j, coef))
+        object.__setattr__(self, "areas", areas)
+        object.__setattr__(self, "tie", tuple(ties))
+        for name, low, strict in (("bias", 0.0, True), ("k_agc", 0.0, False)):
+            value = getattr(self, name)
+            if value is None:
+                continue
+            value = tuple(float(v) for v in value)
+            if len(value) != n or not all(math.isfinite(v) and (v > low if strict else v >= low)
+                                          for v in value):
+                raise ValueError(f"{name} must be {n} finite numbers "
+                                 f"{'> 0' if strict else '>= 0'} (one per area), got "
+                                 f"{getattr(self, name)!r}")
+            object.__setattr__(self, name, value)
+
+    @property
+    def n_areas(self) -> int:
+        return len(self.areas)
+
+    @property
+    def n_states(self) -> int:
+        return N_AREA_STATES * self.n_areas + len(self.tie)
+
+    def biases(self) -> np.ndarray:
+        """Each area's frequency bias ``B_i`` (pu power per pu frequency)."""
+        if self.bias is not None:
+            return np.array(self.bias)
+        return np.array([a.D + 1 / a.droop for a in self.areas])
+
+    def agc_gains(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(k_freq, k_tie)`` (1/s): AGC is ``d dPc_i/dt = k_freq_i (dw_ref_i -
+        dw_meas_i) - k_tie_i (dP_tie,i + ACE attack)``, that is ``k_freq = k_agc B``
+        and ``k_tie = k_agc``; by default ``k_freq = k_i`` exactly."""
+        if self.k_agc is None:
+            k_freq = np.array([a.k_i for a in self.areas])
+            return k_freq, k_freq / self.biases()
+        k = np.array(self.k_agc)
+        return k * self.biases(), k
+
+    def incidence(self) -> np.ndarray:
+        """``(n_areas, n_lines)``: area ``i``'s export is ``incidence[i] @ dP_lines``."""
+        E = np.zeros((self.n_areas, len(self.tie)))
+        for line, (i, j, _) in enumerate(self.tie):
+            E[i, line], E[j, line] = 1.0, -1.0
+        return E
+
+    @classmethod
+    def two_area(cls, area: LFCParams | None = None, T: float = SAADAT_T) -> MultiAreaParams:
+        """Two equal areas (default :class:`LFCParams` on a 1000 MVA base, as in
+        Saadat's two-area examples) joined by one tie-line with ``T`` = 2.0 pu,
+        Saadat (1999), Examples 12.5-12.7."""
+        area = area or LFCParams(s_base_mva=1000.0)
+        return cls(areas=(area, area), tie=((0, 1, T),))
+
+    @classmethod
+    def three_area(cls, T: float = SAADAT_T) -> MultiAreaParams:
+        """Three unequal areas in a ring, each line ``T`` = 2.0 pu: area 0 the
+        default area on 1000 MVA, area 1 heavier (M 6 s, D 1.5), area 2 lighter
+        with a slower turbine (M 3 s, tau_T 0.4 s, D 0.8; its least damped mode
+        has damping ratio 0.15).  Illustrative values in the default area's
+        ranges, not from a published case."""
+        base = LFCParams(s_base_mva=1000.0)
+        heavy = LFCParams(M=6.0, D=1.5, s_base_mva=1000.0)
+        light = LFCParams(M=3.0, tau_t=0.4, D=0.8, s_base_mva=1000.0)
+        return cls(areas=(base, heavy, light), tie=((0, 1, T), (1, 2, T), (0, 2, T)))
+
+
+def multiarea_matrices(params: MultiAreaParams) -> tuple[np.ndarray, np.ndarray]:
+    """Continuous-time ``(A, B)`` of the interconnection (module docstring).
+
+    Returns
+    -------
+    A : ndarray, shape (n_states, n_states)
+    B : ndarray, shape (n_states, 2 n_areas)
+        Columns: every area's ``dPc``, then every area's ``dP_L``.
+    """
+    n, m = params.n_areas, N_AREA_STATES
+    A, B = np.zeros((params.n_states, params.n_states)), np.zeros((params.n_states, 2 * n))
+    for a, area in enumerate(params.areas):
+        Aa, Ba = lfc_matrices(area)
+        rows = slice(m * a, m * (a + 1))
+        A[rows, rows], B[rows, a], B[rows, n + a] = Aa, Ba[:, 0], Ba[:, 1]
+    E = params.incidence()
+    dw = STATES.index("dw")
+    for line, (i, j, coef) in enumerate(params.tie):
+        s = m * n + line
+        A[s, m * i + dw], A[s, m * j + dw] = coef, -coef
+        for a in (i, j):     # the export acts on its area as a load does
+            A[m * a:m * (a + 1), s] = E[a, line] * B[m * a:m * (a + 1), n + a]
+    return A, B
+
+
+def discretize_multiarea(params: MultiAreaParams, dt: float
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Zero-order hold of :func:`multiarea_matrices` at ``dt`` (s): ``(Ad, Bu, Bl)``
+    with ``Bu`` the commands' and ``Bl`` the loads' columns."""
+    A, B = multiarea_matrices(params)
+    Ad, Bd = zoh(A, B, dt)
+    n = params.n_areas
+    return Ad, np.ascontiguousarray(Bd[:, :n]), np.ascontiguousarray(Bd[:, n:])
