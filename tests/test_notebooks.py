@@ -20,7 +20,7 @@ PANELS = {"tutorial": {"no_scc", "scc"}, "fig4": {"a", "b", "c", "d"},
           "kalman": {"no_scc", "scc_true", "scc_kalman"}}
 EXTRA_METRICS = {"fig7": {"oc_trip_t"}}
 RUNS = [(c.name, plant) for c in CHAPTERS for plant in c.plants
-        if c.name not in ("surface", "redteam")]
+        if c.name not in ("surface", "redteam", "multiarea")]
 
 
 def images(notebook: Path) -> int:
@@ -47,6 +47,28 @@ def test_notebook_runs_shows_and_writes_its_figures_and_metrics(name, plant, tmp
         assert panel["parameters"]["duration"] == c.short["duration"]   # what ran
         assert panel["parameters"]["plant"] == plant
     assert json.loads((tmp_path / "res" / "claims.json").read_text())
+
+
+def test_multi_area_notebook_shows_its_figures_and_its_claims_hold(tmp_path):
+    """Notebook 09 with its short parameters and its claims checked (the claims
+    run the full load step and attacks; only the red team is shortened)."""
+    c = chapter("multiarea")
+    nb = runner.NOTEBOOKS_DIR / c.notebook
+    runner.execute(nb, tmp_path / nb.name, {**c.short, "figures_dir": str(tmp_path / "fig"),
+                                            "results_dir": str(tmp_path / "res")})
+    for png in c.figure_files("linear"):
+        assert (tmp_path / "fig" / png).stat().st_size > 1000
+    assert images(tmp_path / nb.name) >= len(c.figures)
+    metrics = json.loads((tmp_path / "res" / "metrics.json").read_text())
+    assert len(metrics) == 4 * 3 * 2          # (load step + 3 attacks) x 3 defences x 2 areas
+    claims = json.loads((tmp_path / "res" / "claims.json").read_text())
+    assert len(claims) == 12 and all(claims.values())
+    for table in ("multiarea_attacks", "multiarea_red_team"):
+        assert "|" in (tmp_path / "fig" / f"{table}.md").read_text()
+    with pytest.raises(Exception, match="plant must be one of"):
+        runner.execute(nb, tmp_path / "testbed.ipynb", {**c.short, "plant": "testbed",
+                                                        "figures_dir": str(tmp_path / "f2"),
+                                                        "results_dir": str(tmp_path / "r2")})
 
 
 def test_attack_surface_notebook_writes_maps_tables_and_claims(tmp_path):

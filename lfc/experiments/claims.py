@@ -115,3 +115,31 @@ def kalman_claims(runs: Runs, rms: tuple[float, float],
         "estimate error below the sensor noise":
             rms[0] < noise_std[0] and rms[1] < noise_std[1],
     })
+
+
+def multiarea_claims(load_step: dict, attacks: dict[str, dict], tol: float = 1e-4
+                     ) -> dict[str, bool]:
+    """The multi-area chapter (notebook 09).  ``load_step`` maps a filter name
+    (``"none"``, ``"paper"``, ``"certified"``) to the run of a load step in area 0;
+    ``attacks`` maps each attack (``"single"``, ``"coordinated"``, ``"ace"``) to
+    such a dict.  AGC restores every area's frequency and tie-line schedule
+    (within ``tol`` pu at the end) with every filter; every attack trips some
+    area without filters; with the certified filter at every area no attack
+    trips any area and no filter flags ``outside``."""
+    def restored(r) -> bool:
+        end = r.trace.iloc[-1]
+        return all(abs(end[f"dw_meas_{a}"]) < tol and abs(end[f"p_tie_{a}"]) < tol
+                   for a in range(len(r.areas)))
+
+    def outside(r) -> int:
+        return sum(int(area.alarms.outside.sum()) for area in r.areas)
+
+    claims = {f"AGC restores frequency and tie-line schedule after a load step ({k} filters)":
+              restored(r) for k, r in load_step.items()}
+    for name, runs in attacks.items():
+        claims[f"{name} attack trips an area without filters"] = runs["none"].tripped
+        claims[f"{name} attack: certified filters, no trip in any area"] = \
+            not runs["certified"].tripped
+        claims[f"{name} attack: no certified filter flags outside"] = \
+            outside(runs["certified"]) == 0
+    return _bools(claims)

@@ -349,3 +349,46 @@ def box_figure(worst, limit_label: str, title: str) -> Figure:
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1))
     ax.set_title(title)
     return fig
+
+
+AREA_STYLES = ("-", "--", ":")
+
+
+def areas_figure(runs: dict, labels: dict[str, str], relays: RelaySettings, title: str,
+                 panels: tuple[str, ...] = ("command", "frequency", "rocof"),
+                 f_nominal: float = 60.0) -> Figure:
+    """An interconnected grid: each run (a :class:`~lfc.simulate_multiarea.MultiAreaResult`,
+    its colour) and each area (its line style), one panel per quantity in
+    ``panels`` — ``"command"`` (applied ΔP_c, pu), ``"frequency"`` (pu, OF2/UF2
+    dashed on the side it moves to), ``"rocof"`` (pu/s, the setting dashed),
+    ``"tie"`` (tie-line export deviation, pu)."""
+    fig, axes = plt.subplots(len(panels), 1, sharex=True, figsize=(10, 2.6 * len(panels)),
+                             layout="constrained")
+    axes = np.atleast_1d(axes)
+    colors = dict(zip(labels, ("tab:blue", "tab:orange", "tab:green", "tab:red")))
+    column = {"command": "pc", "frequency": "dw_meas", "rocof": "rocof_meas", "tie": "p_tie"}
+    ylabel = {"command": "Applied command $\\Delta P_c^*$ (pu)",
+              "frequency": f"Measured frequency $\\hat\\omega$ (pu of {f_nominal:g} Hz)",
+              "rocof": "Measured ROCOF $\\hat{\\dot\\omega}$ (pu/s)",
+              "tie": "Tie-line export $\\Delta P_{tie}$ (pu)"}
+    for ax, panel in zip(axes, panels):
+        moved = []
+        for key, label in labels.items():
+            tr = runs[key].trace
+            for a in range(len(runs[key].areas)):
+                y = tr[f"{column[panel]}_{a}"]
+                moved.append(y)
+                ax.plot(tr.t, 1 + y if panel == "frequency" else y, color=colors[key],
+                        ls=AREA_STYLES[a % len(AREA_STYLES)], lw=1.1,
+                        label=f"{label}, area {a}")
+        if panel == "frequency":
+            shown = [(n, v) for n, v, side in (
+                ("OF2", relays.of2, max(y.max() for y in moved) > 1e-6),
+                ("UF2", relays.uf2, min(y.min() for y in moved) < -1e-6)) if side]
+            _limits(ax, [v for _, v in shown], " / ".join(f"{n} {v:g} pu" for n, v in shown))
+        elif panel == "rocof":
+            _limits(ax, [relays.rocof_limit, -relays.rocof_limit],
+                    f"ROCOF setting $\\pm${relays.rocof_limit:g} pu/s")
+        ax.set_ylabel(ylabel[panel])
+    _finish(axes, title)
+    return fig
