@@ -113,6 +113,23 @@ def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise0: flo
     return u, flags, mod if math.isfinite(mod) else 0.0
 
 
+@inline
+def scenario_tables(e_i: int, f_i: int, ka: np.ndarray, kb: np.ndarray, kc: np.ndarray,
+                    kg: np.ndarray, kdim: np.ndarray, methods: np.ndarray, fdata: np.ndarray,
+                    foff: np.ndarray, empty: np.ndarray) -> tuple:
+    """One generator side's Kalman matrices ``(A, B, C, gain)`` (empty without
+    one, ``e_i`` < 0), filter method (-1 without one, ``f_i`` < 0) and filter
+    data, as views into the engine's tables."""
+    n_kf = kdim[e_i] if e_i >= 0 else 0
+    ka_i = ka[e_i, :n_kf, :n_kf] if e_i >= 0 else ka[0, :0, :0]
+    kb_i = kb[e_i, :n_kf] if e_i >= 0 else empty
+    kc_i = kc[e_i, :, :n_kf] if e_i >= 0 else kc[0, :, :0]
+    kg_i = kg[e_i, :n_kf] if e_i >= 0 else kg[0, :0]
+    method = methods[f_i] if f_i >= 0 else -1
+    fd = fdata[foff[f_i]:foff[f_i + 1]] if f_i >= 0 else empty
+    return ka_i, kb_i, kc_i, kg_i, method, fd
+
+
 @kernel
 def _run(n_steps: int, ratio: int, dt: float, k_i_period: float, ad: np.ndarray,
          bu: np.ndarray, bl: np.ndarray, index: np.ndarray, kinds: np.ndarray,
@@ -141,13 +158,8 @@ def _run(n_steps: int, ratio: int, dt: float, k_i_period: float, ad: np.ndarray,
         p_i, e_i, q_i, f_i, ff = index[i, 0], index[i, 1], index[i, 2], index[i, 3], index[i, 4]
         A, Bu, Bl = ad[p_i], bu[p_i], bl[p_i]
         kinds_i, params_i, offsets_i = kinds[i], params[i], offsets[i]
-        n_kf = kdim[e_i] if e_i >= 0 else 0
-        ka_i = ka[e_i, :n_kf, :n_kf] if e_i >= 0 else ka[0, :0, :0]
-        kb_i = kb[e_i, :n_kf] if e_i >= 0 else empty
-        kc_i = kc[e_i, :, :n_kf] if e_i >= 0 else kc[0, :, :0]
-        kg_i = kg[e_i, :n_kf] if e_i >= 0 else kg[0, :0]
-        method = methods[f_i] if f_i >= 0 else -1
-        fd = fdata[foff[f_i]:foff[f_i + 1]] if f_i >= 0 else empty
+        ka_i, kb_i, kc_i, kg_i, method, fd = scenario_tables(e_i, f_i, ka, kb, kc, kg, kdim,
+                                                             methods, fdata, foff, empty)
         load_kind, load_value = kinds_i[LOAD], params_i[LOAD, 0]
         load_start, load_stop = params_i[LOAD, 2], params_i[LOAD, 3]
         x[:], mem[:], gstate[:], kstate[:], due[:] = 0.0, 0.0, 0.0, 0.0, 0.0

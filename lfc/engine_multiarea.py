@@ -20,7 +20,7 @@ import numpy as np
 from lfc._jit import kernel
 from lfc.engine import (ACE, LOAD, METRICS, N_CHANNELS, N_CTRL, N_KF, _kalman_tables,
                         _lowest_bit, _signal, _Table, check_noise, generator_period,
-                        make_estimator, make_noise, scenario_signals)
+                        make_estimator, make_noise, scenario_signals, scenario_tables)
 from lfc.filters import SafetyFilter
 from lfc.filters.base import ACTIVE, ALARM_BITS, MEMORY, OUTSIDE
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams, discretize_multiarea
@@ -72,13 +72,8 @@ def _run_multi(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarr
                 e_i, q_i, f_i, ff = index[i, a, 0], index[i, a, 1], index[i, a, 2], \
                     index[i, a, 3]
                 kinds_a, params_a, offsets_a = kinds[i, a], params[i, a], offsets[i, a]
-                n_kf = kdim[e_i] if e_i >= 0 else 0
-                ka_a = ka[e_i, :n_kf, :n_kf] if e_i >= 0 else ka[0, :0, :0]
-                kb_a = kb[e_i, :n_kf] if e_i >= 0 else empty
-                kc_a = kc[e_i, :, :n_kf] if e_i >= 0 else kc[0, :, :0]
-                kg_a = kg[e_i, :n_kf] if e_i >= 0 else kg[0, :0]
-                method = methods[f_i] if f_i >= 0 else -1
-                fd = fdata[foff[f_i]:foff[f_i + 1]] if f_i >= 0 else empty
+                ka_a, kb_a, kc_a, kg_a, method, fd = scenario_tables(
+                    e_i, f_i, ka, kb, kc, kg, kdim, methods, fdata, foff, empty)
                 tie = 0.0
                 for line in range(n_l):
                     tie += inc[a, line] * x[m * n_a + line]

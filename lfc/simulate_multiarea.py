@@ -261,20 +261,20 @@ def simulate_multiarea_batch(params: MultiAreaParams, scenarios: list[dict], *,
         rows.append({**s, "filters": built})
     n_a = params.n_areas
 
-    def run(part: list[dict]) -> np.ndarray:
+    def run(part: list[dict]) -> tuple[np.ndarray, int]:
         sc = MultiAreaScenarios(params, duration=duration, dt=dt,
                                 control_period=control_period, relays=relays)
         for s in part:
             sc.add(**s)
-        return sc.run().metrics
+        return sc.run().metrics, sc.n_ctrl
 
     parts = [rows[i::jobs] for i in range(min(jobs, len(rows)))]
     with ThreadPoolExecutor(max_workers=len(parts)) as pool:
         done = list(pool.map(run, parts))
     metrics = np.zeros((len(rows), n_a, len(METRICS)))
-    for i, m in enumerate(done):
+    for i, (m, _) in enumerate(done):
         metrics[i::jobs] = m
-    n_ctrl = -(-int(round(duration / dt)) // int(round(control_period / dt)))
+    n_ctrl = done[0][1]
     flat = metrics.reshape(len(rows) * n_a, len(METRICS))
     out = metrics_frame(flat, n_ctrl, pd.RangeIndex(len(flat)))
     out.insert(0, "area", np.tile(np.arange(n_a), len(rows)))

@@ -38,7 +38,7 @@ from lfc.filters.certified import BOX
 from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams
 from lfc.relays import RelaySettings
-from lfc.simulate_multiarea import simulate_multiarea_batch
+from lfc.simulate_multiarea import area_filter, simulate_multiarea_batch
 
 # family -> (channel, waveform, bounds of (amplitude, freq_hz)); one bound: freq unused
 FAMILIES = {
@@ -210,21 +210,24 @@ def freeform_search(params: LFCParams, defender: Defender, *, amplitude: float =
 def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
                        relays: RelaySettings | None = None, duration: float = 20.0,
                        seed: int = 0, maxiter: int = 5, popsize: int = 5,
-                       jobs: int = 2) -> dict:
+                       jobs: int = 2, control_period: float = 0.01) -> dict:
     """Worst coordinated attack of one family (``MULTI_FAMILIES``) on an
     interconnected grid: differential evolution over the family's parameters in
     every area at once (an area may get amplitude 0: single-area attacks are
     included), maximizing the worst :func:`severity` over the areas.
 
     ``filters`` is :func:`lfc.simulate_multiarea`'s ``{area: "paper" |
-    "certified" | SafetyFilter}``.  Returns the family, the worst severity, the
-    area it is reached in, whether any area tripped and the attack per area.
+    "certified" | SafetyFilter}``, built once for the controller period
+    ``control_period`` (s).  Returns the family, the worst severity, the area it
+    is reached in, whether any area tripped and the attack per area.
     """
     if family not in MULTI_FAMILIES:
         raise ValueError(f"family must be one of {list(MULTI_FAMILIES)}, got {family!r}")
     relays = relays or RelaySettings()
     channel, waveform, bounds = MULTI_FAMILIES[family]
     k, n = len(bounds), params.n_areas
+    filters = {a: area_filter(params, a, f, relays, control_period)     # built once, not
+               for a, f in filters.items()}                            # per generation
 
     def attacks(theta: np.ndarray) -> dict:
         return {a: {channel: scenario_signal(
@@ -235,7 +238,7 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
     def run(thetas: np.ndarray) -> pd.DataFrame:
         out = simulate_multiarea_batch(
             params, [{"attacks": attacks(th), "filters": filters} for th in thetas.T],
-            duration=duration, relays=relays, jobs=jobs)
+            duration=duration, relays=relays, jobs=jobs, control_period=control_period)
         out["severity"] = severity(out, relays)
         return out
 

@@ -95,13 +95,17 @@ def _frequency(ax, runs: dict[str, SimResult], labels: dict[str, str], relays: R
         tr = runs[key].trace
         ax.plot(tr.t, 1 + tr.dw_meas, color=COLORS[key], lw=1.2, label=label,
                 ls="--" if key in dashed else "-")
-    dw = [r.trace.dw_meas for r in runs.values()]
+    _frequency_limits(ax, [r.trace.dw_meas for r in runs.values()], relays)
+    ax.set_ylabel(f"Measured frequency $\\hat\\omega$ (pu of {f_nominal:g} Hz)")
+
+
+def _frequency_limits(ax, dw: list, relays: RelaySettings) -> None:
+    """OF2 / UF2 dashed, on the side(s) the deviations ``dw`` (pu) move to."""
     tiny = 1e-6  # pu: numerical noise (the testbed) does not count as moving to a side
     shown = [(n, v) for n, v, side in (("OF2", relays.of2, max(d.max() for d in dw) > tiny),
                                        ("UF2", relays.uf2, min(d.min() for d in dw) < -tiny))
              if side]
     _limits(ax, [v for _, v in shown], " / ".join(f"{n} {v:g} pu" for n, v in shown))
-    ax.set_ylabel(f"Measured frequency $\\hat\\omega$ (pu of {f_nominal:g} Hz)")
 
 
 def fault_figure(runs: dict[str, SimResult], currents: dict[str, tuple[np.ndarray, np.ndarray]],
@@ -382,10 +386,7 @@ def areas_figure(runs: dict, labels: dict[str, str], relays: RelaySettings, titl
                         ls=AREA_STYLES[a % len(AREA_STYLES)], lw=1.1,
                         label=f"{label}, area {a}")
         if panel == "frequency":
-            shown = [(n, v) for n, v, side in (
-                ("OF2", relays.of2, max(y.max() for y in moved) > 1e-6),
-                ("UF2", relays.uf2, min(y.min() for y in moved) < -1e-6)) if side]
-            _limits(ax, [v for _, v in shown], " / ".join(f"{n} {v:g} pu" for n, v in shown))
+            _frequency_limits(ax, moved, relays)
         elif panel == "rocof":
             _limits(ax, [relays.rocof_limit, -relays.rocof_limit],
                     f"ROCOF setting $\\pm${relays.rocof_limit:g} pu/s")
