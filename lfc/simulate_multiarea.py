@@ -57,7 +57,7 @@ from lfc.simulate import SimResult, check_timing, result
 __all__ = ["MultiAreaResult", "area_filter", "simulate_multiarea", "simulate_multiarea_batch",
            "tie_step_bound"]
 FILTER_KINDS = ("paper", "certified")
-PAPER_ALPHA = 20.0   # 1/s: the paper's SCC as notebook 08 runs it (its strongest reading)
+PAPER_ALPHA = 20.0   # 1/s: "paper" as notebook 08 runs it (notebook 09 also runs α = 3)
 
 
 def tie_step_bound(params: MultiAreaParams, area: int, relays: RelaySettings,
@@ -71,8 +71,9 @@ def tie_step_bound(params: MultiAreaParams, area: int, relays: RelaySettings,
 
 def area_filter(params: MultiAreaParams, area: int, kind: str | SafetyFilter | None,
                 relays: RelaySettings, control_period: float) -> SafetyFilter | None:
-    """The filter of ``area``: ``"paper"`` (the paper's SCC, α = 20 at its
-    default reading, on the area's model), ``"certified"`` (the certified
+    """The filter of ``area``: ``"paper"`` (the paper's SCC at α = 20 and its
+    default reading, on the area's model; build a :class:`SafetyFilter` for
+    another α), ``"certified"`` (the certified
     filter of the area's model with ``load_bound`` = :func:`tie_step_bound`),
     a :class:`SafetyFilter` as given, or None."""
     if kind is None or isinstance(kind, SafetyFilter):

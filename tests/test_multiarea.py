@@ -195,12 +195,15 @@ def _attack_grid() -> list[dict]:
     return out
 
 
+PAPER3 = {a: lfc.SafetyFilter(area, RELAYS, alpha=3.0) for a, area in enumerate(TWO.areas)}
+
+
 @pytest.fixture(scope="module")
 def attack_runs() -> pd.DataFrame:
     attacks = _attack_grid()
     frames = []
-    for kind in (None, "paper", "certified"):
-        filters = {} if kind is None else {0: kind, 1: kind}
+    for kind in (None, "paper", "paper α=3", "certified"):
+        filters = {} if kind is None else PAPER3 if kind == "paper α=3" else {0: kind, 1: kind}
         out = lfc.simulate_multiarea_batch(
             TWO, [{"attacks": a, "filters": filters} for a in attacks], duration=30.0)
         frames.append(out.assign(filters=str(kind)))
@@ -217,11 +220,13 @@ def test_certified_filters_stop_single_coordinated_and_ace_attacks_in_every_area
 
 
 def test_the_attacks_trip_without_filters_and_some_beat_the_papers_scc(attack_runs):
-    """Finding, pinned: per-area paper SCCs (α = 20, strongest reading, given
-    the net disturbance) are beaten by some of these attacks."""
+    """Finding, pinned: per-area paper SCCs (default reading, given the net
+    disturbance) are beaten by some of these attacks at both of the paper's α;
+    α = 3 is the stronger here (40 area-runs trip, against more at α = 20)."""
     by = attack_runs.groupby("filters").tripped.sum()
     assert by["None"] >= 100
-    assert by["paper"] >= 10
+    assert by["paper α=3"] >= 10
+    assert by["paper"] >= by["paper α=3"]
     assert by["certified"] == 0
 
 
@@ -306,8 +311,8 @@ def test_finding_a_lightly_damped_area_leaves_its_certificate_and_loses_the_guar
 
 
 def test_red_team_coordinated_search_beats_the_paper_but_not_the_certified_filters():
-    paper = coordinated_search(TWO, {0: "paper", 1: "paper"}, "bias on ACE", duration=20.0,
-                               maxiter=2, popsize=3)
+    paper = coordinated_search(TWO, PAPER3, "bias on ACE", duration=20.0, maxiter=2,
+                               popsize=3)          # the paper's SCC at its stronger α here
     cert = coordinated_search(TWO, {0: "certified", 1: "certified"}, "sinusoid on P_c",
                               duration=20.0, maxiter=2, popsize=3)
     assert paper["tripped"] and paper["severity"] > 1.5

@@ -63,9 +63,10 @@ def test_multi_area_notebook_shows_its_figures_and_its_claims_hold(tmp_path):
     run the full load step and attacks; only the red team is shortened)."""
     run_chapter("multiarea", tmp_path)
     metrics = json.loads((tmp_path / "res" / "metrics.json").read_text())
-    assert len(metrics) == 4 * 3 * 2          # (load step + 3 attacks) x 3 defences x 2 areas
+    # (load step + 3 attacks) x (none, paper α=3 and α=20, certified) x 2 areas
+    assert len(metrics) == 4 * 4 * 2
     claims = json.loads((tmp_path / "res" / "claims.json").read_text())
-    assert len(claims) == 12 and all(claims.values())
+    assert len(claims) == 13 and all(claims.values())
     for table in ("multiarea_attacks", "multiarea_red_team"):
         assert "|" in (tmp_path / "fig" / f"{table}.md").read_text()
 
