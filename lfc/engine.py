@@ -422,20 +422,13 @@ class Scenarios:
     def run(self, *, trace: bool = False, stop_on_trip: bool = False) -> Run:
         """Run every scenario added; ``trace`` keeps everything (one scenario only)."""
         n = len(self._rows)
-        kinds = np.array([s[0] for s in self._sig], np.int64).reshape(n, N_CHANNELS)
-        params = np.array([s[1] for s in self._sig]).reshape(n, N_CHANNELS, N_PARAMS)
-        offsets = np.array([s[2] for s in self._sig], np.int64).reshape(n, N_CHANNELS, 2)
-        st = np.concatenate(self._st) if self._st else np.zeros(0)
-        sv = np.concatenate(self._sv) if self._sv else np.zeros(0)
+        kinds, params, offsets, st, sv = signal_tables(self._sig, self._st, self._sv, (n,))
         plants = self._plants.items
         ad = np.array([a for a, _ in plants])
         bu = np.ascontiguousarray(np.array([b[:, 0] for _, b in plants]))
         bl = np.ascontiguousarray(np.array([b[:, 1] for _, b in plants]))
         ka, kb, kc, kg, kdim = _kalman_tables(self._kf.items)
-        methods = np.array([f.method_id for f in self._filters.items] or [0], np.int64)
-        data = [f.data for f in self._filters.items]
-        foff = np.concatenate([[0], np.cumsum([len(d) for d in data])]).astype(np.int64)
-        fdata = np.concatenate(data) if data else np.zeros(0)
+        methods, fdata, foff = filter_tables(self._filters.items)
         noise = np.array(self._noise) if self._noise else np.zeros((1, self.n_ctrl, 2))
         limits, delays = self.relays.arrays()
         metrics = np.zeros((n, len(METRICS)))
@@ -449,6 +442,27 @@ class Scenarios:
              np.array(self._relay_noise, float).reshape(n, 3), stop_on_trip, metrics, tx, tc,
              tt, ends, np.zeros((8, N_KF)))
         return Run(metrics, ends, tx, tc, tt)
+
+
+def signal_tables(sig: list[tuple], st: list[np.ndarray], sv: list[np.ndarray],
+                  shape: tuple[int, ...]) -> tuple:
+    """The signals of :func:`scenario_signals`, one per generator side, as the
+    engine's arrays ``(kinds, params, offsets, sample times, sample values)``,
+    the first three shaped ``shape + (N_CHANNELS, ...)``."""
+    kinds = np.array([s[0] for s in sig], np.int64).reshape(*shape, N_CHANNELS)
+    params = np.array([s[1] for s in sig]).reshape(*shape, N_CHANNELS, N_PARAMS)
+    offsets = np.array([s[2] for s in sig], np.int64).reshape(*shape, N_CHANNELS, 2)
+    return (kinds, params, offsets, np.concatenate(st) if st else np.zeros(0),
+            np.concatenate(sv) if sv else np.zeros(0))
+
+
+def filter_tables(filters: list[SafetyFilter]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The filters' method ids, their data one after another and each one's
+    offset into it: ``(methods, fdata, foff)``, as :func:`scenario_tables` reads them."""
+    methods = np.array([f.method_id for f in filters] or [0], np.int64)
+    data = [f.data for f in filters]
+    foff = np.concatenate([[0], np.cumsum([len(d) for d in data])]).astype(np.int64)
+    return methods, np.concatenate(data) if data else np.zeros(0), foff
 
 
 def _kalman_tables(filters: list[KalmanFilter]) -> tuple:

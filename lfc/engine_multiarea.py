@@ -18,9 +18,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from lfc._jit import kernel
-from lfc.engine import (ACE, LOAD, METRICS, N_CHANNELS, N_CTRL, N_KF, _kalman_tables,
+from lfc.engine import (ACE, LOAD, METRICS, N_CTRL, N_KF, _kalman_tables,
                         _lowest_bit, _signal, _Table, check_noise, generator_period,
-                        make_estimator, make_noise, scenario_signals, scenario_tables)
+                        filter_tables, make_estimator, make_noise, scenario_signals,
+                        scenario_tables, signal_tables)
 from lfc.filters import SafetyFilter
 from lfc.filters.base import ACTIVE, ALARM_BITS, MEMORY, OUTSIDE
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams, discretize_multiarea
@@ -224,18 +225,11 @@ class MultiAreaScenarios:
         """Run every scenario added; ``trace`` keeps everything (one scenario only)."""
         p, n = self.params, len(self._rows)
         n_a = p.n_areas
-        kinds = np.array([s[0] for s in self._sig], np.int64).reshape(n, n_a, N_CHANNELS)
-        params = np.array([s[1] for s in self._sig]).reshape(n, n_a, N_CHANNELS, -1)
-        offsets = np.array([s[2] for s in self._sig], np.int64).reshape(n, n_a, N_CHANNELS, 2)
-        st = np.concatenate(self._st) if self._st else np.zeros(0)
-        sv = np.concatenate(self._sv) if self._sv else np.zeros(0)
+        kinds, params, offsets, st, sv = signal_tables(self._sig, self._st, self._sv, (n, n_a))
         ad, bu, bl = discretize_multiarea(p, self.dt)
         k_freq, k_tie = p.agc_gains()
         ka, kb, kc, kg, kdim = _kalman_tables(self._kf.items)
-        methods = np.array([f.method_id for f in self._filters.items] or [0], np.int64)
-        data = [f.data for f in self._filters.items]
-        foff = np.concatenate([[0], np.cumsum([len(d) for d in data])]).astype(np.int64)
-        fdata = np.concatenate(data) if data else np.zeros(0)
+        methods, fdata, foff = filter_tables(self._filters.items)
         noise = np.array(self._noise) if self._noise else np.zeros((1, self.n_ctrl, 2))
         limits, delays = self.relays.arrays()
         metrics = np.zeros((n, n_a, len(METRICS)))
