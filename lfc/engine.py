@@ -494,11 +494,19 @@ class GeneratorSide:
         Control sample times (s), uniform with step ``period``.
     period : float
         Controller period (s).
+    ace_attack : signal, optional
+        Added to the measured tie-line export the AGC integrates (pu; an
+        interconnected area, :mod:`lfc.multiarea`).
+    k_agc : (float, float), optional
+        The AGC's gains on frequency and on tie-line export (1/s,
+        :meth:`lfc.MultiAreaParams.agc_gains`); default ``(design.k_i, 0)``, the
+        local integral controller of one area.
     """
 
     def __init__(self, design: LFCParams, scc: SafetyFilter | None, estimator,
                  noise_std: tuple[float, float], seed: int, tc: np.ndarray, pc_attack,
-                 wref_attack, load_feedforward: bool, period: float) -> None:
+                 wref_attack, load_feedforward: bool, period: float, *, ace_attack=None,
+                 k_agc: tuple[float, float] | None = None) -> None:
         self.tc, self.scc = tc, scc
         self.noise = make_noise(noise_std, len(tc), seed)
         kf = make_estimator(estimator, design, period, noise_std)
@@ -507,8 +515,9 @@ class GeneratorSide:
         n = int(kdim[0]) if kf else 0
         self.ka, self.kb = self.ka[0, :n, :n].copy(), self.kb[0, :n].copy()
         self.kc, self.kg = self.kc[0, :, :n].copy(), self.kg[0, :n].copy()
-        self.signals = scenario_signals(pc_attack, wref_attack, None, tc, tc)
-        self.k_i_period = design.k_i * period
+        self.signals = scenario_signals(pc_attack, wref_attack, None, tc, tc, ace_attack)
+        k_freq, k_tie = (design.k_i, 0.0) if k_agc is None else k_agc
+        self.k_i_period, self.k_tie_period = k_freq * period, k_tie * period
         self.feedforward = load_feedforward
         self.method = scc.method_id if scc is not None else -1
         self.data = scc.data if scc is not None else np.zeros(0)
@@ -518,15 +527,19 @@ class GeneratorSide:
         self.ctrl = np.full((len(tc), N_CTRL), np.nan)
         self.n_done = 0
 
-    def step(self, j: int, x: np.ndarray, p_load: float) -> float:
+    def step(self, j: int, x: np.ndarray, p_load: float, tie: float = 0.0) -> float:
         """Control sample ``j``: read the plant state ``x`` (design-model
-        coordinates, pu) and the true load (pu), return the command to hold (pu)."""
+        coordinates, pu), the true load — in an interconnected area the net
+        disturbance, load plus tie-line export — and the measured tie-line
+        export ``tie`` (pu); return the command to hold (pu)."""
         kinds, params, offsets, st, sv = self.signals
-        u, _, _ = generator_period(j, float(self.tc[j]), np.asarray(x, float), float(p_load),
+        t = float(self.tc[j])
+        tie += _signal(ACE, kinds, params, offsets, st, sv, t, j)
+        u, _, _ = generator_period(j, t, np.asarray(x, float), float(p_load),
                                    float(self.noise[j, 0]), float(self.noise[j, 1]), kinds,
                                    params, offsets, st, sv, self.k_i_period, self.est, self.ka,
                                    self.kb, self.kc, self.kg, self.kstate, self.feedforward,
                                    self.method, self.data, self.memory, self.gstate,
-                                   self.x_hat, self.ctrl, 0.0, 0.0)
+                                   self.x_hat, self.ctrl, tie, self.k_tie_period)
         self.n_done = j + 1
         return u

@@ -54,7 +54,8 @@ from lfc.multiarea import N_AREA_STATES, MultiAreaParams
 from lfc.relays import RELAY_NAMES, RelaySettings
 from lfc.simulate import SimResult, check_timing, result
 
-__all__ = ["MultiAreaResult", "area_filter", "simulate_multiarea", "simulate_multiarea_batch",
+__all__ = ["MultiAreaResult", "area_filter", "multiarea_result", "simulate_multiarea",
+           "simulate_multiarea_batch",
            "tie_step_bound"]
 FILTER_KINDS = ("paper", "certified")
 PAPER_ALPHA = 20.0   # 1/s: "paper" as notebook 08 runs it (notebook 09 also runs α = 3)
@@ -184,31 +185,45 @@ def simulate_multiarea(params: MultiAreaParams, *, duration: float,
     run = sc.run(trace=True, stop_on_trip=stop_on_trip)
     end = int(run.ends[0])
     t = sc.t[:end + 1]
-    m = N_AREA_STATES
-    tie = run.x[:end + 1, m * params.n_areas:] @ params.incidence().T     # (samples, areas)
+    m, n_a = N_AREA_STATES, params.n_areas
+    states = run.x[:end + 1, :m * n_a].reshape(end + 1, n_a, m)
+    tie = run.x[:end + 1, m * n_a:] @ params.incidence().T     # (samples, areas)
     loads = loads or {}
+    p_load = np.column_stack([sample_signal(loads.get(a), t, f"loads[{a}]") for a in range(n_a)])
+    trips = [pd.DataFrame([(RELAY_NAMES[r], float(t[k])) for k in
+                           np.flatnonzero(run.trips[:end + 1, a])
+                           for r in range(3) if run.trips[k, a] >> r & 1], columns=["relay", "t"])
+             for a in range(n_a)]
     settings = {"params": repr(params), "relays": vars(relays), "duration": duration,
                 "dt": dt, "control_period": control_period, "seed": seed,
                 "noise_std": list(noise_std), "estimator": repr(estimator),
                 "attacks": repr(attacks), "loads": repr(loads),
                 "filters": {a: repr(f) for a, f in built.items()},
                 "stop_on_trip": stop_on_trip, "feedforward": feedforward}
+    return multiarea_result(params, t, states, p_load, tie, trips, sc.tc,
+                            [run.ctrl[:, a] for a in range(n_a)], built, settings)
+
+
+def multiarea_result(params: MultiAreaParams, t: np.ndarray, states: np.ndarray,
+                     p_load: np.ndarray, p_tie: np.ndarray, trips: list[pd.DataFrame],
+                     tc: np.ndarray, ctrl: list[np.ndarray], filters: dict,
+                     settings: dict, p_net: np.ndarray | None = None) -> MultiAreaResult:
+    """A :class:`MultiAreaResult` from what a plant logged: times ``t`` (s),
+    ``states`` (samples, areas, 5), each area's load and tie-line export
+    (samples, areas; pu), its trips, the control samples ``tc`` and each area's
+    generator-side rows ``ctrl`` (:func:`lfc.simulate.result`); ``p_net`` the
+    net disturbance if metered (default load plus export)."""
     areas, columns = [], {"t": t}
     for a in range(params.n_areas):
         trace = pd.DataFrame({"t": t})
         for k, name in enumerate(STATES):
-            trace[name] = run.x[:end + 1, m * a + k]
-        trace["p_load"] = sample_signal(loads.get(a), t, f"loads[{a}]")
-        trips = pd.DataFrame([(RELAY_NAMES[r], float(t[k])) for k in
-                              np.flatnonzero(run.trips[:end + 1, a])
-                              for r in range(3) if run.trips[k, a] >> r & 1],
-                             columns=["relay", "t"])
-        res = result(trace, sc.tc, run.ctrl[:, a], trips, built.get(a),
-                     {**settings, "area": a})
+            trace[name] = states[:, a, k]
+        trace["p_load"] = p_load[:, a]
+        res = result(trace, tc, ctrl[a], trips[a], filters.get(a), {**settings, "area": a})
         areas.append(res)
         trace = res.trace
-        trace["p_tie"] = tie[:, a]
-        trace["p_net"] = trace["p_load"] + trace["p_tie"]
+        trace["p_tie"] = p_tie[:, a]
+        trace["p_net"] = trace["p_load"] + trace["p_tie"] if p_net is None else p_net[:, a]
         trace["ace"] = trace["p_tie"] + params.biases()[a] * trace["dw_meas"]
         columns.update({f"{c}_{a}": trace[c].to_numpy() for c in trace.columns if c != "t"})
     return MultiAreaResult(tuple(areas), pd.DataFrame(columns), settings)

@@ -71,6 +71,21 @@ def test_multi_area_notebook_shows_its_figures_and_its_claims_hold(tmp_path):
         assert "|" in (tmp_path / "fig" / f"{table}.md").read_text()
 
 
+def test_multi_area_notebook_on_the_kundur_testbed(tmp_path):
+    """Notebook 09 on ANDES with its claims checked: AGC restores the schedule,
+    every attack trips without filters, the certified filters stop them all;
+    that they flag ``outside`` there (the plant is not their model) is a
+    documented deviation, which fails the run if it stops occurring."""
+    run_chapter("multiarea", tmp_path, "testbed")
+    claims = json.loads((tmp_path / "res" / "claims.json").read_text())
+    deviations = json.loads((tmp_path / "res" / "deviations.json").read_text())
+    assert len(claims) == 13
+    assert {c for c, ok in claims.items() if not ok} == set(deviations) == {
+        f"{a} attack: no certified filter flags outside" for a in ("single", "coordinated", "ACE")}
+    assert "|" in (tmp_path / "fig" / "multiarea_attacks_testbed.md").read_text()
+    assert not (tmp_path / "fig" / "multiarea_red_team.md").exists()   # linear model only
+
+
 def test_attack_surface_notebook_writes_maps_tables_and_claims(tmp_path):
     run_chapter("surface", tmp_path)
     surface = pd.read_csv(tmp_path / "res" / "surface.csv")
@@ -113,7 +128,7 @@ def test_red_team_notebook_writes_results_figures_and_the_comparison_table(tmp_p
     assert tracked_changes() == before   # the README and every tracked file untouched
 
 
-@pytest.mark.parametrize("name", ["tutorial", "kalman", "multiarea"])
+@pytest.mark.parametrize("name", ["tutorial", "kalman"])
 def test_linear_only_notebooks_refuse_the_testbed(name, tmp_path):
     nb = runner.NOTEBOOKS_DIR / runner.FIGURES[name]
     with pytest.raises(runner.pm.PapermillExecutionError, match="for this notebook"):

@@ -42,6 +42,10 @@ FIG5_DURATION = 30.0    # s
 FIG6_LOAD = 0.1         # pu load step
 FIG6_DURATION = 30.0    # s
 FIG7_DURATION = 5.0     # s, fault at ATTACK_START, testbed only
+# Notebook 09's sinusoid on the AGC command (pu of the area's base): 1 pu trips the linear
+# two-area preset (1000 MVA areas, M = 4 s); Kundur's areas on ANDES (1800 MVA, M = 13 s)
+# stay inside every relay setting at 1 pu (peak severity 0.54) and trip at 3 pu.
+MULTIAREA_AMPLITUDE = {"linear": 1.0, "testbed": 3.0}
 
 
 def check_plant(plant: str) -> None:

@@ -84,7 +84,7 @@ CHAPTERS = (
              "margins": [0.1, 0.3], "load_steps": [0.1], "testbed": False,
              "check_claims": False}),
     Chapter("multiarea", "09_multi_area.ipynb",
-            "Beyond the paper: a filter at every area of an interconnected grid", ("linear",),
+            "Beyond the paper: a filter at every area of an interconnected grid", PLANTS,
             ("multiarea_load_step", "multiarea_single", "multiarea_coordinated", "multiarea_ace"),
             {"duration": 10.0, "red_team_families": ["bias on ACE"], "red_team_maxiter": 1,
              "red_team_popsize": 2, "red_team_duration": 5.0}),

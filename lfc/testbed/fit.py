@@ -19,11 +19,13 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import warnings
 from dataclasses import asdict, dataclass, replace
 from functools import lru_cache
 from pathlib import Path
+from typing import Any, Callable
 
 import control as ct
 import numpy as np
@@ -118,15 +120,24 @@ def _errors(params: LFCParams, exps: list[dict]) -> np.ndarray:
 def fit_design_model(case: MicrogridCase | None = None) -> FitReport:
     """Fit the linear LFC parameters to the testbed (see the module docstring)."""
     case = case or MicrogridCase()
-    exps = record_experiments(case)
-    initial = case.design_params()
+    return fit_params(case.design_params(), record_experiments(case))
+
+
+def fit_params(initial: LFCParams, exps: list[dict[str, np.ndarray]],
+               fitted: tuple[str, ...] = FITTED, lower: dict | None = None) -> FitReport:
+    """Least-squares fit of the parameters ``fitted`` (the others stay at
+    ``initial``'s), started at ``initial``, to experiments (dicts of ``t``,
+    ``u``, ``p_load`` and the ``OUTPUTS``, as :func:`record_experiments`
+    returns); ``lower`` maps a parameter to its lower bound (default 0)."""
+    lower = lower or {}
 
     def with_values(log_theta: np.ndarray) -> LFCParams:
-        return replace(initial, **dict(zip(FITTED, np.exp(log_theta))))
+        return replace(initial, **dict(zip(fitted, np.exp(log_theta))))
 
-    theta0 = np.log([getattr(initial, n) for n in FITTED])
+    theta0 = np.log([getattr(initial, n) for n in fitted])
+    floor = [math.log(lower[n]) if n in lower else -np.inf for n in fitted]
     sol = least_squares(lambda th: _errors(with_values(th), exps).ravel(), theta0,
-                        x_scale=1.0, xtol=1e-10, ftol=1e-10)
+                        bounds=(floor, np.inf), x_scale=1.0, xtol=1e-10, ftol=1e-10)
     fitted = with_values(sol.x)
 
     def rms(p: LFCParams) -> dict:
@@ -157,23 +168,28 @@ def _fitted(case: MicrogridCase) -> FitReport:
     return report
 
 
-def _cache_path(case: MicrogridCase) -> Path:
+def _cache_path(case: object, kind: str = "testbed-fit") -> Path:
     """The cache file of ``case``'s fit (module docstring)."""
     import andes
 
     from lfc._files import code_digest
     key = hashlib.sha256((repr(case) + andes.__version__ + code_digest("testbed")).encode())
     folder = Path(os.environ.get("LFC_CACHE_DIR") or Path.home() / ".cache" / "lfc-scc")
-    return folder / f"testbed-fit-{key.hexdigest()[:16]}.json"
+    return folder / f"{kind}-{key.hexdigest()[:16]}.json"
 
 
-def _payload(report: FitReport) -> str:
-    return json.dumps({"params": asdict(report.params), "initial": asdict(report.initial),
-                       "error": report.error, "initial_error": report.initial_error},
-                      sort_keys=True)
+def encode_report(report: FitReport) -> dict:
+    """``report`` as JSON data (:func:`decode_report` inverts it exactly)."""
+    return {"params": asdict(report.params), "initial": asdict(report.initial),
+            "error": report.error, "initial_error": report.initial_error}
 
 
-def _read_report(path: Path) -> FitReport | None:
+def decode_report(data: dict) -> FitReport:
+    return FitReport(LFCParams(**data["params"]), LFCParams(**data["initial"]),
+                     data["error"], data["initial_error"])
+
+
+def _read_report(path: Path, decode: Callable[[dict], Any] = decode_report) -> Any:
     """The cached fit at ``path``; None if absent, damaged (with a warning)."""
     if not path.exists():
         return None
@@ -182,20 +198,19 @@ def _read_report(path: Path) -> FitReport | None:
         payload = stored["payload"]
         if hashlib.sha256(payload.encode()).hexdigest() != stored["sha256"]:
             raise ValueError("checksum mismatch")
-        data = json.loads(payload)
-        return FitReport(LFCParams(**data["params"]), LFCParams(**data["initial"]),
-                         data["error"], data["initial_error"])
+        return decode(json.loads(payload))
     except (OSError, ValueError, KeyError, TypeError) as err:
         warnings.warn(f"damaged cache file {path} ({err}); fitting again", RuntimeWarning,
                       stacklevel=2)
         return None
 
 
-def _write_report(path: Path, report: FitReport) -> None:
+def _write_report(path: Path, report: Any,
+                  encode: Callable[[Any], dict] = encode_report) -> None:
     """Write atomically (:func:`lfc._files.write_atomic`); a cache that cannot be
     written is skipped with a warning."""
     from lfc._files import write_atomic
-    payload = _payload(report)
+    payload = json.dumps(encode(report), sort_keys=True)
     text = json.dumps({"payload": payload,
                        "sha256": hashlib.sha256(payload.encode()).hexdigest()})
     try:

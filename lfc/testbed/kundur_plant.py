@@ -1,0 +1,317 @@
+"""AGC and a filter at every area of the two-area Kundur system on ANDES:
+:func:`simulate_kundur`, the testbed's :func:`lfc.simulate_multiarea`.
+
+ANDES integrates the grid (:mod:`lfc.testbed.kundur`); before every step it
+calls back into :class:`_KundurBed`, which logs the last accepted state and,
+when a control sample is due, runs each area's generator side
+(:class:`lfc.engine.GeneratorSide`, the engine's own code: noise, estimator,
+filter and AGC on the area's ACE) on the area's state in design-model
+coordinates (pu on the area's base):
+
+==============  ==========================================================
+``dPg``         sum of the area's governor lags ``TGOV1.LAG_y`` minus their
+                initial values
+``dPm``         sum of the area's turbine outputs ``TGOV1.pout`` minus theirs
+``dw``          inertia-weighted mean rotor speed ``GENROU.omega − 1``
+``dw_meas``     frequency of the area's meter bus ``BusFreq.f − 1``
+``rocof_meas``  its ROCOF ``BusROCOF.Wf_y`` (pu/s)
+``p_tie``       the area's tie-line export (power into the tie-lines at its
+                end of them, computed from the bus voltage phasors) minus its
+                initial value
+``p_net``       the electrical output of the area's machines ``GENROU.Pe``
+                minus its initial value: the area's net disturbance, given to
+                its filter (``feedforward``)
+==============  ==========================================================
+
+Why ``p_net`` is metered at the machines and not summed as load plus tie-line
+export (as the linear model defines it): the case's loads are constant
+impedance, so every voltage change moves them.  In the fit's load step the
+generators' output differed from the stepped load plus export by half of it
+(0.011 of 0.020 pu), and the model fitted on load plus export came out with
+twice the true inertia; on the machines' output it finds the case's
+inertia (:mod:`lfc.testbed.kundur_fit`).
+
+The area's command is shared equally by its governors: each one's
+``TGOV1.paux0`` (added before the droop gain ``1/R``) is set to
+``R · u · scale / n`` so that it adds ``u / n`` pu of the area's base to the
+machine's power reference.  The relays of each area read its meter bus.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from lfc._validate import check_multiple, check_positive
+from lfc.engine import GeneratorSide, sample_signal
+from lfc.engine_multiarea import CHANNELS, check_area_keys
+from lfc.multiarea import MultiAreaParams
+from lfc.relays import RelayBank, RelaySettings
+from lfc.simulate_multiarea import MultiAreaResult, area_filter, multiarea_result
+from lfc.testbed.kundur import KundurCase, build_kundur
+from lfc.testbed.plant import TestbedError
+
+
+def simulate_kundur(params: MultiAreaParams, *, duration: float,
+                    attacks: dict | None = None, loads: dict | None = None,
+                    filters: dict | None = None, relays: RelaySettings | None = None,
+                    estimator=None, noise_std: tuple[float, float] = (0.0, 0.0),
+                    seed: int = 0, control_period: float = 0.01, step: float = 0.005,
+                    stop_on_trip: bool = False, feedforward: bool = True,
+                    case: KundurCase | None = None) -> MultiAreaResult:
+    """Simulate the two-area Kundur system on ANDES with AGC and filters; the
+    arguments and result of :func:`lfc.simulate_multiarea`, plus the ones below.
+
+    Parameters
+    ----------
+    params : MultiAreaParams
+        The design model: each area's AGC gains and bias, the estimators'
+        models and the filters named by kind (use
+        :func:`lfc.testbed.kundur_design`, the model fitted to the case).
+    loads : dict, optional
+        ``{area: signal}``: load change (pu of the area's base at nominal
+        voltage), a constant-impedance load at the area's ``load_buses`` bus,
+        updated every ANDES step.
+    step : float
+        ANDES time step (s); ``control_period`` must be a multiple of it.
+    case : KundurCase
+        Default ``KundurCase()``.
+
+    Returns
+    -------
+    MultiAreaResult
+        One trace row per accepted ANDES step.
+
+    Raises
+    ------
+    ValueError
+        Before anything runs, for a scenario the testbed cannot represent.
+    TestbedError
+        If ANDES does not converge (with the time and ANDES' reason).
+    """
+    case = case or KundurCase()
+    if not isinstance(params, MultiAreaParams) or params.n_areas != case.n_areas:
+        raise ValueError(f"params must be a MultiAreaParams of {case.n_areas} areas (the "
+                         f"case's), got {params!r}")
+    check_positive("duration", duration)
+    check_multiple("control_period", control_period, "step", step)
+    relays = relays if relays is not None else RelaySettings()
+    n_a = case.n_areas
+    attacks = check_area_keys(attacks, n_a, "attacks")
+    loads = check_area_keys(loads, n_a, "loads")
+    filters = check_area_keys(filters, n_a, "filters")
+    for a, channels in attacks.items():
+        if not isinstance(channels, dict) or set(channels) - set(CHANNELS):
+            raise ValueError(f"attacks[{a}] must be a dict with keys among {CHANNELS}, "
+                             f"got {channels!r}")
+    for a, load in loads.items():
+        sample_signal(load, np.arange(0.0, duration + step, step), f"loads[{a}]")
+    built = {a: area_filter(params, a, f, relays, control_period) for a, f in filters.items()}
+    n_ctrl = int(np.ceil(duration / control_period - 1e-9))
+    tc = np.arange(n_ctrl) * control_period
+    k_freq, k_tie = params.agc_gains()
+    gens = [GeneratorSide(area, built.get(a), estimator, noise_std, seed if a == 0 else (seed, a),
+                          tc, attacks.get(a, {}).get("pc"), attacks.get(a, {}).get("wref"),
+                          feedforward, control_period, ace_attack=attacks.get(a, {}).get("ace"),
+                          k_agc=(float(k_freq[a]), float(k_tie[a])))
+            for a, area in enumerate(params.areas)]
+    bed = _KundurBed(case, loads, gens, [RelayBank(relays) for _ in range(n_a)]
+                     if stop_on_trip else None)
+    bed.run(duration, step)
+    rows = np.array(bed.rows)
+    t = rows[:, 0].round(9)              # ANDES accumulates its time in floating point
+    per_area = rows[:, 1:].reshape(len(rows), n_a, 8)
+    trips = bed.trips if stop_on_trip else _trips(relays, t, per_area)
+    settings = {"plant": "testbed", "case": repr(case), "params": repr(params),
+                "relays": vars(relays), "duration": duration, "step": step,
+                "control_period": control_period, "seed": seed, "noise_std": list(noise_std),
+                "estimator": repr(estimator), "attacks": repr(attacks), "loads": repr(loads),
+                "filters": {a: repr(f) for a, f in built.items()},
+                "stop_on_trip": stop_on_trip, "feedforward": feedforward}
+    return multiarea_result(params, t, per_area[:, :, :5], per_area[:, :, 5],
+                            per_area[:, :, 6], trips, tc, [g.ctrl for g in gens], built,
+                            settings, p_net=per_area[:, :, 7])
+
+
+def _trips(relays: RelaySettings, t: np.ndarray, per_area: np.ndarray) -> list[pd.DataFrame]:
+    """Each area's relay trips on its logged measurements."""
+    out = []
+    for a in range(per_area.shape[1]):
+        found = RelayBank(relays).update(t, per_area[:, a, 3], per_area[:, a, 4])
+        out.append(pd.DataFrame([(r, float(t[k])) for r, k, _ in sorted(found, key=lambda f: f[1])],
+                                columns=["relay", "t"]))
+    return out
+
+
+class _Stop(Exception):
+    """Raised inside the ANDES callback to end a run at a trip."""
+
+
+class _KundurBed:
+    """One ANDES run with every area's generator side in its per-step callback."""
+
+    def __init__(self, case: KundurCase, loads: dict, gens: list[GeneratorSide],
+                 banks: list[RelayBank] | None) -> None:
+        self.case, self.loads, self.gens, self.banks = case, loads, gens, banks
+        self.ss = build_kundur(case)
+        self.rows: list[list[float]] = []
+        self.trips: list[pd.DataFrame] | None = None
+        self.found: list[list[tuple[str, float]]] = [[] for _ in gens]
+        self.next_j = 0
+        self._load_at = (math.nan, np.zeros(case.n_areas))
+
+    def run(self, duration: float, step: float) -> None:
+        ss = self.ss
+        cfg = ss.TDS.config
+        cfg.tf, cfg.tstep, cfg.no_tqdm, cfg.criteria = duration, step, 1, 0
+        cfg.linesearch, cfg.save_every = 0, 0
+        ss.TDS.init()
+        self._addresses()
+        ss.TDS.callpert = self._callback
+        try:
+            ss.TDS.run(no_summary=True)
+            t_end = float(ss.dae.t)
+            if ss.TDS.busted or t_end < duration - 1e-9:
+                raise TestbedError(f"ANDES did not converge at t = {t_end:.4f} s: "
+                                   f"{ss.TDS.err_msg or 'the run ended early'}")
+            self._log(t_end)
+        except _Stop:
+            pass
+        if self.banks is not None:
+            self.trips = [pd.DataFrame(f, columns=["relay", "t"]) for f in self.found]
+
+    def _addresses(self) -> None:
+        ss, case = self.ss, self.case
+        gen, gov, bus = ss.GENROU, ss.TGOV1, ss.Bus
+        self.gen_uid = [[gen.idx2uid(g) for g in gens] for gens in case.generators]
+        self.gov_uid = [[list(gov.syn.v).index(g) for g in gens] for gens in case.generators]
+        self.weights = [gen.M.v[u] / gen.M.v[u].sum() for u in map(np.array, self.gen_uid)]
+        self.a_omega = gen.omega.a
+        self.a_lag, self.a_pout = gov.LAG_y.a, gov.pout.a
+        self.lag0 = ss.dae.x[self.a_lag].copy()
+        self.pout0 = ss.dae.y[self.a_pout].copy()
+        self.a_pe = gen.Pe.a
+        self.pe0 = ss.dae.y[self.a_pe].copy()
+        self.a_f = [ss.BusFreq.f.a[ss.BusFreq.idx2uid(f"F{i}")] for i in range(case.n_areas)]
+        self.a_r = [ss.BusROCOF.Wf_y.a[ss.BusROCOF.idx2uid(f"R{i}")]
+                    for i in range(case.n_areas)]
+        omega = ss.dae.x[self.a_omega]
+        if not (np.all(abs(omega - 1) < 1e-6) and np.all(abs(ss.dae.y[self.a_f] - 1) < 1e-6)):
+            raise TestbedError("the testbed did not initialize at 1.0 pu frequency")
+        self.droop = gov.R.v.copy()
+        self.v_addr, self.ang_addr = bus.v.a, bus.a.a
+        self.ls_uid = [ss.PQ.idx2uid(f"LS{i}") for i in range(case.n_areas)]
+        self.ls_v0 = [float(bus.v.v[bus.idx2uid(b)]) for b in case.load_buses]
+        area_of = dict(zip(bus.idx.v, bus.area.v))
+        area_id = [area_of[gen.bus.v[u[0]]] for u in self.gen_uid]
+        self.ties = []          # (area, bus uid at its end, other end's uid, 1/z, shunt)
+        for name in case.tie_lines:
+            k = ss.Line.idx2uid(name)
+            ends = (ss.Line.bus1.v[k], ss.Line.bus2.v[k])
+            areas = [area_id.index(area_of[b]) if area_of[b] in area_id else -1 for b in ends]
+            if -1 in areas or areas[0] == areas[1]:
+                raise ValueError(f"tie_lines: {name} does not join two of the case's areas")
+            y = 1 / complex(ss.Line.r.v[k], ss.Line.x.v[k])
+            sh = complex(ss.Line.g.v[k] / 2, ss.Line.b.v[k] / 2)
+            for end in (0, 1):
+                self.ties.append((areas[end], bus.idx2uid(ends[end]), bus.idx2uid(ends[1 - end]),
+                                  y, sh))
+        self.tie0 = np.zeros(case.n_areas)
+        self.tie0 = self._tie()
+
+    def _tie(self) -> np.ndarray:
+        """Each area's tie-line export deviation (pu of its base)."""
+        v, a = self.ss.dae.y[self.v_addr], self.ss.dae.y[self.ang_addr]
+        p = np.zeros(self.case.n_areas)
+        for area, here, there, y, sh in self.ties:
+            v1, v2 = v[here] * np.exp(1j * a[here]), v[there] * np.exp(1j * a[there])
+            p[area] += (v1 * np.conj((v1 - v2) * y + v1 * sh)).real
+        return p / self.case.scale - self.tie0
+
+    def _state(self) -> np.ndarray:
+        """(n_areas, 8): design-model state, p_load, p_tie, p_net (pu of each
+        area's base)."""
+        x, y = self.ss.dae.x, self.ss.dae.y
+        s = self.case.scale
+        out = np.zeros((self.case.n_areas, 8))
+        for i, (gu, vu) in enumerate(zip(self.gen_uid, self.gov_uid)):
+            out[i, 0] = (x[self.a_lag[vu]] - self.lag0[vu]).sum() / s
+            out[i, 1] = (y[self.a_pout[vu]] - self.pout0[vu]).sum() / s
+            out[i, 2] = self.weights[i] @ (x[self.a_omega[gu]] - 1.0)
+            out[i, 3] = y[self.a_f[i]] - 1.0
+            out[i, 4] = y[self.a_r[i]]
+            out[i, 7] = (y[self.a_pe[gu]] - self.pe0[gu]).sum() / s
+        out[:, 6] = self._tie()
+        return out
+
+    def _p_load(self, t: float) -> np.ndarray:
+        """Each area's dP_L at ``t`` (pu; the last value is kept, as in the microgrid)."""
+        if t != self._load_at[0]:
+            p = np.zeros(self.case.n_areas)
+            for a, load in self.loads.items():
+                p[a] = float(sample_signal(load, np.array([t]), f"loads[{a}]")[0])
+            self._load_at = (t, p)
+        return self._load_at[1]
+
+    def _callback(self, t_attempt, system) -> None:
+        t_next = float(t_attempt)
+        self._log(max(t_next - self.ss.TDS.h, 0.0))
+        p = self._p_load(t_next)
+        for i, uid in enumerate(self.ls_uid):
+            self.ss.PQ.Req.v[uid] = p[i] * self.case.scale / self.ls_v0[i] ** 2
+
+    def _log(self, t: float) -> None:
+        """Record the accepted state at ``t`` (once), check relays, control if due."""
+        if self.rows and t <= self.rows[-1][0] + 1e-9:
+            return
+        state = self._state()
+        state[:, 5] = self._p_load(t)
+        self.rows.append([t, *state.ravel()])
+        if self.banks is not None:
+            for a, bank in enumerate(self.banks):
+                found = bank.update(np.array([t]), state[a, 3:4], state[a, 4:5])
+                self.found[a].extend((relay, t) for relay, _, _ in found)
+            if any(self.found):
+                raise _Stop
+        tc = self.gens[0].tc
+        gov = self.ss.TGOV1
+        while self.next_j < len(tc) and tc[self.next_j] <= t + 1e-7:
+            for a, gen in enumerate(self.gens):
+                u = gen.step(self.next_j, state[a, :5], state[a, 7], state[a, 6])
+                vu = self.gov_uid[a]
+                gov.paux0.v[vu] = self.droop[vu] * u * self.case.scale / len(vu)
+            self.next_j += 1
+
+
+def simulate_kundur_batch(params: MultiAreaParams, scenarios: list[dict], *, jobs: int = 2,
+                          progress: bool = True, **common) -> list[MultiAreaResult]:
+    """Many :func:`simulate_kundur` runs in ``jobs`` processes (ANDES holds the
+    GIL), each scenario a dict of its keyword arguments, ``common`` the ones
+    they share; the results in the scenarios' order."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from tqdm.auto import tqdm
+
+    if not (isinstance(jobs, int) and jobs >= 1):
+        raise ValueError(f"jobs must be an integer >= 1, got {jobs!r}")
+    if not isinstance(scenarios, (list, tuple)) or not all(isinstance(s, dict)
+                                                           for s in scenarios):
+        raise ValueError(f"scenarios must be a list of dicts, got {scenarios!r}")
+    calls = [{**common, **s} for s in scenarios]
+    bar = tqdm(total=len(calls), unit="run", desc="simulate_kundur", disable=not progress)
+    if jobs == 1 or len(calls) <= 1:
+        out = []
+        for kw in calls:
+            out.append(simulate_kundur(params, **kw))
+            bar.update()
+        bar.close()
+        return out
+    with ProcessPoolExecutor(max_workers=min(jobs, len(calls))) as pool:
+        futures = [pool.submit(simulate_kundur, params, **kw) for kw in calls]
+        for f in futures:
+            f.add_done_callback(lambda _: bar.update())
+        out = [f.result() for f in futures]
+    bar.close()
+    return out
