@@ -51,7 +51,7 @@ from lfc.multiarea import MultiAreaParams
 from lfc.relays import RelayBank, RelaySettings
 from lfc.simulate_multiarea import MultiAreaResult, area_filter, multiarea_result
 from lfc.testbed.kundur import KundurCase, build_kundur
-from lfc.testbed.plant import TestbedError
+from lfc.testbed.plant import TestbedError, init_tds, run_tds
 
 
 def simulate_kundur(params: MultiAreaParams, *, duration: float,
@@ -163,20 +163,10 @@ class _KundurBed:
         self._load_at = (math.nan, np.zeros(case.n_areas))
 
     def run(self, duration: float, step: float) -> None:
-        ss = self.ss
-        cfg = ss.TDS.config
-        cfg.tf, cfg.tstep, cfg.no_tqdm, cfg.criteria = duration, step, 1, 0
-        cfg.linesearch, cfg.save_every = 0, 0
-        ss.TDS.init()
+        init_tds(self.ss, duration, step)
         self._addresses()
-        ss.TDS.callpert = self._callback
         try:
-            ss.TDS.run(no_summary=True)
-            t_end = float(ss.dae.t)
-            if ss.TDS.busted or t_end < duration - 1e-9:
-                raise TestbedError(f"ANDES did not converge at t = {t_end:.4f} s: "
-                                   f"{ss.TDS.err_msg or 'the run ended early'}")
-            self._log(t_end)
+            self._log(run_tds(self.ss, duration, self._callback))
         except _Stop:
             pass
         if self.banks is not None:

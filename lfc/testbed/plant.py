@@ -188,6 +188,29 @@ def _check_load(case: MicrogridCase, load: SignalLike | None, duration: float,
         raise ValueError(f"load takes the total load below zero ({total.min():.3f} pu)")
 
 
+def init_tds(ss, duration: float, step: float) -> None:
+    """Configure ANDES' time-domain run of ``ss`` (to ``duration`` at ``step``,
+    s; quiet, no line search, no stored history: the callback logs) and
+    initialize it."""
+    cfg = ss.TDS.config
+    cfg.tf, cfg.tstep, cfg.no_tqdm, cfg.criteria = duration, step, 1, 0
+    cfg.linesearch, cfg.save_every = 0, 0
+    ss.TDS.init()
+
+
+def run_tds(ss, duration: float, callback) -> float:
+    """Run the initialized ``ss`` with ``callback(t, system)`` before every step
+    attempt; return the end time (s), or raise :class:`TestbedError` with ANDES'
+    reason if it stopped before ``duration``."""
+    ss.TDS.callpert = callback
+    ss.TDS.run(no_summary=True)
+    t_end = float(ss.dae.t)
+    if ss.TDS.busted or t_end < duration - 1e-9:
+        raise TestbedError(f"ANDES did not converge at t = {t_end:.4f} s: "
+                           f"{ss.TDS.err_msg or 'the run ended early'}")
+    return t_end
+
+
 class _Stop(Exception):
     """Raised inside the ANDES callback to end a run early."""
 
@@ -224,20 +247,10 @@ class _Testbed:
     def run(self, duration: float, step: float) -> float | None:
         """Integrate to ``duration``; return the breaker-open time if a first
         pass stopped there, else None."""
-        ss = self.ss
-        cfg = ss.TDS.config
-        cfg.tf, cfg.tstep, cfg.no_tqdm, cfg.criteria = duration, step, 1, 0
-        cfg.linesearch, cfg.save_every = 0, 0
-        ss.TDS.init()
+        init_tds(self.ss, duration, step)
         self._addresses()
-        ss.TDS.callpert = self._callback
         try:
-            ss.TDS.run(no_summary=True)
-            t_end = float(ss.dae.t)
-            if ss.TDS.busted or t_end < duration - 1e-9:
-                raise TestbedError(f"ANDES did not converge at t = {t_end:.4f} s: "
-                                   f"{ss.TDS.err_msg or 'the run ended early'}")
-            self._log(t_end)  # the final accepted state
+            self._log(run_tds(self.ss, duration, self._callback))  # the final accepted state
         except _BreakerOpens:
             return self.oc.open_t
         except _Stop:
