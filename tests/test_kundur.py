@@ -13,6 +13,7 @@ import lfc
 from lfc.multiarea import MultiAreaParams
 from lfc.testbed import (KundurCase, build_kundur, kundur_fit_report, simulate_kundur,
                          simulate_kundur_batch)
+from lfc.testbed import fit as fitting
 from lfc.testbed import kundur_fit
 
 CASE = KundurCase()
@@ -42,15 +43,15 @@ def test_the_fit_finds_the_case_inertia_and_reports_its_errors(fit):
 
 def test_the_fit_cache_round_trips_exactly(fit, tmp_path, monkeypatch):
     monkeypatch.setenv("LFC_CACHE_DIR", str(tmp_path))
-    path = kundur_fit._cache_path(CASE, "kundur-fit")
+    path = fitting._cache_path(CASE, "kundur-fit")
     assert path.parent == tmp_path
-    kundur_fit._write_report(path, fit, kundur_fit._encode)
-    assert kundur_fit._read_report(path, kundur_fit._decode) == fit
+    fitting._write_report(path, fit, kundur_fit._encode)
+    assert fitting._read_report(path, kundur_fit._decode) == fit
     stored = json.loads(path.read_text())
     stored["payload"] = stored["payload"].replace('"T": ', '"T": 1')    # a changed value
     path.write_text(json.dumps(stored))
     with pytest.warns(RuntimeWarning, match="damaged cache file"):
-        assert kundur_fit._read_report(path, kundur_fit._decode) is None
+        assert fitting._read_report(path, kundur_fit._decode) is None
 
 
 def test_the_area_command_reaches_its_governors_on_the_area_base(fit):
@@ -106,3 +107,4 @@ def test_case_values_are_checked():
         KundurCase(area_mva=0.0)
     with pytest.raises(ValueError, match="same number"):
         KundurCase(meter_buses=(6,))
+

@@ -132,11 +132,17 @@ def _fig5_testbed_explain(m: dict) -> str:
             f"{m['no_scc']['first_trip']['t']:.2f} s)")
 
 
+def _certified_areas(m: dict, attack: str) -> dict[str, dict]:
+    """Notebook 09's metrics of ``attack`` under the certified filters, by area."""
+    return {k.rsplit("/", 1)[1]: v for k, v in m.items()
+            if k.startswith(f"{attack}/certified/")}
+
+
 def _held_not_tripped(attack: str) -> Callable[[dict], bool]:
     """Notebook 09 on ANDES: the certified filters flagged ``outside`` under
     ``attack`` and no area tripped."""
     def matches(m: dict) -> bool:
-        runs = [v for k, v in m.items() if k.startswith(f"{attack}/certified/")]
+        runs = _certified_areas(m, attack).values()
         return bool(runs) and sum(r["outside"] for r in runs) > 0 and not any(
             r["tripped"] for r in runs)
     return matches
@@ -144,8 +150,7 @@ def _held_not_tripped(attack: str) -> Callable[[dict], bool]:
 
 def _held_explain(attack: str) -> Callable[[dict], str]:
     def explain(m: dict) -> str:
-        runs = {k.rsplit("/", 1)[1]: v for k, v in m.items()
-                if k.startswith(f"{attack}/certified/")}
+        runs = _certified_areas(m, attack)
         counts = ", ".join(f"{k} {v['outside']}" for k, v in runs.items())
         return (f"ANDES is not the fitted design model (the guarantee's first assumption), so "
                 f"at some control samples no command was certified and the held one failed "

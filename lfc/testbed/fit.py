@@ -160,12 +160,8 @@ def fit_report(case: MicrogridCase | None = None) -> FitReport:
 
 @lru_cache(maxsize=4)
 def _fitted(case: MicrogridCase) -> FitReport:
-    path = _cache_path(case)
-    report = _read_report(path)
-    if report is None:
-        report = fit_design_model(case)
-        _write_report(path, report)
-    return report
+    return cached_fit(case, "testbed-fit", fit_design_model)
+
 
 
 def _cache_path(case: object, kind: str = "testbed-fit") -> Path:
@@ -219,3 +215,16 @@ def _write_report(path: Path, report: Any,
     except OSError as err:
         warnings.warn(f"could not write cache file {path} ({err})", RuntimeWarning,
                       stacklevel=2)
+
+
+def cached_fit(case: object, kind: str, fit: Callable[[Any], Any],
+               encode: Callable[[Any], dict] = encode_report,
+               decode: Callable[[dict], Any] = decode_report) -> Any:
+    """``fit(case)`` read from its cache file (:func:`_cache_path`), or computed
+    and written there when the file is absent or damaged."""
+    path = _cache_path(case, kind)
+    report = _read_report(path, decode)
+    if report is None:
+        report = fit(case)
+        _write_report(path, report, encode)
+    return report

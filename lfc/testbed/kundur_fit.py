@@ -25,8 +25,8 @@ from scipy.integrate import cumulative_trapezoid
 
 from lfc.multiarea import MultiAreaParams
 from lfc.signals import Step
-from lfc.testbed.fit import (OUTPUTS, FitReport, _cache_path, _read_report, _write_report,
-                             decode_report, encode_report, fit_params)
+from lfc.testbed.fit import (OUTPUTS, FitReport, cached_fit, decode_report, encode_report,
+                             fit_params)
 from lfc.testbed.kundur import KundurCase
 
 FIT_STEP = 0.02      # pu of the area's base (36 MW), small enough to stay linear
@@ -129,9 +129,4 @@ def _decode(data: dict) -> KundurFit:
 
 @lru_cache(maxsize=4)
 def _fitted(case: KundurCase) -> KundurFit:
-    path = _cache_path(case, "kundur-fit")
-    fit = _read_report(path, _decode)
-    if fit is None:
-        fit = fit_kundur(case)
-        _write_report(path, fit, _encode)
-    return fit
+    return cached_fit(case, "kundur-fit", fit_kundur, _encode, _decode)

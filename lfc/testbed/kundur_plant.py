@@ -117,8 +117,7 @@ def simulate_kundur(params: MultiAreaParams, *, duration: float,
                           feedforward, control_period, ace_attack=attacks.get(a, {}).get("ace"),
                           k_agc=(float(k_freq[a]), float(k_tie[a])))
             for a, area in enumerate(params.areas)]
-    bed = _KundurBed(case, loads, gens, [RelayBank(relays) for _ in range(n_a)]
-                     if stop_on_trip else None)
+    bed = _KundurBed(case, loads, gens, RelayBank(relays, n_a) if stop_on_trip else None)
     bed.run(duration, step)
     rows = np.array(bed.rows)
     t = rows[:, 0].round(9)              # ANDES accumulates its time in floating point
@@ -137,12 +136,17 @@ def simulate_kundur(params: MultiAreaParams, *, duration: float,
 
 def _trips(relays: RelaySettings, t: np.ndarray, per_area: np.ndarray) -> list[pd.DataFrame]:
     """Each area's relay trips on its logged measurements."""
-    out = []
-    for a in range(per_area.shape[1]):
-        found = RelayBank(relays).update(t, per_area[:, a, 3], per_area[:, a, 4])
-        out.append(pd.DataFrame([(r, float(t[k])) for r, k, _ in sorted(found, key=lambda f: f[1])],
-                                columns=["relay", "t"]))
-    return out
+    bank = RelayBank(relays, per_area.shape[1])
+    found = bank.update(t, per_area[:, :, 3], per_area[:, :, 4])
+    return _by_area(found, t, per_area.shape[1])
+
+
+def _by_area(found: list[tuple[str, int, int]], t: np.ndarray, n_areas: int
+             ) -> list[pd.DataFrame]:
+    """:meth:`RelayBank.update`'s trips (relay, sample, area) as one table of
+    ``relay``, ``t`` per area, in time order."""
+    return [pd.DataFrame([(r, float(t[k])) for r, k, j in found if j == a],
+                         columns=["relay", "t"]) for a in range(n_areas)]
 
 
 class _Stop(Exception):
@@ -153,12 +157,11 @@ class _KundurBed:
     """One ANDES run with every area's generator side in its per-step callback."""
 
     def __init__(self, case: KundurCase, loads: dict, gens: list[GeneratorSide],
-                 banks: list[RelayBank] | None) -> None:
-        self.case, self.loads, self.gens, self.banks = case, loads, gens, banks
+                 bank: RelayBank | None) -> None:
+        self.case, self.loads, self.gens, self.bank = case, loads, gens, bank
         self.ss = build_kundur(case)
         self.rows: list[list[float]] = []
         self.trips: list[pd.DataFrame] | None = None
-        self.found: list[list[tuple[str, float]]] = [[] for _ in gens]
         self.next_j = 0
         self._load_at = (math.nan, np.zeros(case.n_areas))
 
@@ -169,8 +172,6 @@ class _KundurBed:
             self._log(run_tds(self.ss, duration, self._callback))
         except _Stop:
             pass
-        if self.banks is not None:
-            self.trips = [pd.DataFrame(f, columns=["relay", "t"]) for f in self.found]
 
     def _addresses(self) -> None:
         ss, case = self.ss, self.case
@@ -208,17 +209,16 @@ class _KundurBed:
             for end in (0, 1):
                 self.ties.append((areas[end], bus.idx2uid(ends[end]), bus.idx2uid(ends[1 - end]),
                                   y, sh))
-        self.tie0 = np.zeros(case.n_areas)
-        self.tie0 = self._tie()
+        self.tie0 = self._export()
 
-    def _tie(self) -> np.ndarray:
-        """Each area's tie-line export deviation (pu of its base)."""
+    def _export(self) -> np.ndarray:
+        """Each area's tie-line export (pu of its base)."""
         v, a = self.ss.dae.y[self.v_addr], self.ss.dae.y[self.ang_addr]
         p = np.zeros(self.case.n_areas)
         for area, here, there, y, sh in self.ties:
             v1, v2 = v[here] * np.exp(1j * a[here]), v[there] * np.exp(1j * a[there])
             p[area] += (v1 * np.conj((v1 - v2) * y + v1 * sh)).real
-        return p / self.case.scale - self.tie0
+        return p / self.case.scale
 
     def _state(self) -> np.ndarray:
         """(n_areas, 8): design-model state, p_load, p_tie, p_net (pu of each
@@ -233,7 +233,7 @@ class _KundurBed:
             out[i, 3] = y[self.a_f[i]] - 1.0
             out[i, 4] = y[self.a_r[i]]
             out[i, 7] = (y[self.a_pe[gu]] - self.pe0[gu]).sum() / s
-        out[:, 6] = self._tie()
+        out[:, 6] = self._export() - self.tie0
         return out
 
     def _p_load(self, t: float) -> np.ndarray:
@@ -259,11 +259,10 @@ class _KundurBed:
         state = self._state()
         state[:, 5] = self._p_load(t)
         self.rows.append([t, *state.ravel()])
-        if self.banks is not None:
-            for a, bank in enumerate(self.banks):
-                found = bank.update(np.array([t]), state[a, 3:4], state[a, 4:5])
-                self.found[a].extend((relay, t) for relay, _, _ in found)
-            if any(self.found):
+        if self.bank is not None:
+            found = self.bank.update(np.array([t]), state[None, :, 3], state[None, :, 4])
+            if found:
+                self.trips = _by_area(found, np.array([t]), self.case.n_areas)
                 raise _Stop
         tc = self.gens[0].tc
         gov = self.ss.TGOV1
