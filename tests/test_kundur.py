@@ -108,3 +108,13 @@ def test_case_values_are_checked():
     with pytest.raises(ValueError, match="same number"):
         KundurCase(meter_buses=(6,))
 
+
+def test_stop_on_trip_ends_at_the_first_trip_of_the_full_run(fit):
+    attacks = {a: {"ace": lfc.Step(-2.5, 1.0)} for a in range(2)}
+    full = simulate_kundur(fit.params, duration=30.0, attacks=attacks)
+    first = min(float(r.trips.t.min()) for r in full.areas if len(r.trips))
+    stopped = simulate_kundur(fit.params, duration=30.0, attacks=attacks, stop_on_trip=True)
+    assert stopped.tripped and float(stopped.trace.t.iat[-1]) == pytest.approx(first)
+    for a, r in enumerate(stopped.areas):
+        expected = full.areas[a].trips[full.areas[a].trips.t <= first + 1e-9]
+        assert r.trips.to_dict("list") == expected.reset_index(drop=True).to_dict("list")

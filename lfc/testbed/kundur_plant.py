@@ -262,7 +262,7 @@ class _KundurBed:
         if self.bank is not None:
             found = self.bank.update(np.array([t]), state[None, :, 3], state[None, :, 4])
             if found:
-                self.trips = _by_area(found, np.array([t]), self.case.n_areas)
+                self.trips = _by_area(found, np.array([round(t, 9)]), self.case.n_areas)
                 raise _Stop
         tc = self.gens[0].tc
         gov = self.ss.TGOV1

@@ -333,7 +333,7 @@ class _Testbed:
             return
         found = self.bank.update(np.array([t]), state[3:4], state[4:5])
         if found:
-            self.trips.extend((relay, t) for relay, _, _ in found)
+            self.trips.extend((relay, round(t, 9)) for relay, _, _ in found)  # as the trace
             raise _Stop
 
     def result(self, relays: RelaySettings, settings: dict) -> SimResult:
