@@ -291,3 +291,31 @@ def test_each_chapter_reads_as_a_chapter(c):
                    for line in cell.splitlines()), c.name
     assert max(len(cell.splitlines()) for cell in body) <= 30, c.name
     assert any("simulate" in cell for cell in code), c.name
+
+
+def test_a_kernel_is_shut_down_without_an_interrupt(monkeypatch):
+    """jupyter_client interrupts (SIGINT) before every shutdown; a SIGINT landing while
+    the idle kernel handles a message printed "KeyboardInterrupt caught in kernel"
+    during reproduce. Our kernels are stopped by the shutdown request alone."""
+    signals = []
+    km = runner.IPCKernelManager(kernel_name="python3")
+    original = km._async_signal_kernel
+
+    async def record(signum):
+        signals.append(signum)
+        await original(signum)
+
+    monkeypatch.setattr(km, "_async_signal_kernel", record)
+    km.start_kernel()
+    try:
+        client = km.client()
+        client.start_channels()
+        client.wait_for_ready(timeout=60)
+        client.stop_channels()
+        km.interrupt_kernel()               # an interrupt asked for still reaches a kernel
+        assert len(signals) == 1
+        km.shutdown_kernel()
+        assert len(signals) == 1 and not km.is_alive()
+    finally:
+        if km.has_kernel:
+            km.shutdown_kernel(now=True)
