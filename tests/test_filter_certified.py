@@ -145,6 +145,10 @@ def test_load_bound_covers_load_steps_and_rejects_impossible_bounds():
     assert not r.metrics()["tripped"]
     with pytest.raises(ValueError, match="load_bound must be <"):
         CertifiedSet(P, RELAYS, load_bound=P.M * RELAYS.rocof_limit)
+    # a bound that leaves the samples' limits but no terminal set names itself, not the
+    # estimation error (there is none here)
+    with pytest.raises(ValueError, match="no room for the terminal set: lower load_bound"):
+        CertifiedSet(P, RELAYS, load_bound=0.0588)
 
 
 def test_invalid_input_holds_the_last_certified_command():

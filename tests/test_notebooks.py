@@ -84,6 +84,17 @@ def test_multi_area_notebook_on_the_kundur_testbed(tmp_path):
         f"{a} attack: no certified filter flags outside" for a in ("single", "coordinated", "ACE")}
     assert "|" in (tmp_path / "fig" / "multiarea_attacks_testbed.md").read_text()
     assert not (tmp_path / "fig" / "multiarea_red_team.md").exists()   # linear model only
+    # the causes are separated: the same certified runs on the design model itself, and
+    # assumption (c) measured on ANDES against each filter's load_bound
+    assert "outside on the model" in (tmp_path / "fig" /
+                                      "multiarea_outside_causes_testbed.md").read_text()
+    metrics = json.loads((tmp_path / "res" / "metrics.json").read_text())
+    for attack in ("single", "coordinated", "ACE"):
+        for a in range(2):
+            assert f"model/{attack}/certified/area{a}" in metrics
+            run = metrics[f"{attack}/certified/area{a}"]
+            assert 0 < run["disturbance_step"] <= run["load_bound"]
+    assert all("on the fitted design model itself" in why for why in deviations.values())
 
 
 def test_attack_surface_notebook_writes_maps_tables_and_claims(tmp_path):

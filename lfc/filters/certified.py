@@ -314,6 +314,10 @@ class _PlantBlock:
         for level, factor in (("new", 2.0), ("held", 1.0)):
             room = lim - factor * t_max
             rho = float(min(0.5 * room[0] / sigma[0], room[1] / sigma[1]))
+            if rho <= 0:
+                raise ValueError("the tightenings (load_bound, relay noise, margin, between "
+                                 "samples) leave no room for the terminal set: lower "
+                                 "load_bound, trips_per_hour or margin")
             self.rho[level] = rho - error
             self.eq_half[level] = (room[0] - rho * sigma[0]) / abs(dw_u) - eq_error
         if self.rho["new"] <= 0:
