@@ -7,15 +7,13 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 import lfc
-from lfc.experiments.redteam import coordinated_search
+from lfc.experiments.redteam import coordinated_search, severity
 from lfc.multiarea import MultiAreaParams, discretize_multiarea, multiarea_matrices
 from lfc.simulate_multiarea import area_filter, tie_step_bound
 
 RELAYS = lfc.RelaySettings()
 TWO = MultiAreaParams.two_area()
 THREE = MultiAreaParams.three_area()
-
-
 
 
 # -- one area is the single-area model ---------------------------------------------------
@@ -329,8 +327,8 @@ NOISE = (1e-4, 1e-3)   # pu, pu/s: notebook 08's measurement noise
 
 
 def _severity(r) -> float:
-    return max(max(m["max_abs_dw_meas"] / RELAYS.F, m["max_abs_rocof_meas"] / RELAYS.rocof_limit)
-               for m in r.metrics().values())
+    """The worst area's severity (``lfc.experiments.redteam.severity``)."""
+    return max(float(severity(m, RELAYS)) for m in r.metrics().values())
 
 
 def test_finding_with_the_kalman_estimate_the_certified_filters_leave_their_certificate():
