@@ -294,7 +294,7 @@ def test_finding_the_hold_recheck_fails_under_tie_drift_so_the_guarantee_can_end
     assert blind.metrics()[2]["first_trip"]["relay"] == "ROCOF"
 
 
-# Kundur's two-area system as fitted on ANDES (lfc.testbed.kundur_design, rounded): heavy
+# Kundur's two-area system as fitted on ANDES (lfc.testbed.grid_design, rounded): heavy
 # areas on 1800 MVA joined by a stiff tie, T = 98 pu against the presets' 2
 KUNDUR_LIKE = MultiAreaParams(
     areas=(lfc.LFCParams(M=13.8, D=2.96, tau_g=0.05, tau_t=3.33, droop=0.0506,

@@ -1,18 +1,21 @@
-"""The two-area design model that best describes the Kundur testbed.
+"""The two-area design model that best describes a grid on ANDES
+(:class:`lfc.testbed.GridCase`: Kundur's or the IEEE 39-bus system).
 
-Two small experiments on the testbed (:func:`lfc.testbed.simulate_kundur`,
+Two small experiments on the testbed (:func:`lfc.testbed.simulate_grid`,
 AGC on, no filters): a ``FIT_STEP`` pu command step at area 0's generators and
 a ``FIT_STEP`` pu load step in area 1.  Each area's seven parameters are fitted
 as the microgrid's are (:func:`lfc.testbed.fit.fit_params`), on both
 experiments, with the area's recorded command and its recorded net
 disturbance ``dP_L + dP_tie`` as the inputs; the tie-line coefficient ``T`` by
 least squares of ``dP_tie,0(t) = T ∫ (dw_0 − dw_1) dt`` (rotor speeds).  The
-model's errors are RMS residuals over the response's peak.
+model's errors are RMS residuals over the response's peak.  The start is the
+model the case's data imply (:func:`lfc.testbed.grid.case_design`).
 
-The turbines of the case have a lead-lag (T2 = 2.1 s over T3 = 7 s) that the
-design model's single lag cannot represent; the fitted model's errors say how
-much that costs.  The fit (two ANDES runs, about 15 s) is cached on disk as the
-microgrid's is (:mod:`lfc.testbed.fit`).
+The turbines of both cases have a lead-lag (Kundur: T2 = 2.1 s over T3 = 7 s;
+IEEE 39-bus: 1 s over 2.1 s) that the design model's single lag cannot
+represent; the fitted model's errors say how much that costs.  The fit (two
+ANDES runs of ``FIT_DURATION``) is cached on disk as the microgrid's is
+(:mod:`lfc.testbed.fit`).
 """
 
 from __future__ import annotations
@@ -27,20 +30,20 @@ from lfc.multiarea import MultiAreaParams
 from lfc.signals import Step
 from lfc.testbed.fit import (OUTPUTS, FitReport, cached_fit, decode_report, encode_report,
                              fit_params)
-from lfc.testbed.kundur import KundurCase
+from lfc.testbed.grid import GridCase, case_design
 
-FIT_STEP = 0.02      # pu of the area's base (36 MW), small enough to stay linear
+FIT_STEP = 0.02      # pu of the area base (36 MW in Kundur's), small enough to stay linear
 FIT_DURATION = 30.0  # s: the turbines' 7 s lag settles
 # The measurement lags are the BusFreq / BusROCOF settings, known exactly: not fitted.
 # Time constants stay >= 0.05 s: without that bound the fit trades the turbines'
 # lead-lag for a governor lag of microseconds, a model too stiff to certify.
-KUNDUR_FITTED = ("M", "D", "tau_g", "tau_t", "droop")
+GRID_FITTED = ("M", "D", "tau_g", "tau_t", "droop")
 LOWER = {"tau_g": 0.05, "tau_t": 0.05}
 
 
 @dataclass(frozen=True)
-class KundurFit:
-    """Result of :func:`fit_kundur`.
+class GridFit:
+    """Result of :func:`fit_grid`.
 
     Attributes
     ----------
@@ -69,22 +72,31 @@ class KundurFit:
         return "\n\n".join(parts)
 
 
-def record_kundur_experiments(case: KundurCase) -> list:
+def record_grid_experiments(case: GridCase) -> list:
     """The two experiments (module docstring): their :class:`MultiAreaResult`."""
-    from lfc.testbed.kundur_plant import simulate_kundur
+    from lfc.testbed.grid_plant import simulate_grid
 
-    initial = case.design_params()
-    return [simulate_kundur(initial, duration=FIT_DURATION, case=case,
+    initial = case_design(case)
+    return [simulate_grid(initial, duration=FIT_DURATION, case=case,
                             attacks={0: {"pc": Step(FIT_STEP, 1.0)}}),
-            simulate_kundur(initial, duration=FIT_DURATION, case=case,
+            simulate_grid(initial, duration=FIT_DURATION, case=case,
                             loads={1: Step(FIT_STEP, 1.0)})]
 
 
-def fit_kundur(case: KundurCase | None = None) -> KundurFit:
-    """Fit the two-area design model to the testbed (module docstring)."""
-    case = case or KundurCase()
-    runs = record_kundur_experiments(case)
-    initial = case.design_params()
+def fit_grid(case: GridCase | None = None) -> GridFit:
+    """Fit the two-area design model to the testbed (module docstring).
+
+    Raises
+    ------
+    ValueError
+        If ``case`` has more than two areas (one tie-line coefficient is fitted).
+    """
+    case = case or GridCase.kundur()
+    if case.n_areas != 2:
+        raise ValueError(f"the fit handles two areas (one tie-line), the case has "
+                         f"{case.n_areas} (generators)")
+    runs = record_grid_experiments(case)
+    initial = case_design(case)
     reports = []
     for a, area in enumerate(initial.areas):
         exps = []
@@ -94,7 +106,7 @@ def fit_kundur(case: KundurCase | None = None) -> KundurFit:
                    "p_load": tr[f"p_net_{a}"].to_numpy()}
             exp.update({k: tr[f"{k}_{a}"].to_numpy() for k in OUTPUTS})
             exps.append(exp)
-        reports.append(fit_params(area, exps, KUNDUR_FITTED, LOWER))
+        reports.append(fit_params(area, exps, GRID_FITTED, LOWER))
     p, i = [], []
     for r in runs:
         tr = r.trace
@@ -103,30 +115,30 @@ def fit_kundur(case: KundurCase | None = None) -> KundurFit:
     p, i = np.concatenate(p), np.concatenate(i)
     T = float(p @ i / (i @ i))
     error = float(np.sqrt(np.mean((p - T * i) ** 2)) / np.abs(p).max())
-    return KundurFit(tuple(reports), T, error)
+    return GridFit(tuple(reports), T, error)
 
 
-def kundur_fit_report(case: KundurCase | None = None) -> KundurFit:
-    """:func:`fit_kundur` of ``case`` (default ``KundurCase()``), computed once
-    per process and case and cached on disk."""
-    return _fitted(case or KundurCase())
+def grid_fit_report(case: GridCase | None = None) -> GridFit:
+    """:func:`fit_grid` of ``case`` (default ``GridCase.kundur()``), computed
+    once per process and case and cached on disk."""
+    return _fitted(case or GridCase.kundur())
 
 
-def kundur_design(case: KundurCase | None = None) -> MultiAreaParams:
-    """The fitted two-area design model of ``case`` (default ``KundurCase()``)."""
-    return kundur_fit_report(case).params
+def grid_design(case: GridCase | None = None) -> MultiAreaParams:
+    """The fitted two-area design model of ``case`` (default ``GridCase.kundur()``)."""
+    return grid_fit_report(case).params
 
 
-def _encode(fit: KundurFit) -> dict:
+def _encode(fit: GridFit) -> dict:
     return {"areas": [encode_report(r) for r in fit.areas], "T": fit.T,
             "tie_error": fit.tie_error}
 
 
-def _decode(data: dict) -> KundurFit:
-    return KundurFit(tuple(decode_report(r) for r in data["areas"]), float(data["T"]),
+def _decode(data: dict) -> GridFit:
+    return GridFit(tuple(decode_report(r) for r in data["areas"]), float(data["T"]),
                      float(data["tie_error"]))
 
 
 @lru_cache(maxsize=4)
-def _fitted(case: KundurCase) -> KundurFit:
-    return cached_fit(case, "kundur-fit", fit_kundur, _encode, _decode)
+def _fitted(case: GridCase) -> GridFit:
+    return cached_fit(case, "grid-fit", fit_grid, _encode, _decode)

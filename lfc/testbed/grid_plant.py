@@ -1,17 +1,18 @@
-"""AGC and a filter at every area of the two-area Kundur system on ANDES:
-:func:`simulate_kundur`, the testbed's :func:`lfc.simulate_multiarea`.
+"""AGC and a filter at every area of an interconnected grid on ANDES:
+:func:`simulate_grid`, the testbed's :func:`lfc.simulate_multiarea`.
 
-ANDES integrates the grid (:mod:`lfc.testbed.kundur`); before every step it
-calls back into :class:`_KundurBed`, which logs the last accepted state and,
-when a control sample is due, runs each area's generator side
+ANDES integrates the grid (:mod:`lfc.testbed.grid`: Kundur's two-area system
+or the IEEE 39-bus system); before every step it calls back into
+:class:`_GridBed`, which logs the last accepted state and, when a control
+sample is due, runs each area's generator side
 (:class:`lfc.engine.GeneratorSide`, the engine's own code: noise, estimator,
 filter and AGC on the area's ACE) on the area's state in design-model
-coordinates (pu on the area's base):
+coordinates (pu on the area base):
 
 ==============  ==========================================================
-``dPg``         sum of the area's governor lags ``TGOV1.LAG_y`` minus their
-                initial values
-``dPm``         sum of the area's turbine outputs ``TGOV1.pout`` minus theirs
+``dPg``         sum of the area's governor lags ``LAG_y`` (of the case's
+                ``TGOV1`` or ``TGOV1N``) minus their initial values
+``dPm``         sum of the area's turbine outputs ``pout`` minus theirs
 ``dw``          inertia-weighted mean rotor speed ``GENROU.omega − 1``
 ``dw_meas``     frequency of the area's meter bus ``BusFreq.f − 1``
 ``rocof_meas``  its ROCOF ``BusROCOF.Wf_y`` (pu/s)
@@ -24,17 +25,19 @@ coordinates (pu on the area's base):
 ==============  ==========================================================
 
 Why ``p_net`` is metered at the machines and not summed as load plus tie-line
-export (as the linear model defines it): the case's loads are constant
-impedance, so every voltage change moves them.  In the fit's load step the
-generators' output differed from the stepped load plus export by half of it
-(0.011 of 0.020 pu), and the model fitted on load plus export came out with
-twice the true inertia; on the machines' output it finds the case's
-inertia (:mod:`lfc.testbed.kundur_fit`).
+export (as the linear model defines it): the cases' loads are constant
+impedance, so every voltage change moves them.  In the Kundur fit's load step
+the generators' output differed from the stepped load plus export by half of
+it (0.011 of 0.020 pu), and the model fitted on load plus export came out
+with twice the true inertia; on the machines' output it finds the case's
+inertia (:mod:`lfc.testbed.grid_fit`).
 
-The area's command is shared equally by its governors: each one's
-``TGOV1.paux0`` (added before the droop gain ``1/R``) is set to
-``R · u · scale / n`` so that it adds ``u / n`` pu of the area's base to the
-machine's power reference.  The relays of each area read its meter bus.
+The area's command ``u`` is shared by its governors in proportion to their
+machines' ratings ``Sn`` (equally in Kundur's system): machine ``k`` is to add
+``u · Sn_k / Σ Sn`` pu of the area base to its power reference.  A ``TGOV1``
+adds its ``paux0`` before the droop gain ``1/R``, so it gets ``R · u · scale ·
+Sn_k / Σ Sn``; a ``TGOV1N`` adds it after the gain, so it gets ``u · scale ·
+Sn_k / Σ Sn``.  The relays of each area read its meter bus.
 """
 
 from __future__ import annotations
@@ -50,18 +53,18 @@ from lfc.engine_multiarea import CHANNELS, check_area_keys
 from lfc.multiarea import MultiAreaParams
 from lfc.relays import RelayBank, RelaySettings
 from lfc.simulate_multiarea import MultiAreaResult, area_filter, multiarea_result
-from lfc.testbed.kundur import KundurCase, build_kundur
+from lfc.testbed.grid import GridCase, build_grid
 from lfc.testbed.plant import TestbedError, init_tds, run_tds
 
 
-def simulate_kundur(params: MultiAreaParams, *, duration: float,
+def simulate_grid(params: MultiAreaParams, *, duration: float,
                     attacks: dict | None = None, loads: dict | None = None,
                     filters: dict | None = None, relays: RelaySettings | None = None,
                     estimator=None, noise_std: tuple[float, float] = (0.0, 0.0),
                     seed: int = 0, control_period: float = 0.01, step: float = 0.005,
                     stop_on_trip: bool = False, feedforward: bool = True,
-                    case: KundurCase | None = None) -> MultiAreaResult:
-    """Simulate the two-area Kundur system on ANDES with AGC and filters; the
+                    case: GridCase | None = None) -> MultiAreaResult:
+    """Simulate an interconnected grid on ANDES with AGC and filters; the
     arguments and result of :func:`lfc.simulate_multiarea`, plus the ones below.
 
     Parameters
@@ -69,15 +72,15 @@ def simulate_kundur(params: MultiAreaParams, *, duration: float,
     params : MultiAreaParams
         The design model: each area's AGC gains and bias, the estimators'
         models and the filters named by kind (use
-        :func:`lfc.testbed.kundur_design`, the model fitted to the case).
+        :func:`lfc.testbed.grid_design` of ``case``, the model fitted to it).
     loads : dict, optional
         ``{area: signal}``: load change (pu of the area's base at nominal
         voltage), a constant-impedance load at the area's ``load_buses`` bus,
         updated every ANDES step.
     step : float
         ANDES time step (s); ``control_period`` must be a multiple of it.
-    case : KundurCase
-        Default ``KundurCase()``.
+    case : GridCase
+        The grid; default ``GridCase.kundur()``.
 
     Returns
     -------
@@ -91,7 +94,7 @@ def simulate_kundur(params: MultiAreaParams, *, duration: float,
     TestbedError
         If ANDES does not converge (with the time and ANDES' reason).
     """
-    case = case or KundurCase()
+    case = case or GridCase.kundur()
     if not isinstance(params, MultiAreaParams) or params.n_areas != case.n_areas:
         raise ValueError(f"params must be a MultiAreaParams of {case.n_areas} areas (the "
                          f"case's), got {params!r}")
@@ -117,7 +120,7 @@ def simulate_kundur(params: MultiAreaParams, *, duration: float,
                           feedforward, control_period, ace_attack=attacks.get(a, {}).get("ace"),
                           k_agc=(float(k_freq[a]), float(k_tie[a])))
             for a, area in enumerate(params.areas)]
-    bed = _KundurBed(case, loads, gens, RelayBank(relays, n_a) if stop_on_trip else None)
+    bed = _GridBed(case, loads, gens, RelayBank(relays, n_a) if stop_on_trip else None)
     bed.run(duration, step)
     rows = np.array(bed.rows)
     t = rows[:, 0].round(9)              # ANDES accumulates its time in floating point
@@ -153,13 +156,13 @@ class _Stop(Exception):
     """Raised inside the ANDES callback to end a run at a trip."""
 
 
-class _KundurBed:
+class _GridBed:
     """One ANDES run with every area's generator side in its per-step callback."""
 
-    def __init__(self, case: KundurCase, loads: dict, gens: list[GeneratorSide],
+    def __init__(self, case: GridCase, loads: dict, gens: list[GeneratorSide],
                  bank: RelayBank | None) -> None:
         self.case, self.loads, self.gens, self.bank = case, loads, gens, bank
-        self.ss = build_kundur(case)
+        self.ss = build_grid(case)
         self.rows: list[list[float]] = []
         self.trips: list[pd.DataFrame] | None = None
         self.next_j = 0
@@ -175,7 +178,7 @@ class _KundurBed:
 
     def _addresses(self) -> None:
         ss, case = self.ss, self.case
-        gen, gov, bus = ss.GENROU, ss.TGOV1, ss.Bus
+        gen, gov, bus = ss.GENROU, getattr(ss, case.governor), ss.Bus
         self.gen_uid = [[gen.idx2uid(g) for g in gens] for gens in case.generators]
         self.gov_uid = [[list(gov.syn.v).index(g) for g in gens] for gens in case.generators]
         self.weights = [gen.M.v[u] / gen.M.v[u].sum() for u in map(np.array, self.gen_uid)]
@@ -191,7 +194,10 @@ class _KundurBed:
         omega = ss.dae.x[self.a_omega]
         if not (np.all(abs(omega - 1) < 1e-6) and np.all(abs(ss.dae.y[self.a_f] - 1) < 1e-6)):
             raise TestbedError("the testbed did not initialize at 1.0 pu frequency")
-        self.droop = gov.R.v.copy()
+        # each governor's paux0 = before_droop * u * scale * share (module docstring)
+        self.share = [gen.Sn.v[gu] / gen.Sn.v[gu].sum() for gu in self.gen_uid]
+        self.before_droop = [gov.R.v[vu] if case.governor == "TGOV1" else np.ones(len(vu))
+                             for vu in self.gov_uid]
         self.v_addr, self.ang_addr = bus.v.a, bus.a.a
         self.ls_uid = [ss.PQ.idx2uid(f"LS{i}") for i in range(case.n_areas)]
         self.ls_v0 = [float(bus.v.v[bus.idx2uid(b)]) for b in case.load_buses]
@@ -265,18 +271,18 @@ class _KundurBed:
                 self.trips = _by_area(found, np.array([round(t, 9)]), self.case.n_areas)
                 raise _Stop
         tc = self.gens[0].tc
-        gov = self.ss.TGOV1
+        gov = getattr(self.ss, self.case.governor)
         while self.next_j < len(tc) and tc[self.next_j] <= t + 1e-7:
             for a, gen in enumerate(self.gens):
                 u = gen.step(self.next_j, state[a, :5], state[a, 7], state[a, 6])
-                vu = self.gov_uid[a]
-                gov.paux0.v[vu] = self.droop[vu] * u * self.case.scale / len(vu)
+                gov.paux0.v[self.gov_uid[a]] = (self.before_droop[a] * u * self.case.scale
+                                                * self.share[a])
             self.next_j += 1
 
 
-def simulate_kundur_batch(params: MultiAreaParams, scenarios: list[dict], *, jobs: int = 2,
-                          progress: bool = True, **common) -> list[MultiAreaResult]:
-    """Many :func:`simulate_kundur` runs in ``jobs`` processes (ANDES holds the
+def simulate_grid_batch(params: MultiAreaParams, scenarios: list[dict], *, jobs: int = 2,
+                        progress: bool = True, **common) -> list[MultiAreaResult]:
+    """Many :func:`simulate_grid` runs in ``jobs`` processes (ANDES holds the
     GIL), each scenario a dict of its keyword arguments, ``common`` the ones
     they share; the results in the scenarios' order."""
     from concurrent.futures import ProcessPoolExecutor
@@ -289,16 +295,16 @@ def simulate_kundur_batch(params: MultiAreaParams, scenarios: list[dict], *, job
                                                            for s in scenarios):
         raise ValueError(f"scenarios must be a list of dicts, got {scenarios!r}")
     calls = [{**common, **s} for s in scenarios]
-    bar = tqdm(total=len(calls), unit="run", desc="simulate_kundur", disable=not progress)
+    bar = tqdm(total=len(calls), unit="run", desc="simulate_grid", disable=not progress)
     if jobs == 1 or len(calls) <= 1:
         out = []
         for kw in calls:
-            out.append(simulate_kundur(params, **kw))
+            out.append(simulate_grid(params, **kw))
             bar.update()
         bar.close()
         return out
     with ProcessPoolExecutor(max_workers=min(jobs, len(calls))) as pool:
-        futures = [pool.submit(simulate_kundur, params, **kw) for kw in calls]
+        futures = [pool.submit(simulate_grid, params, **kw) for kw in calls]
         for f in futures:
             f.add_done_callback(lambda _: bar.update())
         out = [f.result() for f in futures]
