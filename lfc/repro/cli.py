@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 from lfc.repro import runner
-from lfc.repro.notebook import PLANTS
+from lfc.experiments.scenarios import ALL_PLANTS
 
 
 class _Parser(argparse.ArgumentParser):
@@ -38,7 +38,7 @@ def _parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("reproduce", help="regenerate the paper's figures (notebooks)")
     rep.add_argument("--only", nargs="+", choices=list(runner.FIGURES), metavar="NAME",
                      help=f"a subset of {list(runner.FIGURES)}")
-    rep.add_argument("--plant", default="all", choices=(*PLANTS, "all"),
+    rep.add_argument("--plant", default="all", choices=(*ALL_PLANTS, "all"),
                      help="'all' (default): every plant each figure supports")
     rep.add_argument("--jobs", type=_jobs, default=2, help="notebooks run in parallel")
     rep.add_argument("--figures-dir", type=Path, default=runner.ROOT / "figures")

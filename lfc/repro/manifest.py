@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from lfc.experiments.scenarios import PLANTS
+from lfc.experiments.scenarios import ALL_PLANTS, PLANTS
 
 
 @dataclass(frozen=True)
@@ -27,10 +27,11 @@ class Chapter:
     title : str
         What the chapter shows (the book's index).
     plants : tuple of str
-        Plants it runs on (``"linear"``, ``"testbed"``).
+        Plants it runs on (``"linear"``, ``"testbed"``; notebook 09 also
+        ``"ieee39"``).
     figures : tuple of str
-        Figures it writes to ``figures/`` (PNG and PDF; ``_testbed`` appended on
-        the testbed).
+        Figures it writes to ``figures/`` (PNG and PDF; ``_<plant>`` appended
+        on a plant other than the linear one).
     short : dict
         Parameters of a short run for the tests (papermill parameters).
     """
@@ -84,7 +85,8 @@ CHAPTERS = (
              "margins": [0.1, 0.3], "load_steps": [0.1], "testbed": False,
              "check_claims": False}),
     Chapter("multiarea", "09_multi_area.ipynb",
-            "Beyond the paper: a filter at every area of an interconnected grid", PLANTS,
+            "Beyond the paper: a filter at every area of an interconnected grid",
+            ALL_PLANTS,
             ("multiarea_load_step", "multiarea_single", "multiarea_coordinated", "multiarea_ace"),
             {"duration": 10.0, "red_team_families": ["bias on ACE"], "red_team_maxiter": 1,
              "red_team_popsize": 2, "red_team_duration": 5.0}),

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from lfc.experiments.scenarios import PLANTS, check_plant, design_params
+from lfc.experiments.scenarios import ALL_PLANTS, PLANTS, check_plant, design_params
 from lfc.model import LFCParams
 from lfc.relays import RelaySettings
 from lfc.simulate import SimResult
@@ -19,7 +19,8 @@ __all__ = ["DEVIATIONS", "PLANTS", "PLANT_LABELS", "Deviation", "check_parameter
            "figure_name", "markdown_table", "notebook_parameters", "readme_mismatches",
            "record_claims", "save_table", "setup", "sync_readme", "update_markdown_section",
            "write_metrics"]
-PLANT_LABELS = {"linear": "linear model", "testbed": "ANDES testbed"}
+PLANT_LABELS = {"linear": "linear model", "testbed": "ANDES testbed",
+                "ieee39": "ANDES IEEE 39-bus"}
 
 
 def _parameter_cells(namespace: dict) -> tuple[str, str]:
@@ -80,8 +81,8 @@ def setup(plant: str, supported: tuple[str, ...] = PLANTS) -> tuple[LFCParams, R
 
 
 def figure_name(base: str, plant: str) -> str:
-    """File name of a figure: ``base`` on the linear plant, ``base_testbed`` on the testbed."""
-    check_plant(plant)
+    """File name of a figure: ``base`` on the linear plant, ``base_<plant>`` on another."""
+    check_plant(plant, ALL_PLANTS)
     return base if plant == "linear" else f"{base}_{plant}"
 
 

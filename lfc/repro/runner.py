@@ -29,6 +29,7 @@ from jupyter_client.manager import KernelManager
 from tqdm.auto import tqdm
 
 from lfc.repro.manifest import CHAPTERS
+from lfc.experiments.scenarios import ALL_PLANTS
 from lfc.repro.notebook import check_plant, figure_name
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -131,24 +132,24 @@ def reproduce(only: list[str] | None = None, plant: str = "all", jobs: int = 2,
               figures_dir: Path = ROOT / "figures", build_dir: Path = ROOT / "build",
               executor: Executor | None = None) -> list[RunOutcome]:
     """Execute every figure notebook (or ``only`` those) with its claims checked,
-    on ``plant`` (``"linear"``, ``"testbed"`` or ``"all"``: every plant each
-    notebook supports, ``FIGURE_PLANTS``).
+    on ``plant`` (``"linear"``, ``"testbed"``, ``"ieee39"`` or ``"all"``: every
+    plant each notebook supports, ``FIGURE_PLANTS``).
 
     Figures go to ``figures_dir``; executed notebooks, ``metrics.json`` and
-    ``claims.json`` to ``build_dir/reproduce/<name>[_testbed]/``.
+    ``claims.json`` to ``build_dir/reproduce/<name>[_<plant>]/``.
     """
     names = only or list(FIGURES)
     unknown = [n for n in names if n not in FIGURES]
     if unknown:
         raise ValueError(f"unknown figure(s) {unknown}; choose from {list(FIGURES)}")
     if plant != "all":
-        check_plant(plant)
+        check_plant(plant, ALL_PLANTS)
     if not (isinstance(jobs, int) and jobs >= 1):
         raise ValueError(f"jobs must be an integer >= 1, got {jobs!r}")
     runs = [(n, p) for n in names for p in FIGURE_PLANTS[n] if plant in ("all", p)]
     if not runs:
         raise ValueError(f"none of {names} runs on plant {plant!r} (see FIGURE_PLANTS)")
-    if any(p == "testbed" for _, p in runs):
+    if any(p != "linear" for _, p in runs):
         _prepare_testbed()
     pool = executor or ThreadPoolExecutor(max_workers=jobs)
     futures = {}
@@ -230,7 +231,7 @@ def validate_parameters(notebook: Path, parameters: dict[str, list]) -> dict:
                     if not (isinstance(v, (int, float)) and v > 0):
                         raise ValueError(f"parameter {name!r} must be > 0, got {value!r}")
             if name == "plant":
-                check_plant(value)
+                check_plant(value, ALL_PLANTS)
     return known
 
 
