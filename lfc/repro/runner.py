@@ -28,8 +28,8 @@ import papermill as pm
 from jupyter_client.manager import KernelManager
 from tqdm.auto import tqdm
 
-from lfc.repro.manifest import CHAPTERS
 from lfc.experiments.scenarios import ALL_PLANTS
+from lfc.repro.manifest import CHAPTERS
 from lfc.repro.notebook import check_plant, figure_name
 
 ROOT = Path(__file__).resolve().parents[2]
