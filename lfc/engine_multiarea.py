@@ -154,6 +154,17 @@ def check_area_keys(mapping: dict | None, n_areas: int, name: str) -> dict:
     return mapping
 
 
+def check_attacks(attacks: dict | None, n_areas: int) -> dict:
+    """``attacks`` (None: empty) as :func:`check_area_keys` checks it, each value
+    a dict whose keys are among ``CHANNELS``."""
+    attacks = check_area_keys(attacks, n_areas, "attacks")
+    for a, channels in attacks.items():
+        if not isinstance(channels, dict) or set(channels) - set(CHANNELS):
+            raise ValueError(f"attacks[{a}] must be a dict with keys among {CHANNELS}, "
+                             f"got {channels!r}")
+    return attacks
+
+
 class MultiAreaScenarios:
     """Scenarios of one interconnected grid: add them one by one, then :meth:`run`.
 
@@ -190,16 +201,13 @@ class MultiAreaScenarios:
         """One scenario (arguments as in :func:`lfc.simulate_multiarea`, filters
         already built).  Returns its row number."""
         n = self.params.n_areas
-        attacks = check_area_keys(attacks, n, "attacks")
+        attacks = check_attacks(attacks, n)
         loads = check_area_keys(loads, n, "loads")
         filters = check_area_keys(filters, n, "filters")
         noisy = check_noise(noise_std)
         row = []
         for a, area in enumerate(self.params.areas):
             channels = attacks.get(a, {})
-            if not isinstance(channels, dict) or set(channels) - set(CHANNELS):
-                raise ValueError(f"attacks[{a}] must be a dict with keys among {CHANNELS}, "
-                                 f"got {channels!r}")
             scc = filters.get(a)
             if scc is not None and not isinstance(scc, SafetyFilter):
                 raise ValueError(f"filters[{a}] must be a SafetyFilter or None, got {scc!r}")

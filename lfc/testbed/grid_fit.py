@@ -72,11 +72,11 @@ class GridFit:
         return "\n\n".join(parts)
 
 
-def record_grid_experiments(case: GridCase) -> list:
-    """The two experiments (module docstring): their :class:`MultiAreaResult`."""
+def record_grid_experiments(case: GridCase, initial: MultiAreaParams) -> list:
+    """The two experiments (module docstring), run with the design model
+    ``initial``'s AGC: their :class:`MultiAreaResult`."""
     from lfc.testbed.grid_plant import simulate_grid
 
-    initial = case_design(case)
     return [simulate_grid(initial, duration=FIT_DURATION, case=case,
                             attacks={0: {"pc": Step(FIT_STEP, 1.0)}}),
             simulate_grid(initial, duration=FIT_DURATION, case=case,
@@ -95,8 +95,8 @@ def fit_grid(case: GridCase | None = None) -> GridFit:
     if case.n_areas != 2:
         raise ValueError(f"the fit handles two areas (one tie-line), the case has "
                          f"{case.n_areas} (generators)")
-    runs = record_grid_experiments(case)
     initial = case_design(case)
+    runs = record_grid_experiments(case, initial)
     reports = []
     for a, area in enumerate(initial.areas):
         exps = []

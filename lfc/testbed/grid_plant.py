@@ -49,7 +49,7 @@ import pandas as pd
 
 from lfc._validate import check_multiple, check_positive
 from lfc.engine import GeneratorSide, sample_signal
-from lfc.engine_multiarea import CHANNELS, check_area_keys
+from lfc.engine_multiarea import check_area_keys, check_attacks
 from lfc.multiarea import MultiAreaParams
 from lfc.relays import RelayBank, RelaySettings
 from lfc.simulate_multiarea import MultiAreaResult, area_filter, multiarea_result
@@ -102,13 +102,9 @@ def simulate_grid(params: MultiAreaParams, *, duration: float,
     check_multiple("control_period", control_period, "step", step)
     relays = relays if relays is not None else RelaySettings()
     n_a = case.n_areas
-    attacks = check_area_keys(attacks, n_a, "attacks")
+    attacks = check_attacks(attacks, n_a)
     loads = check_area_keys(loads, n_a, "loads")
     filters = check_area_keys(filters, n_a, "filters")
-    for a, channels in attacks.items():
-        if not isinstance(channels, dict) or set(channels) - set(CHANNELS):
-            raise ValueError(f"attacks[{a}] must be a dict with keys among {CHANNELS}, "
-                             f"got {channels!r}")
     for a, load in loads.items():
         sample_signal(load, np.arange(0.0, duration + step, step), f"loads[{a}]")
     built = {a: area_filter(params, a, f, relays, control_period) for a, f in filters.items()}
