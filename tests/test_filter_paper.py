@@ -148,7 +148,11 @@ def test_hold_rule_lets_a_steady_over_frequency_stay_but_not_grow():
     """E9, "hold": dh/dt >= 0 -- a steady state outside is not pushed, a command
     that would raise the frequency further is cut back to dh/dt = 0."""
     u, info = EXACT.filter(STEADY_X, STEADY_U)
-    assert info.outside and not info.active and u == STEADY_U
+    # the steady command sits exactly on the bound dh/dt = 0, which the filter's data
+    # (matrix exponentials, BLAS) put within round-off of it on either side: measured
+    # 1 ulp below on an AMD EPYC, so the command may be clipped by that much
+    assert info.outside and u == pytest.approx(STEADY_U, rel=1e-14, abs=0)
+    assert not info.active or abs(u - STEADY_U) <= 4 * np.spacing(STEADY_U)
     u, info = EXACT.filter(STEADY_X, STEADY_U + 0.2)
     assert info.outside and info.active and u < STEADY_U + 0.2
     assert info.margin_freq == pytest.approx(0.0, abs=1e-12)

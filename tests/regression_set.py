@@ -1,0 +1,293 @@
+"""The regression set of the Grid rebuild: runs recorded with the code before it.
+
+Every figure's scenarios on the linear model, the maps' corners, red-team
+attacks, multi-area runs and testbed runs on ANDES, each reduced to named
+arrays (metrics, traces at every 10th plant step, control samples, alarms,
+trips).  ``tests/test_regression_set.py`` reruns them and compares with
+``tests/data/grid_regression.npz``: 1e-12 relative on the linear model, 1e-9
+on ANDES.
+
+Record (only before a restructuring, with the code it protects)::
+
+    python tests/regression_set.py            # writes tests/data/grid_regression.npz
+
+The scenarios call the public API.  Where the API is renamed, the calls here
+are rewritten to the new names; the recorded values stay.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import pandas as pd
+
+DATA = Path(__file__).parent / "data" / "grid_regression.npz"
+ANDES_RTOL = 1e-9
+LINEAR_RTOL = 1e-12
+ATOL = 1e-15           # for values that are 0 in one run and round-off in the other
+TRACE_EVERY = 10       # keep every 10th plant step of a trace
+
+
+def _frame(prefix: str, frame: pd.DataFrame, every: int = 1) -> dict[str, np.ndarray]:
+    """A DataFrame's columns as arrays (every ``every``-th row and the last)."""
+    rows = np.unique(np.r_[np.arange(0, len(frame), every), max(len(frame) - 1, 0)])
+    rows = rows[rows < len(frame)]
+    out = {}
+    for col in frame.columns:
+        values = frame[col].to_numpy()[rows]
+        if values.dtype == object or values.dtype.kind in "USO":
+            values = np.array([str(v) for v in values])
+        elif values.dtype == bool:
+            values = values.astype(float)
+        out[f"{prefix}.{col}"] = np.asarray(values)
+    out[f"{prefix}.rows"] = np.array([len(frame)], float)
+    return out
+
+
+def _sim(result) -> dict[str, np.ndarray]:
+    """A :class:`lfc.SimResult` as arrays."""
+    out = {}
+    out.update(_frame("trace", result.trace, TRACE_EVERY))
+    out.update(_frame("controls", result.controls))
+    out.update(_frame("alarms", result.alarms.drop(columns=["reason"])))
+    out.update(_frame("trips", result.trips))
+    metrics = result.metrics()
+    first = metrics.pop("first_trip")
+    out["metrics.first_trip_t"] = np.array([math.nan if first is None else first["t"]])
+    out["metrics.first_trip_relay"] = np.array(["" if first is None else first["relay"]])
+    for key, value in metrics.items():
+        out[f"metrics.{key}"] = np.array([float(value)])
+    return out
+
+
+def _multi(result) -> dict[str, np.ndarray]:
+    """A :class:`lfc.MultiAreaResult` as arrays."""
+    out = _frame("trace", result.trace, TRACE_EVERY)
+    for a, area in enumerate(result.areas):
+        out.update({f"area{a}.{k}": v for k, v in _sim(area).items()
+                    if not k.startswith("trace.")})
+    return out
+
+
+def _table(frame: pd.DataFrame) -> dict[str, np.ndarray]:
+    return _frame("table", frame.reset_index(drop=True))
+
+
+# -- the scenarios ---------------------------------------------------------------------
+def linear_cases() -> dict[str, Callable[[], dict]]:
+    import lfc
+    from lfc import LFCParams, RelaySettings, SafetyFilter, Samples, Sinusoid, Square, Step
+    from lfc.experiments.scenarios import (ATTACK_START, FIG4_AMPLITUDE, FIG4_FREQ, FIG4_WEAK,
+                                           FIG5_BIAS, FIG6_LOAD)
+    p, relays = LFCParams(), RelaySettings()
+    fig4 = Sinusoid(FIG4_AMPLITUDE, FIG4_FREQ, start=ATTACK_START)
+    fig5 = Step(FIG5_BIAS, start=ATTACK_START)
+    fig6 = Step(FIG6_LOAD, start=ATTACK_START)
+
+    def paper(alpha: float, **kw) -> SafetyFilter:
+        return SafetyFilter(p, relays, alpha=alpha, **kw)
+
+    def run(**kw) -> dict:
+        return _sim(lfc.simulate(p, **kw))
+
+    cases = {
+        "fig4_none": lambda: run(duration=10.0, pc_attack=fig4),
+        "fig4_a3": lambda: run(duration=10.0, pc_attack=fig4, scc=paper(3.0)),
+        "fig4_a20": lambda: run(duration=10.0, pc_attack=fig4, scc=paper(20.0)),
+        "fig4_weak": lambda: run(duration=10.0, scc=paper(20.0),
+                                 pc_attack=Sinusoid(FIG4_WEAK, FIG4_FREQ, start=ATTACK_START)),
+        "fig4_stop": lambda: run(duration=10.0, pc_attack=fig4, stop_on_trip=True),
+        "fig5_none": lambda: run(duration=30.0, wref_attack=fig5),
+        "fig5_a20": lambda: run(duration=30.0, wref_attack=fig5, scc=paper(20.0)),
+        "fig6_none": lambda: run(duration=30.0, load=fig6),
+        "fig6_a20": lambda: run(duration=30.0, load=fig6, scc=paper(20.0)),
+        "kalman": lambda: run(duration=10.0, pc_attack=fig4, scc=paper(20.0),
+                              estimator="kalman", noise_std=(1e-4, 1e-3), seed=3),
+        "relay_noise": lambda: run(duration=10.0, pc_attack=fig4, scc=paper(3.0),
+                                   estimator="kalman", noise_std=(2e-4, 2e-3), seed=5,
+                                   relay_noise=True),
+        "readings_push_slack_applied": lambda: run(
+            duration=10.0, pc_attack=Square(0.6, 0.5, start=ATTACK_START),
+            scc=paper(3.0, outside_rule="push", conflict="slack", prediction="applied")),
+        "certified_fig4": lambda: run(duration=10.0, pc_attack=Sinusoid(1.5, 1.0, start=1.0),
+                                      scc=SafetyFilter(p, relays, method="certified")),
+        "certified_load_ff": lambda: run(
+            duration=10.0, load=Step(0.015, start=1.0), load_feedforward=True,
+            pc_attack=Step(-1.0, start=3.0),
+            scc=SafetyFilter(p, relays, method="certified", load_bound=0.02)),
+        "robust_weak_plant": lambda: _sim(lfc.simulate(
+            LFCParams(M=3.2, D=0.8), duration=8.0, pc_attack=Sinusoid(1.2, 0.8, start=1.0),
+            estimator="kalman", noise_std=(1e-4, 1e-3), seed=1,
+            scc=SafetyFilter(p, relays, method="certified", uncertainty=0.2,
+                             noise_std=(1e-4, 1e-3)))),
+        "other_plant_paper": lambda: _sim(lfc.simulate(
+            LFCParams(M=3.0, tau_t=0.4), duration=10.0, pc_attack=fig4, scc=paper(20.0))),
+        "samples_callable": lambda: run(
+            duration=6.0, scc=paper(20.0),
+            pc_attack=Samples(1.0 + 0.05 * np.arange(60), np.sin(np.arange(60)) * 0.8),
+            load=lambda t: 0.03 * np.sin(2 * np.pi * 0.3 * np.asarray(t))),
+        "chirp_ramp": lambda: run(duration=8.0, pc_attack=lfc.Chirp(0.4, 0.1, 3.0, start=1.0),
+                                  load=lfc.Ramp(0.02, start=2.0, stop=4.0), scc=paper(3.0)),
+        "slow_control": lambda: run(duration=8.0, pc_attack=fig4, scc=paper(20.0, Ts=0.25),
+                                    dt=2e-3, control_period=0.05),
+    }
+    return cases
+
+
+def batch_cases() -> dict[str, Callable[[], dict]]:
+    from lfc import LFCParams, simulate_batch
+    from lfc.experiments.redteam import piecewise_attack_table
+    from lfc.experiments.surface import READINGS, attack_map, bias_map
+    p = LFCParams()
+
+    def corners() -> pd.DataFrame:
+        attacks = attack_map(["sinusoid", "square"], [0.2, 3.0], [0.1, 5.0], [3.0, 20.0])
+        biases = bias_map([-0.1, 0.1], [3.0, 20.0])
+        return pd.concat([attacks, biases], ignore_index=True)
+
+    def readings() -> pd.DataFrame:
+        base = attack_map(["square"], [0.6], [0.5], [3.0]).iloc[[-1]]
+        return pd.concat([base.assign(**r) for r in READINGS], ignore_index=True)
+
+    def certified() -> pd.DataFrame:
+        base = attack_map(["sinusoid"], [1.5], [1.0], [3.0])
+        rows = [base.assign(method="certified"),
+                base.assign(method="certified", uncertainty=0.2, M=3.2, D=0.8),
+                base.assign(method="certified", noise_w=1e-4, noise_rocof=1e-3, seed=2,
+                            declare_noise=True, trips_per_hour=1.0),
+                base.assign(method="paper", noise_w=2e-4, noise_rocof=2e-3, seed=4,
+                            relay_noise=True),
+                base.assign(M=3.0, tau_t=0.4)]
+        table = pd.concat(rows, ignore_index=True)
+        return table.fillna({"method": "paper", "declare_noise": False, "relay_noise": False,
+                             "noise_w": 0.0, "noise_rocof": 0.0, "seed": 0})
+
+    def run(table: pd.DataFrame) -> dict:
+        out = simulate_batch(p, table, duration=10.0, progress=False)
+        keep = [c for c in out.columns if c not in ("values",)]
+        return _table(out[keep])
+
+    return {
+        "batch_map_corners": lambda: run(corners()),
+        "batch_readings": lambda: run(readings()),
+        "batch_certified": lambda: run(certified()),
+        "batch_redteam_piecewise": lambda: run(
+            piecewise_attack_table(n=6, amplitude=2.0, duration=10.0, seed=7)),
+    }
+
+
+def multiarea_cases() -> dict[str, Callable[[], dict]]:
+    import lfc
+    from lfc import MultiAreaParams, RelaySettings, SafetyFilter, Sinusoid, Step
+    two, three = MultiAreaParams.two_area(), MultiAreaParams.three_area()
+
+    def run(params, **kw) -> dict:
+        return _multi(lfc.simulate_multiarea(params, **kw))
+
+    attack = {0: {"pc": Sinusoid(1.0, 0.5, start=1.0)}}
+    return {
+        "multi_load_agc": lambda: run(two, duration=20.0, loads={0: Step(0.1, start=1.0)}),
+        "multi_paper": lambda: run(two, duration=10.0, attacks=attack,
+                                   filters={0: "paper", 1: "paper"}),
+        "multi_paper_a3": lambda: run(two, duration=10.0, attacks=attack, filters={
+            a: SafetyFilter(two.areas[a], RelaySettings(), alpha=3.0) for a in (0, 1)}),
+        "multi_certified": lambda: run(two, duration=10.0, attacks=attack,
+                                       filters={0: "certified", 1: "certified"}),
+        "multi_ace": lambda: run(two, duration=10.0, attacks={0: {"ace": Step(-2.5, start=1.0)}},
+                                 filters={0: "certified", 1: "certified"}),
+        "multi_three_coordinated": lambda: run(
+            three, duration=10.0, filters={a: "certified" for a in range(3)},
+            attacks={a: {"pc": Sinusoid(1.0, 0.5, start=1.0)} for a in range(3)}),
+        "multi_kalman": lambda: run(two, duration=8.0, attacks=attack, estimator="kalman",
+                                    noise_std=(1e-4, 1e-3), seed=2,
+                                    filters={0: "paper", 1: "certified"}),
+        "multi_stop": lambda: run(two, duration=10.0, attacks=attack, stop_on_trip=True),
+        "multi_wref_noff": lambda: run(two, duration=10.0, feedforward=False,
+                                       attacks={1: {"wref": Step(0.04, start=1.0)}},
+                                       filters={1: "paper"}),
+        "multi_batch": lambda: _table(lfc.simulate_multiarea_batch(two, [
+            {"attacks": attack, "filters": {0: "paper", 1: "paper"}},
+            {"attacks": attack, "filters": {0: "certified", 1: "certified"}},
+            {"loads": {1: Step(0.1, start=1.0)}},
+            {"attacks": {0: {"ace": Step(-2.5, start=1.0)}}, "estimator": "kalman",
+             "noise_std": (1e-4, 1e-3), "seed": 1, "filters": {0: "certified"}}],
+            duration=10.0, jobs=2)),
+    }
+
+
+def testbed_cases() -> dict[str, Callable[[], dict]]:
+    def microgrid() -> dict:
+        from lfc import RelaySettings, SafetyFilter, Sinusoid
+        from lfc.testbed import simulate_testbed
+        from lfc.testbed.fit import design_model
+        design = design_model()
+        return _sim(simulate_testbed(design, duration=3.0, pc_attack=Sinusoid(0.5, 1.0,
+                                                                               start=1.0),
+                                     scc=SafetyFilter(design, RelaySettings(), alpha=3.0)))
+
+    def kundur() -> dict:
+        from lfc import Sinusoid
+        from lfc.testbed import GridCase, grid_design, simulate_grid
+        case = GridCase.kundur()
+        design = grid_design(case)
+        return _multi(simulate_grid(design, duration=2.0, case=case,
+                                    attacks={0: {"pc": Sinusoid(3.0, 0.5, start=0.5)}},
+                                    filters={0: "paper", 1: "paper"}))
+
+    return {"testbed_microgrid": microgrid, "testbed_kundur": kundur}
+
+
+def all_cases() -> dict[str, Callable[[], dict]]:
+    return {**linear_cases(), **batch_cases(), **multiarea_cases(), **testbed_cases()}
+
+
+def compare(name: str, got: dict[str, np.ndarray], stored: dict[str, np.ndarray]
+            ) -> list[str]:
+    """Differences between a rerun and the record of case ``name`` (empty: equal)."""
+    rtol = ANDES_RTOL if name.startswith("testbed") else LINEAR_RTOL
+    problems = []
+    if set(got) != set(stored):
+        problems.append(f"{name}: keys differ: missing {sorted(set(stored) - set(got))}, "
+                        f"new {sorted(set(got) - set(stored))}")
+    for key in sorted(set(got) & set(stored)):
+        a, b = got[key], stored[key]
+        if a.shape != b.shape:
+            problems.append(f"{name}.{key}: shape {a.shape} != recorded {b.shape}")
+        elif b.dtype.kind in "US":
+            if not np.array_equal(a.astype(str), b):
+                problems.append(f"{name}.{key}: {a[:5]} != recorded {b[:5]}")
+        elif not np.allclose(a.astype(float), b, rtol=rtol, atol=ATOL, equal_nan=True):
+            err = np.nanmax(np.abs(a.astype(float) - b))
+            problems.append(f"{name}.{key}: max abs difference {err:.3g}")
+    return problems
+
+
+def load() -> dict[str, dict[str, np.ndarray]]:
+    """The recorded set: ``{case: {key: array}}``."""
+    with np.load(DATA, allow_pickle=False) as data:
+        out: dict[str, dict[str, np.ndarray]] = {}
+        for key in data.files:
+            case, _, rest = key.partition("/")
+            out.setdefault(case, {})[rest] = data[key]
+    return out
+
+
+def record(names: list[str] | None = None) -> None:
+    cases = all_cases()
+    arrays = {}
+    for name, make in cases.items():
+        if names and name not in names:
+            continue
+        print(f"recording {name}", flush=True)
+        arrays.update({f"{name}/{k}": v for k, v in make().items()})
+    DATA.parent.mkdir(exist_ok=True)
+    np.savez_compressed(DATA, **arrays)
+    print(f"wrote {DATA} ({DATA.stat().st_size / 1e6:.1f} MB, {len(arrays)} arrays)")
+
+
+if __name__ == "__main__":
+    record(sys.argv[1:] or None)

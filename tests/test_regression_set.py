@@ -1,0 +1,24 @@
+"""The Grid rebuild's regression set: every recorded run gives the recorded values
+(``tests/regression_set.py``: 1e-12 relative on the linear model, 1e-9 on ANDES)."""
+
+import pytest
+
+import regression_set as rs
+
+RECORDED = rs.load()
+LINEAR = {**rs.linear_cases(), **rs.batch_cases(), **rs.multiarea_cases()}
+
+
+def test_every_case_is_recorded():
+    assert set(RECORDED) == set(rs.all_cases())
+
+
+@pytest.mark.parametrize("name", sorted(LINEAR))
+def test_linear_case_matches_record(name):
+    assert rs.compare(name, LINEAR[name](), RECORDED[name]) == []
+
+
+@pytest.mark.parametrize("name", sorted(rs.testbed_cases()))
+def test_testbed_case_matches_record(name):
+    pytest.importorskip("andes")
+    assert rs.compare(name, rs.testbed_cases()[name](), RECORDED[name]) == []
