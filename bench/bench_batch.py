@@ -2,9 +2,9 @@
 
 Prints scenario-steps per second (1 ms plant steps x scenarios) for
 
-* ``simulate_batch`` with the paper's filter: 10,000 scenarios x 30 s on the
+* ``simulate_many`` with the paper's filter: 10,000 scenarios x 30 s on the
   default process pool (target >= 1e8/s: <= 3 s);
-* ``simulate_batch`` with the certified filter, 2,000 scenarios x 30 s (two
+* ``simulate_many`` with the certified filter, 2,000 scenarios x 30 s (two
   chunks, one per core; target >= 2e7/s);
 * ``simulate`` of one 60 s scenario with the paper's filter (target <= 0.2 s);
 * the same batch on the numpy engine of commit ``REFERENCE`` (the last one before
@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lfc import LFCParams, SafetyFilter, Sinusoid, simulate, simulate_batch
+from lfc import LFCParams, SafetyFilter, Sinusoid, simulate, simulate_many
 
 ROOT = Path(__file__).resolve().parents[1]
 REFERENCE = "a73c376"  # numpy engine (lfc/batch.py's _Batch), before lfc/engine.py
@@ -42,9 +42,9 @@ rng = np.random.default_rng(0)
 table = pd.DataFrame({"waveform": "sinusoid", "channel": "pc",
                       "amplitude": rng.uniform(0.05, 1.5, n), "freq_hz": rng.uniform(0.1, 2.0, n),
                       "start": 1.0, "alpha": rng.choice([3.0, 20.0], n), "Ts": 0.25})
-lfc.simulate_batch(lfc.LFCParams(), table.iloc[:10], duration=30.0, progress=False)
+lfc.simulate_many(lfc.LFCParams(), table.iloc[:10], duration=30.0, progress=False)
 t0 = time.perf_counter()
-lfc.simulate_batch(lfc.LFCParams(), table, duration=30.0, progress=False)
+lfc.simulate_many(lfc.LFCParams(), table, duration=30.0, progress=False)
 print(time.perf_counter() - t0)
 """
 
@@ -59,13 +59,13 @@ def scenarios(n: int, method: str = "paper") -> pd.DataFrame:
 
 
 def batch_rate(n: int, method: str, repeat: int) -> tuple[float, float]:
-    """Median wall time (s) and scenario-steps/s of ``simulate_batch`` on ``n`` rows."""
+    """Median wall time (s) and scenario-steps/s of ``simulate_many`` on ``n`` rows."""
     table = scenarios(n, method)
-    simulate_batch(LFCParams(), table.iloc[:4], duration=DURATION, progress=False)  # compile
+    simulate_many(LFCParams(), table.iloc[:4], duration=DURATION, progress=False)  # compile
     times = []
     for _ in range(repeat):
         t0 = time.perf_counter()
-        simulate_batch(LFCParams(), table, duration=DURATION, progress=False)
+        simulate_many(LFCParams(), table, duration=DURATION, progress=False)
         times.append(time.perf_counter() - t0)
     wall = statistics.median(times)
     return wall, n * DURATION / DT / wall
@@ -135,9 +135,9 @@ def main() -> None:
     sim = simulate_60s(repeat=5)
     ref = reference_rate()
     print(f"{'run':<52}{'wall (s)':>10}{'steps/s':>12}{'ratio':>10}")
-    print(f"{'simulate_batch, paper filter, 10,000 x 30 s':<52}{wall:>10.2f}{paper:>12.3g}"
+    print(f"{'simulate_many, paper filter, 10,000 x 30 s':<52}{wall:>10.2f}{paper:>12.3g}"
           f"{'' if ref is None else f'{paper / ref:>10.1f}'}")
-    print(f"{'simulate_batch, certified filter, 2,000 x 30 s':<52}{cert_wall:>10.2f}{cert:>12.3g}")
+    print(f"{'simulate_many, certified filter, 2,000 x 30 s':<52}{cert_wall:>10.2f}{cert:>12.3g}")
     if ref is not None:
         print(f"{f'numpy engine at {REFERENCE}, paper filter, {REFERENCE_N:,} x 30 s':<52}"
               f"{REFERENCE_N * DURATION / DT / ref:>10.2f}{ref:>12.3g}{1.0:>10.1f}")

@@ -1,11 +1,11 @@
-"""Benchmark: multi-area batches against one ``simulate_multiarea`` call per scenario.
+"""Benchmark: multi-area batches against one ``simulate`` call per scenario.
 
 Prints, from one run on this machine: the median wall time of a batch of
 two-area scenarios (30 s each, 1 ms plant step, a sinusoid or square on both
 areas' commands, the paper's SCC or the certified filter at both areas) with
-``simulate_multiarea_batch`` on 2 threads, its throughput in area-steps per
+``simulate_many`` on 2 threads, its throughput in area-steps per
 second (target >= 1e7 on 2 cores), and the ratio to the reference: the same
-scenarios one by one with ``simulate_multiarea`` (a trace each, and its filters
+scenarios one by one with ``simulate`` (a trace each, and its filters
 built per call, as a user's call does).
 
 Run: python bench/bench_multiarea.py
@@ -39,25 +39,25 @@ def scenarios(n: int) -> list[dict]:
 def main() -> None:
     grid = lfc.MultiAreaParams.two_area()
     batch, one = scenarios(N), scenarios(REFERENCE_N)
-    lfc.simulate_multiarea_batch(grid, batch[:4], duration=1.0)          # compile, build filters
+    lfc.simulate_many(grid, batch[:4], duration=1.0)          # compile, build filters
     times = []
     for _ in range(REPEAT):
         t0 = time.perf_counter()
-        lfc.simulate_multiarea_batch(grid, batch, duration=DURATION, jobs=2)
+        lfc.simulate_many(grid, batch, duration=DURATION, jobs=2)
         times.append(time.perf_counter() - t0)
     t_batch = statistics.median(times) / N
     ref = []
     for _ in range(REPEAT):
         t0 = time.perf_counter()
         for s in one:
-            lfc.simulate_multiarea(grid, duration=DURATION, **s)
+            lfc.simulate(grid, duration=DURATION, **s)
         ref.append(time.perf_counter() - t0)
     t_ref = statistics.median(ref) / REFERENCE_N
     steps = 2 * DURATION / 1e-3
     print(f"two areas, {DURATION:g} s per scenario, 1 ms plant step, median of {REPEAT}")
-    print(f"simulate_multiarea_batch ({N} scenarios, 2 threads): {1e3 * t_batch:.2f} ms per "
+    print(f"simulate_many ({N} scenarios, 2 threads): {1e3 * t_batch:.2f} ms per "
           f"scenario, {steps / t_batch:.3g} area-steps/s (target >= 1e7)")
-    print(f"simulate_multiarea one by one ({REFERENCE_N} scenarios, traced, filters built "
+    print(f"simulate one by one ({REFERENCE_N} scenarios, traced, filters built "
           f"per call): {1e3 * t_ref:.2f} ms per scenario")
     print(f"ratio: the batch is {t_ref / t_batch:.1f}x faster per scenario")
 

@@ -1,4 +1,5 @@
-"""Many scenarios at once: :func:`simulate_batch`.
+"""Many single-area scenarios at once: :func:`simulate_table`, which
+:func:`lfc.simulate_many` runs for an ``LFCParams`` plant.
 
 The engine of :func:`lfc.simulate` (:mod:`lfc.engine`) run over a table of
 scenarios, one row each; the result is that table with the
@@ -50,7 +51,7 @@ READINGS = {"outside_rule": OUTSIDE_RULES, "conflict": CONFLICT_RULES,
 CHIRP_F0 = 0.1  # Hz, where every chirp starts
 PLANT = ("M", "D", "tau_g", "tau_t", "droop")   # optional columns: the row's own plant
 NOISE = ("noise_w", "noise_rocof")             # optional: measurement noise std (pu, pu/s)
-FLAGS = ("declare_noise", "relay_noise")       # optional booleans (simulate_batch)
+FLAGS = ("declare_noise", "relay_noise")       # optional booleans
 FILTER_COLUMNS = ("alpha", "Ts", "method", "uncertainty", "margin", "declare_noise",
                   "trips_per_hour", *NOISE, *READINGS)  # the columns that select a filter
 BATCH_METRICS = ("tripped", "first_trip_relay", "first_trip_t", "max_abs_dw_meas",
@@ -204,14 +205,15 @@ def run_chunk(params: LFCParams, scenarios: pd.DataFrame, duration: float,
                    relays=relays)
     for row in scenarios.to_dict("records"):
         signal = scenario_signal(row, duration)
-        channel = {"pc": "pc_attack", "wref": "wref_attack", "load": "load"}[row["channel"]]
+        channel = row["channel"]
         noise = tuple(float(row.get(c, 0.0)) for c in NOISE)
-        sc.add(plant=_plant(params, row), scc=_filter(params, relays, row),
+        sc.add(plant=_plant(params, row), filters={0: _filter(params, relays, row)},
                estimator="kalman" if any(noise) else None, noise_std=noise,
                seed=int(row.get("seed", 0)), relay_noise=bool(row.get("relay_noise", False)),
-               **({channel: signal} if signal else {}))
+               attacks={0: {channel: signal}} if channel != "load" else None,
+               loads={0: signal} if channel == "load" else None)
     run = sc.run()
-    return metrics_frame(run.metrics, sc.n_ctrl, scenarios.index)
+    return metrics_frame(run.metrics[:, 0], sc.n_ctrl, scenarios.index)
 
 
 def metrics_frame(metrics: np.ndarray, n_ctrl: int, index) -> pd.DataFrame:
@@ -269,7 +271,7 @@ def _filter(params: LFCParams, relays: RelaySettings, row: dict) -> SafetyFilter
     return _BUILT[key]
 
 
-def simulate_batch(params: LFCParams, scenarios: pd.DataFrame, *, duration: float,
+def simulate_table(params: LFCParams, scenarios: pd.DataFrame, *, duration: float,
                    relays: RelaySettings | None = None, dt: float = 1e-3,
                    control_period: float = 0.01, executor: Executor | None = None,
                    chunk_size: int = 1000, out: str | Path | None = None,
@@ -344,7 +346,7 @@ def simulate_batch(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
         else:
             todo.append((i, chunk, path))
     with tqdm(total=len(scenarios), initial=sum(map(len, results.values())), unit="scenario",
-              desc="simulate_batch", disable=not progress) as bar:
+              desc="simulate_many", disable=not progress) as bar:
         for i, metrics in _execute(todo, args, executor):
             results[i] = metrics
             bar.update(len(metrics))
@@ -387,7 +389,7 @@ def _execute(todo: list, args: tuple, executor: Executor | None):
 
 
 class ChunkWarning(UserWarning):
-    """A chunk file of ``simulate_batch(out=...)`` was damaged and is recomputed."""
+    """A chunk file of ``simulate_many(out=...)`` was damaged and is recomputed."""
 
 
 CHUNK_MAGIC = "# lfc-chunk"

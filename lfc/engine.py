@@ -13,7 +13,7 @@ One engine advances N scenarios (one after another, each in registers):
   OF2, UF2 and ROCOF relays (:func:`lfc.relays.relay_sample`) see the
   measured signals.
 
-:func:`lfc.simulate` is N = 1 with a trace; :func:`lfc.simulate_batch` is N
+:func:`lfc.simulate` is N = 1 with a trace; :func:`lfc.simulate_many` is N
 large with metrics only; the ANDES testbed runs :class:`GeneratorSide` (the
 same :func:`generator_period`) against its own plant.  Each scenario has its own
 plant, signals, noise, estimator and filter (indices into small tables), so a
@@ -32,7 +32,8 @@ from lfc.estimation import KalmanFilter, kf_correct, kf_predict
 from lfc.filters import SafetyFilter
 from lfc.filters.base import ACTIVE, ALARM_BITS, MEMORY, OUTSIDE
 from lfc.filters.dispatch import decide
-from lfc.model import LFCParams, discretize
+from lfc.model import LFCParams
+from lfc.multiarea import N_AREA_STATES, MultiAreaParams, as_grid, discretize_grid
 from lfc.relays import RelaySettings, relay_sample
 from lfc.signals import GRID, N_PARAMS, NONE, SAMPLES, STEP, Signal, value_at
 
@@ -130,110 +131,201 @@ def scenario_tables(e_i: int, f_i: int, ka: np.ndarray, kb: np.ndarray, kc: np.n
     return ka_i, kb_i, kc_i, kg_i, method, fd
 
 
-@kernel
-def _run(n_steps: int, ratio: int, dt: float, k_i_period: float, ad: np.ndarray,
-         bu: np.ndarray, bl: np.ndarray, index: np.ndarray, kinds: np.ndarray,
-         params: np.ndarray, offsets: np.ndarray, st: np.ndarray, sv: np.ndarray,
-         noise: np.ndarray, ka: np.ndarray, kb: np.ndarray, kc: np.ndarray, kg: np.ndarray,
-         kdim: np.ndarray, methods: np.ndarray, fdata: np.ndarray, foff: np.ndarray,
-         limits: np.ndarray, delays: np.ndarray, relay_noise: np.ndarray, stop_on_trip: bool,
-         metrics: np.ndarray,
-         trace_x: np.ndarray, trace_ctrl: np.ndarray, trace_trips: np.ndarray,
-         ends: np.ndarray, work: np.ndarray) -> None:
-    """Advance every scenario from equilibrium for ``n_steps`` plant steps.
+@inline
+def _load(kind: int, value: float, on: float, off: float, kinds: np.ndarray,
+          params: np.ndarray, offsets: np.ndarray, st: np.ndarray, sv: np.ndarray, t: float,
+          index: int) -> float:
+    """The load (pu) of one area at plant step ``index`` (time ``t``, s), of kind
+    ``kind``; a step (``value`` pu from ``on`` to ``off`` s, the common case of
+    every map) is evaluated here directly."""
+    if kind == STEP:
+        return value if on <= t < off else 0.0
+    if kind == NONE:
+        return 0.0
+    return _signal(LOAD, kinds, params, offsets, st, sv, t, index)
 
-    ``index`` (N, 5): each scenario's plant, Kalman filter (-1: none), noise
-    table row (-1: none), filter (-1: none) and load feed-forward (0/1);
-    ``relay_noise`` (N, 3) the std of the relays' own measurement noise on
-    ``(dw_meas, rocof_meas)`` (pu, pu/s; drawn at every plant step) and its seed.
-    Writes ``metrics`` (N, len(METRICS)) and, when the trace arrays have rows
-    (N = 1), every state, control sample and trip; ``ends`` the last sample kept.
-    ``work`` (8, N_KF) is scratch space: the kernel allocates nothing.
+
+@inline
+def _watch(met: np.ndarray, t: float, dw: float, rc: float, noisy: bool, r0: float, r1: float,
+           limits: np.ndarray, delays: np.ndarray, start: np.ndarray, due: np.ndarray,
+           peak_dw: float, peak_rc: float) -> tuple:
+    """One area's relays at plant sample time ``t`` (s): the measured ``dw`` (pu)
+    and ROCOF (pu/s), read through white noise of std ``r0``, ``r1`` if ``noisy``.
+    Records the area's first trip in its metrics ``met`` and returns ``(trip
+    bits, peak |dw|, peak |ROCOF|)`` updated from ``peak_dw``, ``peak_rc``."""
+    if noisy:
+        n0 = np.random.standard_normal()
+        n1 = np.random.standard_normal()
+        trips = relay_sample(t, dw + r0 * n0, rc + r1 * n1, limits, delays, start, due)
+    else:
+        trips = relay_sample(t, dw, rc, limits, delays, start, due)
+    if trips and math.isnan(met[0]):
+        met[0], met[1] = t, float(_lowest_bit(trips))
+    return trips, max(peak_dw, abs(dw)), max(peak_rc, abs(rc))
+
+
+@kernel
+def _run(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarray,
+         bl: np.ndarray, inc: np.ndarray, k_freq: np.ndarray, k_tie: np.ndarray,
+         plant_of: np.ndarray, index: np.ndarray, kinds: np.ndarray, params: np.ndarray,
+         offsets: np.ndarray, st: np.ndarray, sv: np.ndarray, noise: np.ndarray,
+         ka: np.ndarray, kb: np.ndarray, kc: np.ndarray, kg: np.ndarray, kdim: np.ndarray,
+         methods: np.ndarray, fdata: np.ndarray, foff: np.ndarray, limits: np.ndarray,
+         delays: np.ndarray, relay_noise: np.ndarray, stop_on_trip: bool,
+         metrics: np.ndarray, trace_x: np.ndarray, trace_ctrl: np.ndarray,
+         trace_trips: np.ndarray, ends: np.ndarray, x: np.ndarray, xn: np.ndarray,
+         u: np.ndarray, pl: np.ndarray, x_hat: np.ndarray, mem: np.ndarray,
+         gstate: np.ndarray, kstate: np.ndarray, start: np.ndarray, due: np.ndarray) -> None:
+    """Advance every scenario of one grid from equilibrium for ``n_steps`` plant steps.
+
+    The grid has ``n_a = inc.shape[0]`` areas and ``inc.shape[1]`` tie-lines
+    (:mod:`lfc.multiarea`; one area and no line is the single-area model).
+    ``ad``, ``bu``, ``bl`` (plants, n_s, ...) are the discretized plants and
+    ``plant_of`` (N,) each scenario's; ``k_freq``, ``k_tie`` (n_a,) the AGC
+    gains times the control period.  ``index`` (N, n_a, 4): each area's Kalman
+    filter (-1: none), noise row (-1: none), filter (-1: none) and disturbance
+    feed-forward (0/1); ``relay_noise`` (N, n_a, 3) the std of the relays' own
+    measurement noise on ``(dw_meas, rocof_meas)`` (pu, pu/s; drawn at every
+    plant step) and, in ``[i, 0, 2]``, the scenario's seed for it.  Writes
+    ``metrics`` (N, n_a, len(METRICS)) and, when the trace arrays have rows (N =
+    1), every state (samples, n_s), control sample (n_ctrl, n_a, N_CTRL) and trip
+    (samples, n_a); ``ends`` the last sample kept.  The arrays after ``ends``
+    are scratch space: the kernel allocates nothing.
+
+    One area of five states (the single-area model) takes a path that keeps the
+    state in registers for a control period; it computes the same sums in the
+    same order as the general path.
     """
     n_ctrl = -(-n_steps // ratio)
-    empty = work[0, :0]
-    x, x_hat, mem, gstate = work[0, :5], work[1, :5], work[2, :MEMORY], work[3, :1]
-    kstate, start, due = work[4:6], work[6, :3], work[7, :3]
+    n_a, n_l, n_s = inc.shape[0], inc.shape[1], ad.shape[1]
+    m = N_AREA_STATES
+    single = n_a == 1 and n_s == N_AREA_STATES
+    traced = trace_x.shape[0] > 0
+    empty = x_hat[:0]
+    x_0, ks_0, mem_0, gs_0, ctrl_0 = x[:m], kstate[0], mem[0], gstate[0], trace_ctrl[:, 0, :]
     for i in range(index.shape[0]):
-        p_i, e_i, q_i, f_i, ff = index[i, 0], index[i, 1], index[i, 2], index[i, 3], index[i, 4]
+        p_i = plant_of[i]
         A, Bu, Bl = ad[p_i], bu[p_i], bl[p_i]
-        kinds_i, params_i, offsets_i = kinds[i], params[i], offsets[i]
-        ka_i, kb_i, kc_i, kg_i, method, fd = scenario_tables(e_i, f_i, ka, kb, kc, kg, kdim,
-                                                             methods, fdata, foff, empty)
-        load_kind, load_value = kinds_i[LOAD], params_i[LOAD, 0]
-        load_start, load_stop = params_i[LOAD, 2], params_i[LOAD, 3]
         x[:], mem[:], gstate[:], kstate[:], due[:] = 0.0, 0.0, 0.0, 0.0, 0.0
         start[:] = np.nan
-        first_t, first_r = math.nan, -1.0
-        max_dw = max_rc = max_mod = sum_mod = 0.0
-        active = alarms = outside = 0
-        end = n_steps
-        stopped = False
-        r0, r1 = relay_noise[i, 0], relay_noise[i, 1]
-        noisy_relays = r0 > 0.0 or r1 > 0.0
-        if noisy_relays:
-            np.random.seed(int(relay_noise[i, 2]))
-        trips = relay_sample(0.0, 0.0, 0.0, limits, delays, start, due)   # sample 0 (x = 0)
-        if trace_x.shape[0]:
-            trace_trips[0] = trips
+        met = metrics[i]
+        met[:] = 0.0
+        met[:, 0], met[:, 1] = np.nan, -1.0
+        end, stopped = n_steps, False
+        rn = relay_noise[i]
+        for a in range(n_a):
+            if rn[a, 0] > 0.0 or rn[a, 1] > 0.0:
+                np.random.seed(int(rn[0, 2]))
+                break
+        for a in range(n_a):
+            trips = relay_sample(0.0, 0.0, 0.0, limits, delays, start[a], due[a])
+            if traced:
+                trace_trips[0, a] = trips
+        # area 0's tables, looked up once per scenario (the other areas' every period)
+        kinds0, params0, offsets0 = kinds[i, 0], params[i, 0], offsets[i, 0]
+        ka0, kb0, kc0, kg0, method0, fd0 = scenario_tables(
+            index[i, 0, 0], index[i, 0, 2], ka, kb, kc, kg, kdim, methods, fdata, foff, empty)
         for j in range(n_ctrl):
             k0 = j * ratio
             t = k0 * dt
-            p_true = _signal(LOAD, kinds_i, params_i, offsets_i, st, sv, t, k0)
-            u, flags, mod = generator_period(
-                j, t, x, p_true, noise[q_i, j, 0] if q_i >= 0 else 0.0,
-                noise[q_i, j, 1] if q_i >= 0 else 0.0, kinds_i, params_i, offsets_i, st, sv,
-                k_i_period, e_i, ka_i, kb_i, kc_i, kg_i, kstate, ff == 1, method, fd, mem,
-                gstate, x_hat, trace_ctrl, 0.0, 0.0)
-            active += (flags & ACTIVE) != 0
-            alarms += (flags & ALARM_BITS) != 0
-            outside += (flags & OUTSIDE) != 0
-            max_mod = max(max_mod, mod)
-            sum_mod += mod
-            x0, x1, x2, x3, x4 = x[0], x[1], x[2], x[3], x[4]
-            for k in range(k0, min(k0 + ratio, n_steps)):
-                if load_kind == STEP:
-                    pl = load_value if load_start <= k * dt < load_stop else 0.0
-                elif load_kind == NONE:
-                    pl = 0.0
+            for a in range(n_a):
+                e_i, q_i, f_i, ff = index[i, a, 0], index[i, a, 1], index[i, a, 2], \
+                    index[i, a, 3]
+                if a == 0:
+                    kinds_a, params_a, offsets_a = kinds0, params0, offsets0
+                    ka_a, kb_a, kc_a, kg_a, method, fd = ka0, kb0, kc0, kg0, method0, fd0
+                    x_a, ks_a, mem_a, gs_a, ctrl_a = x_0, ks_0, mem_0, gs_0, ctrl_0
                 else:
-                    pl = _signal(LOAD, kinds_i, params_i, offsets_i, st, sv, k * dt, k)
-                n0 = A[0, 0] * x0 + A[0, 1] * x1 + A[0, 2] * x2 + A[0, 3] * x3 + A[0, 4] * x4 \
-                    + Bu[0] * u + Bl[0] * pl
-                n1 = A[1, 0] * x0 + A[1, 1] * x1 + A[1, 2] * x2 + A[1, 3] * x3 + A[1, 4] * x4 \
-                    + Bu[1] * u + Bl[1] * pl
-                n2 = A[2, 0] * x0 + A[2, 1] * x1 + A[2, 2] * x2 + A[2, 3] * x3 + A[2, 4] * x4 \
-                    + Bu[2] * u + Bl[2] * pl
-                n3 = A[3, 0] * x0 + A[3, 1] * x1 + A[3, 2] * x2 + A[3, 3] * x3 + A[3, 4] * x4 \
-                    + Bu[3] * u + Bl[3] * pl
-                n4 = A[4, 0] * x0 + A[4, 1] * x1 + A[4, 2] * x2 + A[4, 3] * x3 + A[4, 4] * x4 \
-                    + Bu[4] * u + Bl[4] * pl
-                x0, x1, x2, x3, x4 = n0, n1, n2, n3, n4
-                if noisy_relays:
-                    trips = relay_sample((k + 1) * dt, x3 + r0 * np.random.standard_normal(),
-                                         x4 + r1 * np.random.standard_normal(), limits, delays,
-                                         start, due)
-                else:
-                    trips = relay_sample((k + 1) * dt, x3, x4, limits, delays, start, due)
-                if trace_x.shape[0]:
-                    trace_x[k + 1, 0], trace_x[k + 1, 1], trace_x[k + 1, 2] = x0, x1, x2
-                    trace_x[k + 1, 3], trace_x[k + 1, 4] = x3, x4
-                    trace_trips[k + 1] = trips
-                max_dw = max(max_dw, abs(x3))
-                max_rc = max(max_rc, abs(x4))
-                if trips:
-                    if math.isnan(first_t):
-                        first_t, first_r = (k + 1) * dt, float(_lowest_bit(trips))
-                    if stop_on_trip:
+                    kinds_a, params_a, offsets_a = kinds[i, a], params[i, a], offsets[i, a]
+                    ka_a, kb_a, kc_a, kg_a, method, fd = scenario_tables(
+                        e_i, f_i, ka, kb, kc, kg, kdim, methods, fdata, foff, empty)
+                    x_a, ks_a, mem_a, gs_a = x[m * a:m * (a + 1)], kstate[a], mem[a], gstate[a]
+                    ctrl_a = trace_ctrl[:, a, :]
+                tie = 0.0
+                for line in range(n_l):
+                    tie += inc[a, line] * x[m * n_a + line]
+                load = _signal(LOAD, kinds_a, params_a, offsets_a, st, sv, t, k0)
+                ace = _signal(ACE, kinds_a, params_a, offsets_a, st, sv, t, j)
+                ua, flags, mod = generator_period(
+                    j, t, x_a, load + tie, noise[q_i, j, 0] if q_i >= 0 else 0.0,
+                    noise[q_i, j, 1] if q_i >= 0 else 0.0, kinds_a, params_a, offsets_a, st,
+                    sv, k_freq[a], e_i, ka_a, kb_a, kc_a, kg_a, ks_a, ff == 1, method, fd,
+                    mem_a, gs_a, x_hat, ctrl_a, tie + ace, k_tie[a])
+                u[a] = ua
+                met[a, 4] += (flags & ACTIVE) != 0
+                met[a, 5] += (flags & ALARM_BITS) != 0
+                met[a, 8] += (flags & OUTSIDE) != 0
+                met[a, 6] = max(met[a, 6], mod)
+                met[a, 7] += mod
+            if single:       # one area of five states: the state in registers
+                ua = u[0]
+                x0, x1, x2, x3, x4 = x[0], x[1], x[2], x[3], x[4]
+                peak_dw, peak_rc = met[0, 2], met[0, 3]
+                r0, r1 = rn[0, 0], rn[0, 1]
+                noisy = r0 > 0.0 or r1 > 0.0
+                met0, start0, due0 = met[0], start[0], due[0]
+                kind, value, on, off = kinds0[LOAD], params0[LOAD, 0], params0[LOAD, 2], \
+                    params0[LOAD, 3]
+                for k in range(k0, min(k0 + ratio, n_steps)):
+                    p0 = _load(kind, value, on, off, kinds0, params0, offsets0, st, sv, k * dt, k)
+                    n0 = A[0, 0] * x0 + A[0, 1] * x1 + A[0, 2] * x2 + A[0, 3] * x3 \
+                        + A[0, 4] * x4 + Bu[0, 0] * ua + Bl[0, 0] * p0
+                    n1 = A[1, 0] * x0 + A[1, 1] * x1 + A[1, 2] * x2 + A[1, 3] * x3 \
+                        + A[1, 4] * x4 + Bu[1, 0] * ua + Bl[1, 0] * p0
+                    n2 = A[2, 0] * x0 + A[2, 1] * x1 + A[2, 2] * x2 + A[2, 3] * x3 \
+                        + A[2, 4] * x4 + Bu[2, 0] * ua + Bl[2, 0] * p0
+                    n3 = A[3, 0] * x0 + A[3, 1] * x1 + A[3, 2] * x2 + A[3, 3] * x3 \
+                        + A[3, 4] * x4 + Bu[3, 0] * ua + Bl[3, 0] * p0
+                    n4 = A[4, 0] * x0 + A[4, 1] * x1 + A[4, 2] * x2 + A[4, 3] * x3 \
+                        + A[4, 4] * x4 + Bu[4, 0] * ua + Bl[4, 0] * p0
+                    x0, x1, x2, x3, x4 = n0, n1, n2, n3, n4
+                    trips, peak_dw, peak_rc = _watch(met0, (k + 1) * dt, x3, x4, noisy, r0, r1,
+                                                     limits, delays, start0, due0, peak_dw,
+                                                     peak_rc)
+                    if traced:
+                        trace_x[k + 1, 0], trace_x[k + 1, 1], trace_x[k + 1, 2] = x0, x1, x2
+                        trace_x[k + 1, 3], trace_x[k + 1, 4] = x3, x4
+                        trace_trips[k + 1, 0] = trips
+                    if trips and stop_on_trip:
                         end, stopped = k + 1, True
                         break
-            x[0], x[1], x[2], x[3], x[4] = x0, x1, x2, x3, x4
+                x[0], x[1], x[2], x[3], x[4] = x0, x1, x2, x3, x4
+                met[0, 2], met[0, 3] = peak_dw, peak_rc
+            else:
+                for k in range(k0, min(k0 + ratio, n_steps)):
+                    for a in range(n_a):
+                        pa = params[i, a]
+                        pl[a] = _load(kinds[i, a, LOAD], pa[LOAD, 0], pa[LOAD, 2], pa[LOAD, 3],
+                                      kinds[i, a], pa, offsets[i, a], st, sv, k * dt, k)
+                    for r in range(n_s):
+                        s = 0.0
+                        for c in range(n_s):
+                            s += A[r, c] * x[c]
+                        for a in range(n_a):
+                            s += Bu[r, a] * u[a]
+                        for a in range(n_a):
+                            s += Bl[r, a] * pl[a]
+                        xn[r] = s
+                    for r in range(n_s):
+                        x[r] = xn[r]
+                        if traced:
+                            trace_x[k + 1, r] = xn[r]
+                    for a in range(n_a):
+                        trips, met[a, 2], met[a, 3] = _watch(
+                            met[a], (k + 1) * dt, x[m * a + 3], x[m * a + 4],
+                            rn[a, 0] > 0.0 or rn[a, 1] > 0.0, rn[a, 0], rn[a, 1], limits,
+                            delays, start[a], due[a], met[a, 2], met[a, 3])
+                        if traced:
+                            trace_trips[k + 1, a] = trips
+                        if trips and stop_on_trip:
+                            stopped = True
+                    if stopped:
+                        end = k + 1
+                        break
             if stopped:
                 break
-        m = metrics[i]
-        m[0], m[1], m[2], m[3] = first_t, first_r, max_dw, max_rc
-        m[4], m[5], m[6], m[7] = active, alarms, max_mod, sum_mod
-        m[8], m[9] = outside, abs(x[3])
+        for a in range(n_a):
+            met[a, 9] = abs(x[m * a + 3])
         ends[i] = end
 
 
@@ -346,10 +438,11 @@ class _Table:
 
 @dataclass
 class Run:
-    """What :meth:`Scenarios.run` returns: per-scenario ``metrics`` (N, len(METRICS))
-    and ``ends`` (last plant sample kept), and for a traced run (N = 1) every
-    state ``x`` (samples, 5), control sample ``ctrl`` (periods, N_CTRL) and
-    relay trip bits ``trips`` (samples,)."""
+    """What :meth:`Scenarios.run` returns: per-scenario and area ``metrics`` (N,
+    n_areas, len(METRICS)) and ``ends`` (N,: last plant sample kept), and for a
+    traced run (N = 1) every state ``x`` (samples, n_states), control sample
+    ``ctrl`` (periods, n_areas, N_CTRL) and relay trip bits ``trips`` (samples,
+    n_areas)."""
 
     metrics: np.ndarray
     ends: np.ndarray
@@ -358,89 +451,149 @@ class Run:
     trips: np.ndarray
 
 
+CHANNELS = ("pc", "wref", "ace")   # what an attacker may corrupt in an area
+
+
+def check_area_keys(mapping: dict | None, n_areas: int, name: str) -> dict:
+    """``mapping`` (None: empty) with every key an area index in ``[0, n_areas)``."""
+    mapping = {} if mapping is None else mapping
+    if not isinstance(mapping, dict):
+        raise ValueError(f"{name} must be a dict {{area: ...}}, got {mapping!r}")
+    for key in mapping:
+        if not (isinstance(key, (int, np.integer)) and 0 <= key < n_areas):
+            raise ValueError(f"{name} has key {key!r}; areas are 0 to {n_areas - 1}")
+    return mapping
+
+
+def check_attacks(attacks: dict | None, n_areas: int) -> dict:
+    """``attacks`` (None: empty) as :func:`check_area_keys` checks it, each value
+    a dict whose keys are among ``CHANNELS``."""
+    attacks = check_area_keys(attacks, n_areas, "attacks")
+    for a, channels in attacks.items():
+        if not isinstance(channels, dict) or set(channels) - set(CHANNELS):
+            raise ValueError(f"attacks[{a}] must be a dict with keys among {CHANNELS}, "
+                             f"got {channels!r}")
+    return attacks
+
+
 class Scenarios:
-    """Scenarios for the engine: add them one by one, then :meth:`run` them all.
+    """Scenarios of one grid for the engine: add them one by one, then :meth:`run`.
 
     Parameters
     ----------
-    design : LFCParams
-        The design model: the local controller's gain ``k_i`` and the model of a
-        ``"kalman"`` estimator (filters carry their own).
+    design : LFCParams or MultiAreaParams
+        The design model: a single area (a grid of one area, no tie-line) or an
+        interconnected grid.  It gives the AGC (for one area: the local integral
+        controller, gain ``k_i``), the model of each area's ``"kalman"``
+        estimator (filters carry their own) and the plant of scenarios added
+        without one.
     duration, dt, control_period : float
         Simulated time, plant step and controller period (s); checked by the caller.
     relays : RelaySettings
+        The same settings in every area.
     """
 
-    def __init__(self, design: LFCParams, *, duration: float, dt: float, control_period: float,
-                 relays: RelaySettings) -> None:
+    def __init__(self, design: LFCParams | MultiAreaParams, *, duration: float, dt: float,
+                 control_period: float, relays: RelaySettings) -> None:
         self.design, self.dt, self.relays = design, float(dt), relays
+        self.grid = as_grid(design)
         self.ratio = int(round(control_period / dt))
         self.n_steps = int(round(duration / dt))
         self.n_ctrl = -(-self.n_steps // self.ratio)
         self.period = self.ratio * self.dt
         self.t = np.arange(self.n_steps + 1) * self.dt
-        self.tc = np.arange(self.n_ctrl) * self.ratio * self.dt
+        self.tc = np.arange(self.n_ctrl) * self.period
         self._plants, self._kf, self._filters = _Table(), _Table(), _Table()
-        self._rows: list[tuple] = []
+        self._plant_of: list[int] = []
+        self._rows: list[list[tuple]] = []
         self._noise: list[np.ndarray] = []
-        self._relay_noise: list[tuple] = []
+        self._relay_noise: list[list[tuple]] = []
         self._sig: list[tuple] = []
         self._st: list[np.ndarray] = []
         self._sv: list[np.ndarray] = []
         self._n_samples = 0
 
-    def add(self, *, plant: LFCParams | None = None, pc_attack=None, wref_attack=None,
-            load=None, scc: SafetyFilter | None = None, estimator=None,
+    def add(self, *, plant: LFCParams | MultiAreaParams | None = None,
+            attacks: dict | None = None, loads: dict | None = None,
+            filters: dict | None = None, estimator=None,
             noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0,
-            load_feedforward: bool = False, relay_noise: bool = False) -> int:
-        """One scenario (arguments as in :func:`lfc.simulate`; ``plant`` defaults
-        to the design model).  Returns its row number."""
-        plant = plant or self.design
-        p_i = self._plants.index(plant, lambda: discretize(plant, self.dt))
-        kf = make_estimator(estimator, self.design, self.period, noise_std)
-        e_i = -1 if kf is None else self._kf.index(id(kf) if not isinstance(estimator, str)
-                                                   else ("kalman", tuple(noise_std)),
-                                                   lambda: kf)
+            feedforward: bool = False, relay_noise: bool = False) -> int:
+        """One scenario; returns its row number.
+
+        ``attacks`` (``{area: {"pc" | "wref" | "ace": signal}}``), ``loads``
+        (``{area: signal}``), ``filters`` (``{area: SafetyFilter}``, built),
+        ``estimator``, ``noise_std``, ``seed`` (area ``a > 0`` draws from ``(seed,
+        a)``), ``feedforward`` (the filter is given the area's net disturbance)
+        and ``relay_noise`` as in :func:`lfc.simulate` (a grid) and
+        :func:`lfc.simulate`; ``plant`` (default the design model) is the grid
+        the scenario runs on, with the design's areas and tie-lines.
+        """
+        grid = self.grid
+        n = grid.n_areas
+        plant = grid if plant is None else as_grid(plant)
+        if plant.n_areas != n or len(plant.tie) != len(grid.tie):
+            raise ValueError(f"plant must have the design's {n} area(s) and {len(grid.tie)} "
+                             f"tie-line(s), got {plant!r}")
+        p_i = self._plants.index(plant, lambda: discretize_grid(plant, self.dt))
+        attacks = check_attacks(attacks, n)
+        loads = check_area_keys(loads, n, "loads")
+        filters = check_area_keys(filters, n, "filters")
         noisy = check_noise(noise_std)
         if relay_noise and not noisy:
             raise ValueError("relay_noise=True needs noise_std > 0 (the relays' measurement "
                              "noise)")
-        if noisy:
-            self._noise.append(make_noise(noise_std, self.n_ctrl, seed))
-        f_i = -1 if scc is None else self._filters.index(id(scc), lambda: scc)
-        kinds, params, offsets, st, sv = scenario_signals(pc_attack, wref_attack, load, self.tc,
-                                                          self.t)
-        self._sig.append((kinds, params, offsets + np.array([self._n_samples, 0])))
-        self._st.append(st)
-        self._sv.append(sv)
-        self._n_samples += len(st)
-        self._rows.append((p_i, e_i, len(self._noise) - 1 if noisy else -1, f_i,
-                           int(load_feedforward)))
-        self._relay_noise.append((*(noise_std if relay_noise else (0.0, 0.0)), seed))
+        row = []
+        for a, area in enumerate(grid.areas):
+            channels = attacks.get(a, {})
+            scc = filters.get(a)
+            if scc is not None and not isinstance(scc, SafetyFilter):
+                raise ValueError(f"filters[{a}] must be a SafetyFilter or None, got {scc!r}")
+            kf = make_estimator(estimator, area, self.period, noise_std)
+            e_i = -1 if kf is None else self._kf.index(
+                id(kf) if not isinstance(estimator, str) else (a, tuple(noise_std)), lambda: kf)
+            if noisy:
+                self._noise.append(make_noise(noise_std, self.n_ctrl, seed if a == 0
+                                              else (seed, a)))
+            f_i = -1 if scc is None else self._filters.index(id(scc), lambda: scc)
+            kinds, params, offsets, st, sv = scenario_signals(
+                channels.get("pc"), channels.get("wref"), loads.get(a), self.tc, self.t,
+                channels.get("ace"))
+            self._sig.append((kinds, params, offsets + np.array([self._n_samples, 0])))
+            self._st.append(st)
+            self._sv.append(sv)
+            self._n_samples += len(st)
+            row.append((e_i, len(self._noise) - 1 if noisy else -1, f_i, int(feedforward)))
+        self._rows.append(row)
+        self._plant_of.append(p_i)
+        self._relay_noise.append([(*(noise_std if relay_noise else (0.0, 0.0)), seed)] * n)
         return len(self._rows) - 1
 
     def run(self, *, trace: bool = False, stop_on_trip: bool = False) -> Run:
         """Run every scenario added; ``trace`` keeps everything (one scenario only)."""
-        n = len(self._rows)
-        kinds, params, offsets, st, sv = signal_tables(self._sig, self._st, self._sv, (n,))
+        grid, n = self.grid, len(self._rows)
+        n_a, n_s = grid.n_areas, grid.n_states
+        kinds, params, offsets, st, sv = signal_tables(self._sig, self._st, self._sv, (n, n_a))
         plants = self._plants.items
-        ad = np.array([a for a, _ in plants])
-        bu = np.ascontiguousarray(np.array([b[:, 0] for _, b in plants]))
-        bl = np.ascontiguousarray(np.array([b[:, 1] for _, b in plants]))
+        ad = np.array([p[0] for p in plants])
+        bu, bl = np.array([p[1] for p in plants]), np.array([p[2] for p in plants])
+        k_freq, k_tie = grid.agc_gains()
         ka, kb, kc, kg, kdim = _kalman_tables(self._kf.items)
         methods, fdata, foff = filter_tables(self._filters.items)
         noise = np.array(self._noise) if self._noise else np.zeros((1, self.n_ctrl, 2))
         limits, delays = self.relays.arrays()
-        metrics = np.zeros((n, len(METRICS)))
+        metrics = np.zeros((n, n_a, len(METRICS)))
         ends = np.zeros(n, np.int64)
         rows = (self.n_steps + 1) if trace else 0
-        tx, tt = np.zeros((rows, 5)), np.zeros(rows, np.int64)
-        tc = np.full((self.n_ctrl if trace else 0, N_CTRL), np.nan)
-        _run(self.n_steps, self.ratio, self.dt, self.design.k_i * self.period, ad, bu, bl,
-             np.array(self._rows, np.int64).reshape(n, 5), kinds, params, offsets, st, sv,
-             noise, ka, kb, kc, kg, kdim, methods, fdata, foff, limits, delays,
-             np.array(self._relay_noise, float).reshape(n, 3), stop_on_trip, metrics, tx, tc,
-             tt, ends, np.zeros((8, N_KF)))
+        tx, tt = np.zeros((rows, n_s)), np.zeros((rows, n_a), np.int64)
+        tc = np.full((self.n_ctrl if trace else 0, n_a, N_CTRL), np.nan)
+        _run(self.n_steps, self.ratio, self.dt, ad, bu, bl, grid.incidence(),
+             k_freq * self.period, k_tie * self.period, np.array(self._plant_of, np.int64),
+             np.array(self._rows, np.int64).reshape(n, n_a, 4), kinds, params, offsets, st,
+             sv, noise, ka, kb, kc, kg, kdim, methods, fdata, foff, limits, delays,
+             np.array(self._relay_noise, float).reshape(n, n_a, 3), stop_on_trip, metrics,
+             tx, tc, tt, ends, np.zeros(n_s), np.zeros(n_s), np.zeros(n_a), np.zeros(n_a),
+             np.zeros(N_AREA_STATES), np.zeros((n_a, MEMORY)), np.zeros((n_a, 1)),
+             np.zeros((n_a, 2, N_KF)), np.zeros((n_a, 3)), np.zeros((n_a, 3)))
         return Run(metrics, ends, tx, tc, tt)
 
 

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lfc.model import STATES, LFCParams, lfc_matrices, zoh
+from lfc.model import STATES, LFCParams, discretize, lfc_matrices, zoh
 
 N_AREA_STATES = len(STATES)
 SAADAT_T = 2.0   # pu: Saadat (1999), Examples 12.5-12.7, "synchronizing power coefficient"
@@ -183,11 +183,31 @@ def multiarea_matrices(params: MultiAreaParams) -> tuple[np.ndarray, np.ndarray]
     return A, B
 
 
-def discretize_multiarea(params: MultiAreaParams, dt: float
-                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def as_grid(params: LFCParams | MultiAreaParams) -> MultiAreaParams:
+    """``params`` as a grid: a single area (:class:`LFCParams`) is a grid of one
+    area with no tie-line, whose AGC is exactly its local integral controller."""
+    if isinstance(params, MultiAreaParams):
+        return params
+    if isinstance(params, LFCParams):
+        return MultiAreaParams(areas=(params,))
+    raise ValueError(f"params must be an LFCParams or a MultiAreaParams, got "
+                     f"{type(params).__name__}")
+
+
+def discretize_grid(params: MultiAreaParams, dt: float
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Zero-order hold of :func:`multiarea_matrices` at ``dt`` (s): ``(Ad, Bu, Bl)``
-    with ``Bu`` the commands' and ``Bl`` the loads' columns."""
+    with ``Bu`` the commands' and ``Bl`` the loads' columns (one per area).
+
+    Raises ``ValueError`` naming the parameter if the discretization is not
+    finite (:func:`lfc.model.discretize`)."""
     A, B = multiarea_matrices(params)
-    Ad, Bd = zoh(A, B, dt)
+    with np.errstate(over="ignore", invalid="ignore"):   # checked just below
+        Ad, Bd = zoh(A, B, dt)
+    if not (np.all(np.isfinite(Ad)) and np.all(np.isfinite(Bd))):
+        for area in params.areas:
+            discretize(area, dt)           # raises, naming the parameter
+        raise ValueError(f"the grid is too fast to simulate at a {dt} s step (its "
+                         f"discretization is not finite); use physical tie-line coefficients")
     n = params.n_areas
     return Ad, np.ascontiguousarray(Bd[:, :n]), np.ascontiguousarray(Bd[:, n:])

@@ -5,7 +5,8 @@ local controller, the network command (with any attack) and the filter run
 every ``control_period`` and hold their command in between.  Relays watch the
 measured signals at every plant step.  Trips are recorded and the run goes on
 (as in the paper, "to show the SCC's continuity") unless ``stop_on_trip``.
-:func:`simulate` is the engine (:mod:`lfc.engine`) with one scenario and a trace.
+:func:`simulate_area` is the engine (:mod:`lfc.engine`) with one scenario and a trace;
+:func:`lfc.simulate` runs it for an ``LFCParams`` plant.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from lfc.model import STATES, LFCParams
 from lfc.relays import RELAY_NAMES, RelaySettings
 from lfc.signals import Signal
 
-__all__ = ["ALARM_COLUMNS", "METRIC_KEYS", "SimResult", "check_timing", "simulate"]
+__all__ = ["ALARM_COLUMNS", "METRIC_KEYS", "SimResult", "check_timing", "simulate_area"]
 METRIC_KEYS = ("tripped", "first_trip", "max_abs_dw_meas", "max_abs_rocof_meas",
                "scc_active_fraction", "max_abs_modification", "alarms")
 ALARM_COLUMNS = ("t", "u_ref", "u", "binding", "h_freq", "h_rocof", "margin_freq",
@@ -107,7 +108,7 @@ def check_timing(duration: float, dt: float, control_period: float) -> int:
     return ratio
 
 
-def simulate(params: LFCParams, *, duration: float, pc_attack: Signal | None = None,
+def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | None = None,
              wref_attack: Signal | None = None, load: Signal | None = None,
              scc: SafetyFilter | None = None, relays: RelaySettings | None = None,
              estimator=None, noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0,
@@ -164,9 +165,9 @@ def simulate(params: LFCParams, *, duration: float, pc_attack: Signal | None = N
     relays = relays if relays is not None else RelaySettings()
     sc = Scenarios(params, duration=duration, dt=dt, control_period=control_period,
                    relays=relays)
-    sc.add(pc_attack=pc_attack, wref_attack=wref_attack, load=load, scc=scc,
-           estimator=estimator, noise_std=noise_std, seed=seed,
-           load_feedforward=load_feedforward, relay_noise=relay_noise)
+    sc.add(attacks={0: {"pc": pc_attack, "wref": wref_attack}}, loads={0: load},
+           filters={0: scc}, estimator=estimator, noise_std=noise_std, seed=seed,
+           feedforward=load_feedforward, relay_noise=relay_noise)
     run = sc.run(trace=True, stop_on_trip=stop_on_trip)
     end = int(run.ends[0])
     t = sc.t[:end + 1]
@@ -174,15 +175,16 @@ def simulate(params: LFCParams, *, duration: float, pc_attack: Signal | None = N
     for i, name in enumerate(STATES):
         trace[name] = run.x[:end + 1, i]
     trace["p_load"] = sample_signal(load, t, "load")
-    trips = pd.DataFrame([(RELAY_NAMES[r], float(t[k])) for k in np.flatnonzero(run.trips[:end + 1])
-                          for r in range(3) if run.trips[k] >> r & 1], columns=["relay", "t"])
+    bits = run.trips[:end + 1, 0]
+    trips = pd.DataFrame([(RELAY_NAMES[r], float(t[k])) for k in np.flatnonzero(bits)
+                          for r in range(3) if bits[k] >> r & 1], columns=["relay", "t"])
     settings = {"params": vars(params), "relays": vars(relays), "duration": duration,
                 "dt": dt, "control_period": control_period, "seed": seed,
                 "noise_std": list(noise_std), "scc": repr(scc), "estimator": repr(estimator),
                 "pc_attack": repr(pc_attack), "wref_attack": repr(wref_attack),
                 "load": repr(load), "stop_on_trip": stop_on_trip,
                 "load_feedforward": load_feedforward}
-    return result(trace, sc.tc, run.ctrl, trips, scc, settings)
+    return result(trace, sc.tc, run.ctrl[:, 0], trips, scc, settings)
 
 
 def result(trace: pd.DataFrame, tc: np.ndarray, ctrl: np.ndarray, trips: pd.DataFrame,

@@ -1,7 +1,8 @@
 """Closed-loop simulation of an interconnected grid with a safety filter at every area.
 
-:func:`simulate_multiarea` is one scenario with a trace (the multi-area engine,
-:mod:`lfc.engine_multiarea`); :func:`simulate_multiarea_batch` many, metrics
+:func:`simulate_grid_linear` (what :func:`lfc.simulate` runs for a
+``MultiAreaParams`` plant) is one scenario with a trace (the engine,
+:mod:`lfc.engine`); :func:`simulate_grid_table` many, metrics
 only.  With one area and no tie-line both are :func:`lfc.simulate` exactly.
 
 **What a certified filter at every area guarantees.**  ``filters={i:
@@ -57,16 +58,15 @@ import numpy as np
 import pandas as pd
 
 from lfc.batch import metrics_frame
-from lfc.engine import METRICS, sample_signal
-from lfc.engine_multiarea import MultiAreaScenarios, check_area_keys
+from lfc.engine import METRICS, Scenarios, check_area_keys, sample_signal
 from lfc.filters import SafetyFilter
 from lfc.model import STATES
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams
 from lfc.relays import RELAY_NAMES, RelaySettings
 from lfc.simulate import SimResult, check_timing, result
 
-__all__ = ["MultiAreaResult", "area_filter", "multiarea_result", "simulate_multiarea",
-           "simulate_multiarea_batch",
+__all__ = ["MultiAreaResult", "area_filter", "multiarea_result", "simulate_grid_linear",
+           "simulate_grid_table",
            "tie_step_bound"]
 FILTER_KINDS = ("paper", "certified")
 PAPER_ALPHA = 20.0   # 1/s: "paper" as notebook 08 runs it (notebook 09 also runs α = 3)
@@ -165,13 +165,13 @@ class MultiAreaResult:
         return out
 
 
-def simulate_multiarea(params: MultiAreaParams, *, duration: float,
+def simulate_grid_linear(params: MultiAreaParams, *, duration: float,
                        attacks: dict | None = None, loads: dict | None = None,
                        filters: dict | None = None, relays: RelaySettings | None = None,
                        estimator=None, noise_std: tuple[float, float] = (0.0, 0.0),
                        seed: int = 0, dt: float = 1e-3, control_period: float = 0.01,
-                       stop_on_trip: bool = False, feedforward: bool = True
-                       ) -> MultiAreaResult:
+                       stop_on_trip: bool = False, feedforward: bool = True,
+                       relay_noise: bool = False) -> MultiAreaResult:
     """Simulate an interconnected grid from equilibrium.
 
     Parameters
@@ -199,6 +199,10 @@ def simulate_multiarea(params: MultiAreaParams, *, duration: float,
         ``dP_L + dP_tie`` (default; the tie-line export is metered at the
         area's boundary); False gives 0, as :func:`lfc.simulate` does by
         default.
+    relay_noise : bool
+        Every area's relays read through white noise of std ``noise_std``, as
+        in :func:`lfc.simulate` (one generator seeded by ``seed`` draws for the
+        areas in turn at every plant step).
 
     Returns
     -------
@@ -210,10 +214,10 @@ def simulate_multiarea(params: MultiAreaParams, *, duration: float,
     relays = relays if relays is not None else RelaySettings()
     filters = check_area_keys(filters, params.n_areas, "filters")
     built = {a: area_filter(params, a, f, relays, control_period) for a, f in filters.items()}
-    sc = MultiAreaScenarios(params, duration=duration, dt=dt, control_period=control_period,
-                            relays=relays)
+    sc = Scenarios(params, duration=duration, dt=dt, control_period=control_period,
+                   relays=relays)
     sc.add(attacks=attacks, loads=loads, filters=built, estimator=estimator,
-           noise_std=noise_std, seed=seed, feedforward=feedforward)
+           noise_std=noise_std, seed=seed, feedforward=feedforward, relay_noise=relay_noise)
     run = sc.run(trace=True, stop_on_trip=stop_on_trip)
     end = int(run.ends[0])
     t = sc.t[:end + 1]
@@ -231,7 +235,8 @@ def simulate_multiarea(params: MultiAreaParams, *, duration: float,
                 "noise_std": list(noise_std), "estimator": repr(estimator),
                 "attacks": repr(attacks), "loads": repr(loads),
                 "filters": {a: repr(f) for a, f in built.items()},
-                "stop_on_trip": stop_on_trip, "feedforward": feedforward}
+                "stop_on_trip": stop_on_trip, "feedforward": feedforward,
+                "relay_noise": relay_noise}
     return multiarea_result(params, t, states, p_load, tie, trips, sc.tc,
                             [run.ctrl[:, a] for a in range(n_a)], built, settings)
 
@@ -261,7 +266,7 @@ def multiarea_result(params: MultiAreaParams, t: np.ndarray, states: np.ndarray,
     return MultiAreaResult(tuple(areas), pd.DataFrame(columns), settings)
 
 
-def simulate_multiarea_batch(params: MultiAreaParams, scenarios: list[dict], *,
+def simulate_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
                              duration: float, relays: RelaySettings | None = None,
                              dt: float = 1e-3, control_period: float = 0.01,
                              jobs: int = 2) -> pd.DataFrame:
@@ -272,10 +277,11 @@ def simulate_multiarea_batch(params: MultiAreaParams, scenarios: list[dict], *,
     params : MultiAreaParams
     scenarios : list of dict
         Each with any of the keyword arguments ``attacks``, ``loads``,
-        ``filters``, ``estimator``, ``noise_std``, ``seed``, ``feedforward`` of
-        :func:`simulate_multiarea` (filters named by kind are built once).
+        ``filters``, ``estimator``, ``noise_std``, ``seed``, ``feedforward``,
+        ``relay_noise`` of
+        :func:`simulate_grid_linear` (filters named by kind are built once).
     duration, relays, dt, control_period
-        As in :func:`simulate_multiarea`.
+        As in :func:`simulate_grid_linear`.
     jobs : int
         Threads (the compiled loop runs without the GIL), >= 1.
 
@@ -291,7 +297,8 @@ def simulate_multiarea_batch(params: MultiAreaParams, scenarios: list[dict], *,
         raise ValueError(f"jobs must be an integer >= 1, got {jobs!r}")
     if not isinstance(scenarios, (list, tuple)) or not scenarios:
         raise ValueError(f"scenarios must be a non-empty list of dicts, got {scenarios!r}")
-    keys = {"attacks", "loads", "filters", "estimator", "noise_std", "seed", "feedforward"}
+    keys = {"attacks", "loads", "filters", "estimator", "noise_std", "seed", "feedforward",
+            "relay_noise"}
     relays = relays if relays is not None else RelaySettings()
     cache: dict = {}
     rows = []
@@ -306,12 +313,12 @@ def simulate_multiarea_batch(params: MultiAreaParams, scenarios: list[dict], *,
             if key not in cache:
                 cache[key] = area_filter(params, a, f, relays, control_period)
             built[a] = cache[key]
-        rows.append({**s, "filters": built})
+        rows.append({"feedforward": True, **s, "filters": built})
     n_a = params.n_areas
 
     def run(part: list[dict]) -> tuple[np.ndarray, int]:
-        sc = MultiAreaScenarios(params, duration=duration, dt=dt,
-                                control_period=control_period, relays=relays)
+        sc = Scenarios(params, duration=duration, dt=dt, control_period=control_period,
+                       relays=relays)
         for s in part:
             sc.add(**s)
         return sc.run().metrics, sc.n_ctrl

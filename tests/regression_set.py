@@ -139,7 +139,7 @@ def linear_cases() -> dict[str, Callable[[], dict]]:
 
 
 def batch_cases() -> dict[str, Callable[[], dict]]:
-    from lfc import LFCParams, simulate_batch
+    from lfc import LFCParams, simulate_many
     from lfc.experiments.redteam import piecewise_attack_table
     from lfc.experiments.surface import READINGS, attack_map, bias_map
     p = LFCParams()
@@ -167,7 +167,7 @@ def batch_cases() -> dict[str, Callable[[], dict]]:
                              "noise_w": 0.0, "noise_rocof": 0.0, "seed": 0})
 
     def run(table: pd.DataFrame) -> dict:
-        out = simulate_batch(p, table, duration=10.0, progress=False)
+        out = simulate_many(p, table, duration=10.0, progress=False)
         keep = [c for c in out.columns if c not in ("values",)]
         return _table(out[keep])
 
@@ -186,7 +186,7 @@ def multiarea_cases() -> dict[str, Callable[[], dict]]:
     two, three = MultiAreaParams.two_area(), MultiAreaParams.three_area()
 
     def run(params, **kw) -> dict:
-        return _multi(lfc.simulate_multiarea(params, **kw))
+        return _multi(lfc.simulate(params, **kw))
 
     attack = {0: {"pc": Sinusoid(1.0, 0.5, start=1.0)}}
     return {
@@ -209,7 +209,7 @@ def multiarea_cases() -> dict[str, Callable[[], dict]]:
         "multi_wref_noff": lambda: run(two, duration=10.0, feedforward=False,
                                        attacks={1: {"wref": Step(0.04, start=1.0)}},
                                        filters={1: "paper"}),
-        "multi_batch": lambda: _table(lfc.simulate_multiarea_batch(two, [
+        "multi_batch": lambda: _table(lfc.simulate_many(two, [
             {"attacks": attack, "filters": {0: "paper", 1: "paper"}},
             {"attacks": attack, "filters": {0: "certified", 1: "certified"}},
             {"loads": {1: Step(0.1, start=1.0)}},

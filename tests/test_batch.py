@@ -12,7 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import lfc
-from lfc.batch import BATCH_METRICS, scenario_signal, simulate_batch
+from lfc import simulate_many
+from lfc.batch import BATCH_METRICS, scenario_signal
 from lfc.experiments.redteam import piecewise_attack_table
 
 P = lfc.LFCParams()
@@ -62,7 +63,7 @@ def check_equal(scenarios: pd.DataFrame, res: pd.DataFrame, duration: float) -> 
 
 def test_batch_equals_simulate_on_a_random_sample():
     scenarios = random_scenarios(60, seed=1)
-    res = simulate_batch(P, scenarios, duration=8.0, chunk_size=25, progress=False)
+    res = simulate_many(P, scenarios, duration=8.0, chunk_size=25, progress=False)
     assert list(res.columns) == list(scenarios.columns) + list(BATCH_METRICS)
     assert 5 <= res.tripped.sum() <= 55  # the sample exercises both outcomes
     check_equal(scenarios, res, 8.0)
@@ -75,7 +76,7 @@ def test_batch_equals_simulate_for_the_certified_filter_and_free_form_attacks():
     periodic = periodic[periodic.alpha.notna()].assign(method="certified")
     free = piecewise_attack_table(n=8, amplitude=2.0, duration=8.0, seed=3)
     scenarios = pd.concat([periodic, free, free.assign(method="certified")], ignore_index=True)
-    res = simulate_batch(P, scenarios, duration=8.0, chunk_size=13, progress=False)
+    res = simulate_many(P, scenarios, duration=8.0, chunk_size=13, progress=False)
     assert res[res.method == "paper"].tripped.any()
     assert (res[res.method == "certified"].alarms > 0).any()
     check_equal(scenarios, res, 8.0)
@@ -86,7 +87,7 @@ def test_small_map_matches_simulate_at_its_corners():
     grid = pd.DataFrame([{"waveform": "sinusoid", "channel": "pc", "amplitude": a,
                           "freq_hz": f, "start": 1.0, "alpha": al, "Ts": 0.25}
                          for al in (np.nan, 20.0) for a in amps for f in freqs])
-    res = simulate_batch(P, grid, duration=10.0, progress=False)
+    res = simulate_many(P, grid, duration=10.0, progress=False)
     assert res.tripped.any() and not res.tripped.all()
     corners = res[res.amplitude.isin([amps[0], amps[-1]]) & res.freq_hz.isin([freqs[0],
                                                                                  freqs[-1]])]
@@ -101,9 +102,9 @@ def test_small_map_matches_simulate_at_its_corners():
 @given(chunk=st.integers(1, 12), seed=st.integers(0, 2**16))
 def test_chunking_and_row_order_do_not_change_results(chunk, seed):
     scenarios = random_scenarios(12, seed)
-    whole = simulate_batch(P, scenarios, duration=2.0, progress=False)
+    whole = simulate_many(P, scenarios, duration=2.0, progress=False)
     shuffled = scenarios.sample(frac=1.0, random_state=seed % 1000)
-    parts = simulate_batch(P, shuffled, duration=2.0, chunk_size=chunk, progress=False)
+    parts = simulate_many(P, shuffled, duration=2.0, chunk_size=chunk, progress=False)
     pd.testing.assert_frame_equal(parts.loc[whole.index], whole)
 
 
@@ -132,7 +133,7 @@ class Slow(ThreadPoolExecutor):
     def submit(self, fn, *args):
         return super().submit(slowly, *args)
 
-lfc.simulate_batch(lfc.LFCParams(), pd.read_csv(sys.argv[2], index_col=0), duration=20.0,
+lfc.simulate_many(lfc.LFCParams(), pd.read_csv(sys.argv[2], index_col=0), duration=20.0,
                    chunk_size=5, out=sys.argv[1], executor=Slow(1), progress=False)
 """
 
@@ -154,21 +155,21 @@ def test_killed_run_resumes_without_recomputing_chunks(tmp_path):
     done = {p.name: p.stat().st_mtime_ns for p in out.glob("chunk_*.csv")}
     assert 1 <= len(done) < 8
     inline = InlineExecutor()
-    resumed = simulate_batch(P, scenarios, duration=20.0, chunk_size=5, out=out,
+    resumed = simulate_many(P, scenarios, duration=20.0, chunk_size=5, out=out,
                              executor=inline, progress=False)
     assert inline.ran == 8 - len(done)
     for name, mtime in done.items():
         assert (out / name).stat().st_mtime_ns == mtime
     assert len(list(out.glob("chunk_*.csv"))) == 8 and not list(out.glob("*.tmp"))
-    fresh = simulate_batch(P, scenarios, duration=20.0, chunk_size=5, progress=False)
+    fresh = simulate_many(P, scenarios, duration=20.0, chunk_size=5, progress=False)
     pd.testing.assert_frame_equal(resumed, fresh)
 
 
 def test_changed_settings_do_not_reuse_old_chunks(tmp_path):
     scenarios = random_scenarios(6, 4)
-    simulate_batch(P, scenarios, duration=2.0, chunk_size=3, out=tmp_path, progress=False)
+    simulate_many(P, scenarios, duration=2.0, chunk_size=3, out=tmp_path, progress=False)
     inline = InlineExecutor()
-    simulate_batch(P, scenarios, duration=3.0, chunk_size=3, out=tmp_path, executor=inline,
+    simulate_many(P, scenarios, duration=3.0, chunk_size=3, out=tmp_path, executor=inline,
                    progress=False)
     assert inline.ran == 2
 
@@ -176,11 +177,11 @@ def test_changed_settings_do_not_reuse_old_chunks(tmp_path):
 def test_dask_local_cluster_gives_the_same_table_as_the_process_pool():
     distributed = pytest.importorskip("distributed")
     scenarios = random_scenarios(16, 5)
-    pool = simulate_batch(P, scenarios, duration=3.0, chunk_size=4, progress=False)
+    pool = simulate_many(P, scenarios, duration=3.0, chunk_size=4, progress=False)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=None) as cluster, \
             distributed.Client(cluster) as client:
-        dask = simulate_batch(P, scenarios, duration=3.0, chunk_size=4,
+        dask = simulate_many(P, scenarios, duration=3.0, chunk_size=4,
                               executor=client.get_executor(), progress=False)
     pd.testing.assert_frame_equal(dask, pool)
 
@@ -196,11 +197,11 @@ def test_dask_local_cluster_gives_the_same_table_as_the_process_pool():
 ])
 def test_bad_scenarios_name_the_column(change, message):
     with pytest.raises(ValueError, match=message):
-        simulate_batch(P, change(random_scenarios(3, 0)), duration=1.0, progress=False)
+        simulate_many(P, change(random_scenarios(3, 0)), duration=1.0, progress=False)
 
 
 def test_bad_settings_raise():
     with pytest.raises(ValueError, match="chunk_size"):
-        simulate_batch(P, random_scenarios(3, 0), duration=1.0, chunk_size=0)
+        simulate_many(P, random_scenarios(3, 0), duration=1.0, chunk_size=0)
     with pytest.raises(ValueError, match="control_period"):
-        simulate_batch(P, random_scenarios(3, 0), duration=1.0, control_period=0.0015)
+        simulate_many(P, random_scenarios(3, 0), duration=1.0, control_period=0.0015)

@@ -1,4 +1,4 @@
-"""One engine: simulate and simulate_batch agree row for row (noise, Kalman estimate,
+"""One engine: simulate and simulate_many agree row for row (noise, Kalman estimate,
 per-row plants, every filter), and the package's layers hold (no import circle,
 a light core)."""
 
@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 import lfc
-from lfc.batch import simulate_batch
+from lfc import simulate_many
 
 P = lfc.LFCParams()
 LFC = Path(lfc.__file__).parent
@@ -30,7 +30,7 @@ def test_batch_rows_equal_simulate_seed_for_seed_with_noise_kalman_and_own_plant
                                                               np.nan],
         "noise_w": [1e-4, 0.0, 2e-4, 1e-4, 1e-4, 0.0],
         "noise_rocof": [1e-3, 0.0, 1e-3, 0.0, 1e-3, 0.0], "seed": [3, 0, 7, 1, 2, 0]})
-    res = simulate_batch(P, rows, duration=10.0, chunk_size=4, progress=False)
+    res = simulate_many(P, rows, duration=10.0, chunk_size=4, progress=False)
     for i, row in rows.iterrows():
         plant = lfc.LFCParams(**{**vars(P), **{k: row[k] for k in ("M", "droop")
                                                if pd.notna(row[k])}})
@@ -59,7 +59,7 @@ def test_batch_rows_equal_simulate_with_noisy_relays_and_the_robust_filter():
                          "seed": [4, 5, 6], "relay_noise": [True, True, False],
                          "declare_noise": [False, True, True],
                          "uncertainty": [np.nan, 0.1, 0.1]})
-    res = simulate_batch(P, rows, duration=8.0, chunk_size=2, progress=False)
+    res = simulate_many(P, rows, duration=8.0, chunk_size=2, progress=False)
     for i, row in rows.iterrows():
         scc = lfc.SafetyFilter(P, method="certified",
                                uncertainty=0.0 if np.isnan(row.uncertainty) else row.uncertainty,
@@ -79,7 +79,7 @@ def test_relay_noise_needs_noise():
     rows = pd.DataFrame({"waveform": "none", "channel": "pc", "amplitude": 0.0, "freq_hz": 0.0,
                          "start": 0.0, "alpha": np.nan, "Ts": 0.25, "relay_noise": [True]})
     with pytest.raises(ValueError, match="relay_noise"):
-        simulate_batch(P, rows, duration=1.0, progress=False)
+        simulate_many(P, rows, duration=1.0, progress=False)
 
 
 def test_the_plant_need_not_be_the_design_model():
@@ -87,7 +87,7 @@ def test_the_plant_need_not_be_the_design_model():
     base = {"waveform": "square", "channel": "pc", "amplitude": 1.0, "freq_hz": 0.3,
             "start": 1.0, "alpha": 1.0, "Ts": 0.25, "method": "certified"}
     rows = pd.DataFrame([base, {**base, "M": 0.8 * P.M}])
-    res = simulate_batch(P, rows, duration=10.0, progress=False)
+    res = simulate_many(P, rows, duration=10.0, progress=False)
     assert res.max_abs_rocof_meas[1] > res.max_abs_rocof_meas[0]
 
 
@@ -99,7 +99,7 @@ def test_bad_plant_and_noise_columns_name_the_column(column, value, message):
     row = pd.DataFrame([{"waveform": "none", "channel": "pc", "amplitude": 0.0, "freq_hz": 0.0,
                          "start": 0.0, "alpha": np.nan, "Ts": 0.25, column: value}])
     with pytest.raises(ValueError, match=message):
-        simulate_batch(P, row, duration=1.0, progress=False)
+        simulate_many(P, row, duration=1.0, progress=False)
 
 
 def test_import_lfc_loads_no_heavy_or_optional_package():

@@ -114,7 +114,7 @@ def test_no_trip_over_the_whole_attack_surface_grid():
                                  alphas=[1.0]),
                       bias_map(d["biases"], [1.0])], ignore_index=True)
     grid = grid[grid.alpha.notna()].assign(method="certified")
-    res = lfc.simulate_batch(P, grid, duration=d["duration"], chunk_size=200, progress=False)
+    res = lfc.simulate_many(P, grid, duration=d["duration"], chunk_size=200, progress=False)
     assert len(res) == 2 * 16 * 11 + 15
     assert not res.tripped.any()
     assert res.max_abs_rocof_meas.max() <= RELAYS.rocof_limit
@@ -123,8 +123,8 @@ def test_no_trip_over_the_whole_attack_surface_grid():
 
 def test_no_trip_on_seeded_red_team_attacks():
     table = piecewise_attack_table(n=40, amplitude=3.0, duration=15.0, seed=11)
-    paper = lfc.simulate_batch(P, table, duration=15.0, progress=False)
-    certified = lfc.simulate_batch(P, table.assign(method="certified"), duration=15.0,
+    paper = lfc.simulate_many(P, table, duration=15.0, progress=False)
+    certified = lfc.simulate_many(P, table.assign(method="certified"), duration=15.0,
                                    progress=False)
     assert paper.tripped.any()            # the attacks are strong enough to matter
     assert not certified.tripped.any()

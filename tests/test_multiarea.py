@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 
 import lfc
 from lfc.experiments.redteam import coordinated_search, severity
-from lfc.multiarea import MultiAreaParams, discretize_multiarea, multiarea_matrices
+from lfc.multiarea import MultiAreaParams, discretize_grid, multiarea_matrices
 from lfc.simulate_multiarea import area_filter, tie_step_bound
 
 RELAYS = lfc.RelaySettings()
@@ -27,7 +27,7 @@ def test_one_area_equals_simulate_exactly(method, estimator):
         lfc.Step(0.05, start=2.0)
     single = lfc.simulate(p, duration=8.0, pc_attack=attack, wref_attack=wref, load=load,
                           scc=scc, estimator=estimator, noise_std=noise, seed=3)
-    multi = lfc.simulate_multiarea(MultiAreaParams(areas=(p,)), duration=8.0,
+    multi = lfc.simulate(MultiAreaParams(areas=(p,)), duration=8.0,
                                    attacks={0: {"pc": attack, "wref": wref}}, loads={0: load},
                                    filters={0: scc}, estimator=estimator, noise_std=noise,
                                    seed=3, feedforward=False)
@@ -36,6 +36,33 @@ def test_one_area_equals_simulate_exactly(method, estimator):
         np.testing.assert_array_equal(area.trace[column], single.trace[column], err_msg=column)
     assert area.metrics() == single.metrics()
     pd.testing.assert_frame_equal(area.alarms, single.alarms)
+
+
+def test_one_area_with_relay_noise_equals_simulate_exactly():
+    p, noise = lfc.LFCParams(), (2e-4, 2e-3)
+    attack = lfc.Sinusoid(0.5, 1.0, start=1.0)
+    single = lfc.simulate(p, duration=6.0, pc_attack=attack, estimator="kalman",
+                          noise_std=noise, seed=4, relay_noise=True)
+    multi = lfc.simulate(MultiAreaParams(areas=(p,)), duration=6.0,
+                                   attacks={0: {"pc": attack}}, estimator="kalman",
+                                   noise_std=noise, seed=4, feedforward=False, relay_noise=True)
+    pd.testing.assert_frame_equal(multi.areas[0].trips, single.trips)
+    assert multi.areas[0].metrics() == single.metrics()
+
+
+def test_relay_noise_reaches_the_relays_of_every_area():
+    """ROCOF noise of the order of the setting (0.05 pu/s) trips every area's ROCOF
+    relay when the relays read it, and none when only the controllers do."""
+    kw = dict(duration=2.0, estimator="kalman", noise_std=(1e-4, 0.05), seed=1)
+    quiet = lfc.simulate(TWO, **kw)
+    noisy = lfc.simulate(TWO, relay_noise=True, **kw)
+    assert not quiet.tripped
+    assert all(set(r.trips.relay) == {"ROCOF"} for r in noisy.areas)
+    batch = lfc.simulate_many(TWO, [{"estimator": "kalman", "seed": 1,
+                                                "noise_std": (1e-4, 0.05),
+                                                "relay_noise": True}], duration=2.0)
+    assert batch.tripped.all()
+    assert batch.first_trip_t.tolist() == [r.trips.t.min() for r in noisy.areas]
 
 
 def test_one_area_matrices_are_the_single_area_ones():
@@ -60,7 +87,7 @@ def test_without_agc_the_areas_share_a_load_step_by_their_natural_responses():
     """Steady state of primary control alone (k_agc = 0): one frequency
     dw = -dP_L / (B_0 + B_1), the exporting area's share B_1 / (B_0 + B_1)."""
     grid = MultiAreaParams(areas=TWO.areas, tie=TWO.tie, k_agc=(0.0, 0.0))
-    r = lfc.simulate_multiarea(grid, duration=150.0, loads={0: lfc.Step(0.1, start=1.0)})
+    r = lfc.simulate(grid, duration=150.0, loads={0: lfc.Step(0.1, start=1.0)})
     end = r.trace.iloc[-1]
     B = grid.biases()
     assert end.dw_0 == pytest.approx(-0.1 / B.sum(), rel=1e-4)
@@ -76,7 +103,7 @@ def test_agc_restores_frequency_and_tie_line_schedule_after_a_load_step(grid, fi
     takes it, frequencies and tie-line flows return to schedule; no filter
     raises an alarm for this legitimate step."""
     kinds = {} if filters is None else {a: filters for a in range(grid.n_areas)}
-    r = lfc.simulate_multiarea(grid, duration=120.0, loads={0: lfc.Step(0.1, start=1.0)},
+    r = lfc.simulate(grid, duration=120.0, loads={0: lfc.Step(0.1, start=1.0)},
                                filters=kinds)
     end = r.trace.iloc[-1]
     for a in range(grid.n_areas):
@@ -95,7 +122,7 @@ def test_two_area_preset_cites_its_coefficient():
 
 
 def test_discretization_matches_the_continuous_model():
-    Ad, Bu, Bl = discretize_multiarea(THREE, 1e-3)
+    Ad, Bu, Bl = discretize_grid(THREE, 1e-3)
     A, B = multiarea_matrices(THREE)
     assert Ad.shape == (18, 18) and Bu.shape == (18, 3) and Bl.shape == (18, 3)
     from scipy.linalg import expm
@@ -134,18 +161,18 @@ def test_bad_grid_names_the_parameter(kwargs, message):
 ])
 def test_bad_scenario_names_the_argument(kwargs, message):
     with pytest.raises(ValueError, match=message):
-        lfc.simulate_multiarea(TWO, **{"duration": 1.0, **kwargs})
+        lfc.simulate(TWO, **{"duration": 1.0, **kwargs})
 
 
 def test_params_must_be_a_grid_and_batches_check_their_input():
-    with pytest.raises(ValueError, match="params must be a MultiAreaParams"):
-        lfc.simulate_multiarea(lfc.LFCParams(), duration=1.0)
+    with pytest.raises(ValueError, match="plant must be an LFCParams, a MultiAreaParams"):
+        lfc.simulate("two areas", duration=1.0)
     with pytest.raises(ValueError, match="jobs must be an integer >= 1"):
-        lfc.simulate_multiarea_batch(TWO, [{}], duration=1.0, jobs=0)
+        lfc.simulate_many(TWO, [{}], duration=1.0, jobs=0)
     with pytest.raises(ValueError, match="scenarios must be a non-empty list"):
-        lfc.simulate_multiarea_batch(TWO, [], duration=1.0)
+        lfc.simulate_many(TWO, [], duration=1.0)
     with pytest.raises(ValueError, match=r"scenarios\[0\] must be a dict with keys"):
-        lfc.simulate_multiarea_batch(TWO, [{"attack": {}}], duration=1.0)
+        lfc.simulate_many(TWO, [{"attack": {}}], duration=1.0)
 
 
 # -- the batch ---------------------------------------------------------------------------
@@ -158,10 +185,10 @@ def test_batch_rows_equal_simulate_multiarea():
         {"loads": {1: lfc.Step(0.1, start=1.0)}, "estimator": "kalman",
          "noise_std": (1e-4, 1e-3), "seed": 5},
     ]
-    batch = lfc.simulate_multiarea_batch(TWO, scenarios, duration=10.0, jobs=2)
+    batch = lfc.simulate_many(TWO, scenarios, duration=10.0, jobs=2)
     assert list(batch.scenario) == [0, 0, 1, 1, 2, 2] and list(batch.area) == [0, 1] * 3
     for k, s in enumerate(scenarios):
-        one = lfc.simulate_multiarea(TWO, duration=10.0, **s).metrics()
+        one = lfc.simulate(TWO, duration=10.0, **s).metrics()
         for a in range(2):
             row = batch[(batch.scenario == k) & (batch.area == a)].iloc[0]
             assert row.tripped == one[a]["tripped"]
@@ -198,7 +225,7 @@ def attack_runs() -> pd.DataFrame:
     frames = []
     for kind in (None, "paper", "paper α=3", "certified"):
         filters = {} if kind is None else PAPER3 if kind == "paper α=3" else {0: kind, 1: kind}
-        out = lfc.simulate_multiarea_batch(
+        out = lfc.simulate_many(
             TWO, [{"attacks": a, "filters": filters} for a in attacks], duration=30.0)
         frames.append(out.assign(filters=str(kind)))
     return pd.concat(frames, ignore_index=True)
@@ -229,17 +256,17 @@ def test_the_tie_line_assumption_holds_on_a_coordinated_attack():
     disturbance moves by less than the declared bound within each period."""
     attacks = {0: {"pc": lfc.Square(3.0, 0.3, start=1.0)},
                1: {"pc": lfc.Square(-3.0, 0.3, start=1.0)}}
-    r = lfc.simulate_multiarea(TWO, duration=30.0, attacks=attacks,
+    r = lfc.simulate(TWO, duration=30.0, attacks=attacks,
                                filters={0: "certified", 1: "certified"})
     assert not r.tripped
     for a in range(2):
         assert r.disturbance_step(a) <= tie_step_bound(TWO, a, RELAYS, 0.01)
-    r = lfc.simulate_multiarea(TWO, duration=30.0, attacks=attacks)
+    r = lfc.simulate(TWO, duration=30.0, attacks=attacks)
     assert r.tripped
 
 
 def test_disturbance_step_is_the_largest_move_within_a_control_period():
-    r = lfc.simulate_multiarea(TWO, duration=3.0, loads={0: lfc.Step(0.1, start=1.0)},
+    r = lfc.simulate(TWO, duration=3.0, loads={0: lfc.Step(0.1, start=1.0)},
                                attacks={1: {"pc": lfc.Sinusoid(1.0, 0.5, start=0.5)}})
     for a in range(2):
         x = r.trace[f"p_net_{a}"].to_numpy()      # 10 plant steps per control period
@@ -269,7 +296,7 @@ def test_property_no_coordinated_attack_on_three_areas_trips_a_certified_area(am
     a filter flag ``outside``, which ends its guarantee)."""
     wave = lfc.Square if square else lfc.Sinusoid
     attacks = {a: {"pc": wave(amps[a], freqs[a], start=1.0)} for a in range(3)}
-    r = lfc.simulate_multiarea(THREE, duration=15.0, attacks=attacks, filters=FILTERS3)
+    r = lfc.simulate(THREE, duration=15.0, attacks=attacks, filters=FILTERS3)
     assert not r.tripped
     for a in range(3):
         assert r.disturbance_step(a) <= tie_step_bound(THREE, a, RELAYS, 0.01)
@@ -285,11 +312,11 @@ def test_finding_the_hold_recheck_fails_under_tie_drift_so_the_guarantee_can_end
     does not trip.  Without the net disturbance (``feedforward=False``) the
     same attack trips ROCOF."""
     attacks = {2: {"pc": lfc.Sinusoid(1.0, 0.5, start=1.0)}}
-    r = lfc.simulate_multiarea(THREE, duration=15.0, attacks=attacks, filters=FILTERS3)
+    r = lfc.simulate(THREE, duration=15.0, attacks=attacks, filters=FILTERS3)
     assert 0 < r.areas[2].alarms.outside.sum() < 50
     assert r.disturbance_step(2) <= tie_step_bound(THREE, 2, RELAYS, 0.01)
     assert not r.tripped
-    blind = lfc.simulate_multiarea(THREE, duration=15.0, attacks=attacks, filters=FILTERS3,
+    blind = lfc.simulate(THREE, duration=15.0, attacks=attacks, filters=FILTERS3,
                                    feedforward=False)
     assert blind.metrics()[2]["first_trip"]["relay"] == "ROCOF"
 
@@ -312,14 +339,14 @@ def test_finding_a_stiff_tie_makes_the_hold_recheck_fail_on_the_exact_model():
     command is held.  So the ``outside`` flags notebook 09 documents on ANDES are not
     only ANDES' model error.  No trip."""
     bias = lfc.Step(-2.5, start=1.0)
-    r = lfc.simulate_multiarea(KUNDUR_LIKE, duration=30.0, attacks={a: {"ace": bias}
+    r = lfc.simulate(KUNDUR_LIKE, duration=30.0, attacks={a: {"ace": bias}
                                                                      for a in range(2)},
                                filters={0: "certified", 1: "certified"})
     assert r.areas[0].alarms.outside.sum() == 0 and r.areas[1].alarms.outside.sum() > 100
     for a in range(2):
         assert r.disturbance_step(a) <= tie_step_bound(KUNDUR_LIKE, a, RELAYS, 0.01)
     assert not r.tripped
-    assert lfc.simulate_multiarea(KUNDUR_LIKE, duration=30.0,
+    assert lfc.simulate(KUNDUR_LIKE, duration=30.0,
                                   attacks={a: {"ace": bias} for a in range(2)}).tripped
 
 
@@ -346,16 +373,16 @@ def test_finding_with_the_kalman_estimate_the_certified_filters_leave_their_cert
                                     load_bound=tie_step_bound(TWO, a, RELAYS, 0.01))
                 for a in range(2)}
     attack = {0: {"pc": lfc.Sinusoid(1.0, 0.5, start=1.0)}}
-    kalman = lfc.simulate_multiarea(TWO, duration=20.0, attacks=attack, filters=declared,
+    kalman = lfc.simulate(TWO, duration=20.0, attacks=attack, filters=declared,
                                     estimator="kalman", noise_std=NOISE)
     assert 50 < kalman.areas[0].alarms.outside.sum() < 300 and not kalman.tripped
-    exact = lfc.simulate_multiarea(TWO, duration=20.0, attacks=attack, filters=declared,
+    exact = lfc.simulate(TWO, duration=20.0, attacks=attack, filters=declared,
                                    noise_std=NOISE)
-    quiet = lfc.simulate_multiarea(TWO, duration=20.0, attacks=attack,
+    quiet = lfc.simulate(TWO, duration=20.0, attacks=attack,
                                    filters={0: "certified", 1: "certified"}, estimator="kalman")
     for r in (exact, quiet):
         assert sum(a.alarms.outside.sum() for a in r.areas) == 0 and not r.tripped
-    runs = [lfc.simulate_multiarea(TWO, duration=20.0, filters=declared, estimator="kalman",
+    runs = [lfc.simulate(TWO, duration=20.0, filters=declared, estimator="kalman",
                                    noise_std=NOISE, attacks=att)
             for wave in (lfc.Sinusoid, lfc.Square) for amp in (1.0, 3.0)
             for freq in (0.1, 0.3, 0.5, 1.0, 2.0)
@@ -372,7 +399,7 @@ def test_a_tie_too_stiff_for_an_area_is_a_clear_error():
     grid = MultiAreaParams.two_area(T=98.0)
     with pytest.raises(ValueError, match=r"filters\[0\]='certified' cannot be built: its "
                                          r"tie-line bound load_bound=0.0588 pu"):
-        lfc.simulate_multiarea(grid, duration=1.0, filters={0: "certified"})
+        lfc.simulate(grid, duration=1.0, filters={0: "certified"})
 
 
 def test_finding_a_lightly_damped_area_leaves_its_certificate_and_loses_the_guarantee():
@@ -388,7 +415,7 @@ def test_finding_a_lightly_damped_area_leaves_its_certificate_and_loses_the_guar
     assert f.filter(np.zeros(5), 0.0)[1].details["interval"][1] < 0.025
     attacks = {a: {"pc": lfc.Square(amp, freq, start=1.0)}
                for a, (amp, freq) in enumerate(((3.0, 0.05), (-3.0, 3.0), (3.0, 0.3)))}
-    r = lfc.simulate_multiarea(grid, duration=15.0, attacks=attacks,
+    r = lfc.simulate(grid, duration=15.0, attacks=attacks,
                                filters={a: "certified" for a in range(3)})
     assert r.areas[2].alarms.outside.sum() > 100
     assert r.disturbance_step(2) <= tie_step_bound(grid, 2, RELAYS, 0.01)

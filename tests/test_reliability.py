@@ -17,7 +17,8 @@ from hypothesis import strategies as st
 
 import lfc
 from lfc import batch
-from lfc.batch import ChunkWarning, simulate_batch
+from lfc import simulate_many
+from lfc.batch import ChunkWarning
 from lfc.repro.cli import main
 
 P = lfc.LFCParams()
@@ -35,11 +36,11 @@ def test_a_step_with_a_stop_is_a_pulse():
     15 s when the stop was ignored), exactly as ``simulate`` with a pulse."""
     row = {**ROW, "waveform": "step", "channel": "wref", "amplitude": 0.04, "alpha": np.nan,
            "stop": 1.5}
-    res = simulate_batch(P, pd.DataFrame([row]), duration=20.0, progress=False)
+    res = simulate_many(P, pd.DataFrame([row]), duration=20.0, progress=False)
     pulse = lfc.simulate(P, duration=20.0, wref_attack=lfc.Step(0.04, 1.0, stop=1.5)).metrics()
     assert not res.tripped[0] and not pulse["tripped"]
     assert res.max_abs_dw_meas[0] == pulse["max_abs_dw_meas"]
-    held = simulate_batch(P, pd.DataFrame([{**row, "stop": np.nan}]), duration=20.0,
+    held = simulate_many(P, pd.DataFrame([{**row, "stop": np.nan}]), duration=20.0,
                           progress=False)
     assert held.first_trip_relay[0] == "OF2"
 
@@ -60,7 +61,7 @@ def test_a_load_pulse_ends():
 ])
 def test_bad_robust_and_pulse_columns_name_the_column(change, message):
     with pytest.raises(ValueError, match=message):
-        simulate_batch(P, pd.DataFrame([{**ROW, **change}]), duration=1.0, progress=False)
+        simulate_many(P, pd.DataFrame([{**ROW, **change}]), duration=1.0, progress=False)
 
 
 # -- chunk files ---------------------------------------------------------------------------
@@ -70,7 +71,7 @@ def chunk_files(folder) -> list:
 
 @pytest.mark.parametrize("damage", ["truncate", "flip", "header", "empty", "binary"])
 def test_a_damaged_chunk_is_recomputed_with_a_warning_naming_it(tmp_path, damage):
-    first = simulate_batch(P, table(), duration=5.0, chunk_size=2, out=tmp_path,
+    first = simulate_many(P, table(), duration=5.0, chunk_size=2, out=tmp_path,
                            progress=False)
     path = chunk_files(tmp_path)[1]
     data = path.read_bytes()
@@ -80,19 +81,19 @@ def test_a_damaged_chunk_is_recomputed_with_a_warning_naming_it(tmp_path, damage
                       "empty": b"",
                       "binary": b"\xff\xfe\x00garbage"}[damage])
     with pytest.warns(ChunkWarning, match=path.name):
-        again = simulate_batch(P, table(), duration=5.0, chunk_size=2, out=tmp_path,
+        again = simulate_many(P, table(), duration=5.0, chunk_size=2, out=tmp_path,
                                progress=False)
     pd.testing.assert_frame_equal(again, first)
     with warnings.catch_warnings():
         warnings.simplefilter("error")                      # repaired: read silently now
-        simulate_batch(P, table(), duration=5.0, chunk_size=2, out=tmp_path, progress=False)
+        simulate_many(P, table(), duration=5.0, chunk_size=2, out=tmp_path, progress=False)
 
 
 def test_chunks_of_other_code_are_not_reused(tmp_path, monkeypatch):
-    simulate_batch(P, table(), duration=5.0, chunk_size=2, out=tmp_path, progress=False)
+    simulate_many(P, table(), duration=5.0, chunk_size=2, out=tmp_path, progress=False)
     old = chunk_files(tmp_path)
     monkeypatch.setattr(batch, "code_digest", lambda: "another version of the engine")
-    simulate_batch(P, table(), duration=5.0, chunk_size=2, out=tmp_path, progress=False)
+    simulate_many(P, table(), duration=5.0, chunk_size=2, out=tmp_path, progress=False)
     assert len(chunk_files(tmp_path)) == 2 * len(old)       # computed again, under new names
 
 
@@ -103,7 +104,7 @@ def test_two_runs_on_one_folder_at_once(tmp_path):
 
     def run():
         try:
-            results.append(simulate_batch(P, table(8), duration=5.0, chunk_size=1,
+            results.append(simulate_many(P, table(8), duration=5.0, chunk_size=1,
                                           out=tmp_path, progress=False))
         except Exception as err:  # noqa: BLE001 - the test reports any failure
             errors.append(err)
@@ -183,10 +184,10 @@ def test_property_a_scenario_table_is_refused_or_simulated_correctly(rows, bad, 
             if column == "stop" and scenarios.loc[row, "waveform"] in ("none",):
                 scenarios.loc[row, "waveform"] = "step"
             with pytest.raises(ValueError, match=f"column '{column}'.*row {row}"):
-                simulate_batch(P, scenarios, duration=2.0, progress=False)
+                simulate_many(P, scenarios, duration=2.0, progress=False)
             event("refused")
             return
-    res = simulate_batch(P, scenarios, duration=2.0, progress=False)
+    res = simulate_many(P, scenarios, duration=2.0, progress=False)
     event("simulated")
     for i, row in scenarios.iterrows():
         signal = batch.scenario_signal(row, 2.0)
@@ -307,7 +308,7 @@ def test_cli_unreachable_dask_scheduler(tmp_path, capsys):
 def test_cli_ctrl_c_is_one_line_and_resumable(tmp_path, capsys, monkeypatch):
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
-    monkeypatch.setattr("lfc.batch.simulate_batch", interrupted)
+    monkeypatch.setattr("lfc.run.simulate_many", interrupted)
     assert main(["batch", scenario_csv(tmp_path), "--duration", "1",
                  "--out", str(tmp_path / "o")]) == 130
     err = capsys.readouterr().err

@@ -46,7 +46,7 @@ def strong_attacks() -> pd.DataFrame:
     design model, measured here): per waveform and frequency the smallest and
     the largest such amplitude; plus four of the red team's piecewise attacks."""
     grid = map_attacks().assign(method="certified")
-    res = lfc.simulate_batch(P, grid, duration=20.0, progress=False)
+    res = lfc.simulate_many(P, grid, duration=20.0, progress=False)
     sev = np.maximum(res.max_abs_rocof_meas / RELAYS.rocof_limit, res.max_abs_dw_meas / RELAYS.F)
     strong = grid[(sev >= 0.95).to_numpy()].sort_values("amplitude")
     by = strong.groupby(["waveform", "freq_hz"], sort=False)
@@ -86,7 +86,7 @@ def test_no_trip_at_any_plant_step(dt):
     table = pd.concat([map_attacks(), piecewise_attack_table(n=16, amplitude=3.0,
                                                              duration=20.0, seed=11)
                        .assign(alpha=1.0)], ignore_index=True).assign(method="certified")
-    res = lfc.simulate_batch(P, table, duration=20.0, dt=dt, progress=False)
+    res = lfc.simulate_many(P, table, duration=20.0, dt=dt, progress=False)
     assert not res.tripped.any()
     assert res.max_abs_rocof_meas.max() <= RELAYS.rocof_limit
     assert res.max_abs_dw_meas.max() <= RELAYS.F
@@ -109,7 +109,7 @@ def test_robust_filter_never_trips_at_the_box_corners_or_inside(attacks):
     (measured), the strong attacks, plant step 0.5 ms."""
     table = on_plants(attacks.assign(method="certified", uncertainty=BOX_WIDTH),
                       corners() + interior(8))
-    res = lfc.simulate_batch(P, table, duration=15.0, dt=5e-4, progress=False, chunk_size=200)
+    res = lfc.simulate_many(P, table, duration=15.0, dt=5e-4, progress=False, chunk_size=200)
     assert len(res) == 40 * len(attacks) >= 40 * 20
     assert not res.tripped.any()
 
@@ -118,7 +118,7 @@ def test_without_the_box_the_certified_filter_trips_off_the_design_model(attacks
     """The finding that motivated the box: the design-model certificate, on the
     low-inertia corners, trips under the same attacks."""
     low_inertia = [c for c in corners() if c.M < P.M][:4]
-    res = lfc.simulate_batch(P, on_plants(attacks.assign(method="certified"), low_inertia),
+    res = lfc.simulate_many(P, on_plants(attacks.assign(method="certified"), low_inertia),
                              duration=20.0, progress=False)
     assert res.tripped.any()
 
@@ -177,7 +177,7 @@ def test_robust_filter_on_kalman_estimates_over_many_seeds(attacks):
     table = pd.concat([table.assign(seed=s) for s in range(16)], ignore_index=True)
     weakest = replace(P, M=0.8 * P.M, D=0.8 * P.D, tau_g=1.2 * P.tau_g, tau_t=1.2 * P.tau_t,
                       droop=0.8 * P.droop)
-    res = lfc.simulate_batch(P, on_plants(table, [P, weakest]), duration=10.0,
+    res = lfc.simulate_many(P, on_plants(table, [P, weakest]), duration=10.0,
                              progress=False, chunk_size=200)
     assert len(res) >= 2 * 16 * 20 and not res.tripped.any()
 
@@ -186,7 +186,7 @@ def test_undeclared_noise_trips_the_certified_filter(attacks):
     """Without ``noise_std`` the certificate trusts the estimate: some seed trips."""
     table = attacks.assign(method="certified", noise_w=NOISE[0], noise_rocof=NOISE[1])
     table = pd.concat([table.assign(seed=s) for s in range(4)], ignore_index=True)
-    assert lfc.simulate_batch(P, table, duration=15.0, progress=False).tripped.any()
+    assert lfc.simulate_many(P, table, duration=15.0, progress=False).tripped.any()
 
 
 def test_noisy_relays_trip_rate_within_the_claim(attacks):
@@ -198,10 +198,10 @@ def test_noisy_relays_trip_rate_within_the_claim(attacks):
                           noise_rocof=NOISE[1], relay_noise=True)
     n = int(np.ceil(3600 / 15.0 / len(base)))
     table = pd.concat([base.assign(seed=s) for s in range(n)], ignore_index=True)
-    claimed = lfc.simulate_batch(P, table.assign(trips_per_hour=1.0), duration=15.0,
+    claimed = lfc.simulate_many(P, table.assign(trips_per_hour=1.0), duration=15.0,
                                  progress=False, chunk_size=500)
     assert len(claimed) * 15.0 >= 3600 and not claimed.tripped.any()
-    unclaimed = lfc.simulate_batch(P, table.iloc[:len(base) * 2], duration=15.0,
+    unclaimed = lfc.simulate_many(P, table.iloc[:len(base) * 2], duration=15.0,
                                    progress=False)
     assert unclaimed.tripped.any()
 

@@ -13,7 +13,7 @@ from lfc.filters import SafetyFilter
 from lfc.model import LFCParams
 from lfc.relays import RelaySettings
 from lfc.signals import Step
-from lfc.simulate import simulate
+from lfc.run import simulate
 
 FilterFactory = Callable[[LFCParams], SafetyFilter | None]
 

@@ -26,7 +26,7 @@ from lfc._validate import check_multiple, check_positive
 from lfc.model import LFCParams, discretize
 from lfc.relays import RelaySettings
 from lfc.signals import Step
-from lfc.simulate import simulate
+from lfc.run import simulate
 
 
 def no_scc_threshold(params: LFCParams, relays: RelaySettings, *, tol: float = 1e-4,

@@ -4,7 +4,7 @@ closest to tripping a relay.
 Severity of a run: ``max(peak |ROCOF| / rocof_limit, peak |Δω̂| / F)`` (≥ 1
 means a measured output reached a relay setting; ROCOF trips at once, OF2/UF2
 after 160 ms).  Both searches evaluate a whole population of attacks per
-generation with :func:`lfc.simulate_batch` (``vectorized=True`` in scipy's
+generation with :func:`lfc.simulate_many` (``vectorized=True`` in scipy's
 ``differential_evolution``):
 
 * :func:`family_search`: over the parameters of one waveform family
@@ -15,7 +15,7 @@ generation with :func:`lfc.simulate_batch` (``vectorized=True`` in scipy's
 * :func:`coordinated_search`: an interconnected grid (:mod:`lfc.multiarea`),
   one family's parameters chosen separately for every area at once (a
   coordinated attack; families also on the ACE each area's AGC integrates),
-  severity the worst over the areas, with :func:`lfc.simulate_multiarea_batch`.
+  severity the worst over the areas, with :func:`lfc.simulate_many`.
 
 Both can search the plant and the noise too (``Search``): each attack's plant
 anywhere in a box around the design model (M, D, τ_G, τ_T, R within
@@ -32,13 +32,14 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import differential_evolution
 
-from lfc.batch import scenario_signal, simulate_batch
+from lfc.batch import scenario_signal
 from lfc.experiments.scenarios import ATTACK_START
 from lfc.filters.certified import BOX
 from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams
 from lfc.relays import RelaySettings
-from lfc.simulate_multiarea import area_filter, simulate_multiarea_batch
+from lfc.run import simulate_many
+from lfc.simulate_multiarea import area_filter
 
 # family -> (channel, waveform, bounds of (amplitude, freq_hz)); one bound: freq unused
 FAMILIES = {
@@ -151,14 +152,14 @@ def _search(table_of, n_attack, bounds, params, relays, duration, seed, maxiter,
         return table_of(theta[:n_attack]).assign(**search.columns(params, theta[n_attack:]))
 
     def objective(theta: np.ndarray) -> np.ndarray:
-        res = simulate_batch(params, table(theta), duration=duration, relays=relays,
+        res = simulate_many(params, table(theta), duration=duration, relays=relays,
                              chunk_size=max(1, -(-theta.shape[1] // 2)), progress=False)
         return -severity(res, relays)
 
     sol = differential_evolution(objective, list(bounds) + extra, seed=seed, maxiter=maxiter,
                                  popsize=popsize, vectorized=True, updating="deferred",
                                  polish=False, tol=0, integrality=integrality)
-    best = simulate_batch(params, table(sol.x[:, None]), duration=duration, relays=relays,
+    best = simulate_many(params, table(sol.x[:, None]), duration=duration, relays=relays,
                           progress=False)
     return sol.x, float(severity(best, relays)[0]), best.iloc[0]
 
@@ -216,7 +217,7 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
     every area at once (an area may get amplitude 0: single-area attacks are
     included), maximizing the worst :func:`severity` over the areas.
 
-    ``filters`` is :func:`lfc.simulate_multiarea`'s ``{area: "paper" |
+    ``filters`` is :func:`lfc.simulate`'s ``{area: "paper" |
     "certified" | SafetyFilter}``, built once for the controller period
     ``control_period`` (s).  Returns the family, the worst severity, the area it
     is reached in, whether any area tripped and the attack per area.
@@ -236,7 +237,7 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
             duration)} for a in range(n)}
 
     def run(thetas: np.ndarray) -> pd.DataFrame:
-        out = simulate_multiarea_batch(
+        out = simulate_many(
             params, [{"attacks": attacks(th), "filters": filters} for th in thetas.T],
             duration=duration, relays=relays, jobs=jobs, control_period=control_period)
         out["severity"] = severity(out, relays)

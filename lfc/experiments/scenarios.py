@@ -28,7 +28,8 @@ from typing import Callable
 
 from lfc.model import LFCParams
 from lfc.relays import RelaySettings
-from lfc.simulate import SimResult, simulate
+from lfc.run import simulate
+from lfc.simulate import SimResult
 
 PLANTS = ("linear", "testbed")   # single-area chapters: the linear model, the ANDES microgrid
 # Notebook 09 runs on all three: the linear model; on ANDES "testbed" is Kundur's two-area

@@ -1,6 +1,6 @@
 """Scenario tables for the attack-surface maps and the α–T_s trade-off.
 
-Each function returns a table for :func:`lfc.simulate_batch` (one row per
+Each function returns a table for :func:`lfc.simulate_many` (one row per
 scenario; ``alpha`` NaN means no SCC).  All attacks and load steps start at
 ``lfc.experiments.scenarios.ATTACK_START``.
 """

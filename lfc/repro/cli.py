@@ -53,7 +53,7 @@ def _parser() -> argparse.ArgumentParser:
     sw.add_argument("--out", type=Path, default=None,
                     help="default build/sweeps/<notebook name>")
     sw.add_argument("--dask", metavar="ADDRESS", help="run on a Dask scheduler at ADDRESS")
-    bt = sub.add_parser("batch", help="simulate a scenario table (CSV) with simulate_batch")
+    bt = sub.add_parser("batch", help="simulate a scenario table (CSV) with simulate_many")
     bt.add_argument("scenarios", type=Path, help="CSV, one row per scenario (see lfc.batch)")
     bt.add_argument("--duration", type=float, required=True, help="simulated time (s)")
     bt.add_argument("--out", type=Path, required=True,
@@ -87,7 +87,7 @@ def _executor(address: str | None):
 def _batch(args) -> int:
     import pandas as pd
 
-    from lfc.batch import simulate_batch
+    from lfc.run import simulate_many
     from lfc.model import LFCParams
     if not args.scenarios.is_file():
         raise ValueError(f"scenario table not found (or not a file): {args.scenarios}")
@@ -95,7 +95,7 @@ def _batch(args) -> int:
         scenarios = pd.read_csv(args.scenarios)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as err:
         raise ValueError(f"cannot read the scenario table {args.scenarios}: {err}") from err
-    table = simulate_batch(LFCParams(), scenarios, duration=args.duration,
+    table = simulate_many(LFCParams(), scenarios, duration=args.duration,
                            chunk_size=args.chunk_size, out=args.out / "chunks",
                            executor=_executor(args.dask))
     table.to_csv(args.out / "results.csv", index=False)

@@ -5,7 +5,7 @@ The SCC keeps its linear design model (as in the paper); only the plant
 changes.  :func:`simulate_testbed` takes the same arguments as
 :func:`lfc.simulate` (plus a fault) and returns the same
 :class:`~lfc.simulate.SimResult`; :func:`simulate_grid` takes those of
-:func:`lfc.simulate_multiarea` (plus the grid, a :class:`GridCase`) and returns
+:func:`lfc.simulate` (a grid) (plus the grid, a :class:`GridCase`) and returns
 its :class:`~lfc.MultiAreaResult`.
 """
 

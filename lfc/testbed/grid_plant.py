@@ -1,5 +1,5 @@
 """AGC and a filter at every area of an interconnected grid on ANDES:
-:func:`simulate_grid`, the testbed's :func:`lfc.simulate_multiarea`.
+:func:`simulate_grid`, the testbed's :func:`lfc.simulate` (a grid).
 
 ANDES integrates the grid (:mod:`lfc.testbed.grid`: Kundur's two-area system
 or the IEEE 39-bus system); before every step it calls back into
@@ -48,8 +48,7 @@ import numpy as np
 import pandas as pd
 
 from lfc._validate import check_multiple, check_positive
-from lfc.engine import GeneratorSide, sample_signal
-from lfc.engine_multiarea import check_area_keys, check_attacks
+from lfc.engine import GeneratorSide, check_area_keys, check_attacks, sample_signal
 from lfc.multiarea import MultiAreaParams
 from lfc.relays import RelayBank, RelaySettings
 from lfc.simulate_multiarea import MultiAreaResult, area_filter, multiarea_result
@@ -65,7 +64,7 @@ def simulate_grid(params: MultiAreaParams, *, duration: float,
                     stop_on_trip: bool = False, feedforward: bool = True,
                     case: GridCase | None = None) -> MultiAreaResult:
     """Simulate an interconnected grid on ANDES with AGC and filters; the
-    arguments and result of :func:`lfc.simulate_multiarea`, plus the ones below.
+    arguments and result of :func:`lfc.simulate` (a grid), plus the ones below.
 
     Parameters
     ----------

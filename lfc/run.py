@@ -1,0 +1,165 @@
+"""The two entry points: :func:`simulate` (one scenario, a trace) and
+:func:`simulate_many` (a table of scenarios, one row of metrics each).
+
+Both take the plant first, and the plant decides what a scenario is:
+
+=========================  ==========================================  ===========================
+plant                      ``simulate`` keywords, result               ``simulate_many`` scenarios
+=========================  ==========================================  ===========================
+``LFCParams``              ``pc_attack``, ``wref_attack``, ``load``,   a DataFrame, one row each
+                           ``scc``, ... → ``SimResult``                (``lfc.batch``)
+``MultiAreaParams``        ``attacks``, ``loads``, ``filters``, ...    a list of dicts of those
+                           → ``MultiAreaResult``                       keywords
+``MicrogridCase`` (ANDES)  as ``LFCParams``, plus ``design``, ``fault``  —
+``GridCase`` (ANDES)       as ``MultiAreaParams``, plus ``design``     a list of dicts
+=========================  ==========================================  ===========================
+
+On ANDES the filters and the AGC keep a linear design model, as in the paper:
+``design`` (default: the model fitted to the case, cached on disk).
+"""
+
+from __future__ import annotations
+
+import warnings
+
+from lfc.model import LFCParams
+from lfc.multiarea import MultiAreaParams
+
+__all__ = ["simulate", "simulate_many"]
+
+PLANTS = "an LFCParams, a MultiAreaParams, an lfc.testbed.MicrogridCase or an lfc.testbed.GridCase"
+
+
+def _testbed_kind(plant) -> str | None:
+    """``"microgrid"`` or ``"grid"`` for a testbed case, else None (ANDES is only
+    imported when a testbed case is given)."""
+    module = type(plant).__module__
+    if not module.startswith("lfc.testbed"):
+        return None
+    from lfc.testbed import GridCase, MicrogridCase
+    if isinstance(plant, MicrogridCase):
+        return "microgrid"
+    if isinstance(plant, GridCase):
+        return "grid"
+    return None
+
+
+def _bad_plant(plant) -> ValueError:
+    return ValueError(f"plant must be {PLANTS}, got {type(plant).__name__}")
+
+
+def simulate(plant, *, duration: float, design=None, **kwargs):
+    """Simulate one scenario from equilibrium, with a trace.
+
+    Parameters
+    ----------
+    plant : LFCParams, MultiAreaParams, MicrogridCase or GridCase
+        The plant (module docstring).
+    duration : float
+        Simulated time (s), > 0.
+    design : LFCParams or MultiAreaParams, optional
+        ANDES cases only: the design model of the generator side (default the
+        model fitted to the case).
+    **kwargs
+        The scenario: for an area, :func:`lfc.simulate.simulate_area`'s
+        keywords; for a grid, :func:`lfc.simulate_multiarea.simulate_grid_linear`'s;
+        on ANDES also :func:`lfc.testbed.simulate_testbed`'s or
+        :func:`lfc.testbed.simulate_grid`'s.
+
+    Returns
+    -------
+    SimResult or MultiAreaResult
+    """
+    if design is not None and _testbed_kind(plant) is None:
+        raise ValueError("design is for ANDES cases only; a linear plant is its own design "
+                         "model (give a filter built on another model to study mismatch)")
+    if isinstance(plant, LFCParams):
+        from lfc.simulate import simulate_area
+        return simulate_area(plant, duration=duration, **kwargs)
+    if isinstance(plant, MultiAreaParams):
+        from lfc.simulate_multiarea import simulate_grid_linear
+        return simulate_grid_linear(plant, duration=duration, **kwargs)
+    kind = _testbed_kind(plant)
+    if kind == "microgrid":
+        from lfc.testbed import simulate_testbed
+        from lfc.testbed.fit import design_model
+        return simulate_testbed(design if design is not None else design_model(plant),
+                                duration=duration, case=plant, **kwargs)
+    if kind == "grid":
+        from lfc.testbed import grid_design, simulate_grid
+        return simulate_grid(design if design is not None else grid_design(plant),
+                             duration=duration, case=plant, **kwargs)
+    raise _bad_plant(plant)
+
+
+def simulate_many(plant, scenarios, *, duration: float, design=None, **kwargs):
+    """Simulate many scenarios; metrics only on the linear plants.
+
+    Parameters
+    ----------
+    plant : LFCParams, MultiAreaParams or GridCase
+        The plant (module docstring).
+    scenarios : DataFrame or list of dict
+        For an area, a table (:func:`lfc.batch.simulate_table`: one row per
+        scenario); for a grid, a list of dicts of :func:`simulate`'s keywords.
+    duration : float
+        Simulated time (s), > 0.
+    design : MultiAreaParams, optional
+        ``GridCase`` only (default the model fitted to the case).
+    **kwargs
+        For an area: ``relays``, ``dt``, ``control_period``, ``executor``,
+        ``chunk_size``, ``out``, ``progress``; for a grid: ``relays``, ``dt``,
+        ``control_period``, ``jobs``; for a ``GridCase``: ``jobs``, ``progress``
+        and keywords every scenario shares.
+
+    Returns
+    -------
+    DataFrame or list of MultiAreaResult
+        An area: ``scenarios`` with the metric columns added; a grid: one row
+        per scenario and area; a ``GridCase``: one result per scenario.
+    """
+    if design is not None and _testbed_kind(plant) is None:
+        raise ValueError("design is for ANDES cases only")
+    if isinstance(plant, LFCParams):
+        from lfc.batch import simulate_table
+        return simulate_table(plant, scenarios, duration=duration, **kwargs)
+    if isinstance(plant, MultiAreaParams):
+        from lfc.simulate_multiarea import simulate_grid_table
+        return simulate_grid_table(plant, scenarios, duration=duration, **kwargs)
+    kind = _testbed_kind(plant)
+    if kind == "grid":
+        from lfc.testbed import grid_design, simulate_grid_batch
+        return simulate_grid_batch(design if design is not None else grid_design(plant),
+                                   scenarios, duration=duration, case=plant, **kwargs)
+    if kind == "microgrid":
+        raise ValueError("simulate_many does not run the ANDES microgrid (one scenario per "
+                         "call: simulate(MicrogridCase(), ...))")
+    raise _bad_plant(plant)
+
+
+# -- the names of release 0.3, for one release --------------------------------------------
+def _deprecated(old: str, new: str) -> None:
+    warnings.warn(f"lfc.{old} is deprecated and will be removed in 0.5; use lfc.{new} "
+                  f"(the same keywords)", DeprecationWarning, stacklevel=3)
+
+
+def simulate_batch(params: LFCParams, scenarios, **kwargs):
+    """Deprecated: :func:`simulate_many` of an ``LFCParams`` plant."""
+    _deprecated("simulate_batch", "simulate_many")
+    return simulate_many(params, scenarios, **kwargs)
+
+
+def simulate_multiarea(params: MultiAreaParams, **kwargs):
+    """Deprecated: :func:`simulate` of a ``MultiAreaParams`` plant."""
+    _deprecated("simulate_multiarea", "simulate")
+    if not isinstance(params, MultiAreaParams):
+        raise ValueError(f"params must be a MultiAreaParams, got {type(params).__name__}")
+    return simulate(params, **kwargs)
+
+
+def simulate_multiarea_batch(params: MultiAreaParams, scenarios, **kwargs):
+    """Deprecated: :func:`simulate_many` of a ``MultiAreaParams`` plant."""
+    _deprecated("simulate_multiarea_batch", "simulate_many")
+    if not isinstance(params, MultiAreaParams):
+        raise ValueError(f"params must be a MultiAreaParams, got {type(params).__name__}")
+    return simulate_many(params, scenarios, **kwargs)

@@ -1,0 +1,74 @@
+"""The two entry points: simulate and simulate_many take any plant, and the names of
+0.3 are deprecated aliases that call them."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import lfc
+
+P, TWO = lfc.LFCParams(), lfc.MultiAreaParams.two_area()
+ATTACK = lfc.Sinusoid(0.5, 1.0, start=1.0)
+
+
+def test_simulate_dispatches_on_the_plant():
+    area = lfc.simulate(P, duration=2.0, pc_attack=ATTACK)
+    grid = lfc.simulate(TWO, duration=2.0, attacks={0: {"pc": ATTACK}})
+    assert isinstance(area, lfc.SimResult) and isinstance(grid, lfc.MultiAreaResult)
+    one = lfc.simulate(lfc.MultiAreaParams(areas=(P,)), duration=2.0,
+                       attacks={0: {"pc": ATTACK}}, feedforward=False)
+    pd.testing.assert_frame_equal(one.areas[0].trace[area.trace.columns], area.trace)
+
+
+def test_simulate_many_dispatches_on_the_plant():
+    table = pd.DataFrame({"waveform": ["sinusoid"], "channel": ["pc"], "amplitude": [0.5],
+                          "freq_hz": [1.0], "start": [1.0], "alpha": [np.nan], "Ts": [0.25]})
+    rows = lfc.simulate_many(P, table, duration=2.0, progress=False)
+    grid = lfc.simulate_many(TWO, [{"attacks": {0: {"pc": ATTACK}}}], duration=2.0)
+    assert list(grid.area) == [0, 1] and len(rows) == 1
+    assert rows.max_abs_rocof_meas[0] == lfc.simulate(P, duration=2.0, pc_attack=ATTACK)\
+        .metrics()["max_abs_rocof_meas"]
+
+
+@pytest.mark.parametrize("plant", ["kundur", None, 3.0])
+def test_an_unknown_plant_is_a_clear_error(plant):
+    with pytest.raises(ValueError, match="plant must be an LFCParams, a MultiAreaParams, an "
+                                         "lfc.testbed.MicrogridCase or an lfc.testbed.GridCase"):
+        lfc.simulate(plant, duration=1.0)
+    with pytest.raises(ValueError, match="plant must be"):
+        lfc.simulate_many(plant, [], duration=1.0)
+
+
+def test_design_is_for_andes_cases_only():
+    with pytest.raises(ValueError, match="design is for ANDES cases only"):
+        lfc.simulate(P, duration=1.0, design=P)
+
+
+@pytest.mark.parametrize("old, args, new", [
+    ("simulate_multiarea", (TWO,), lambda: lfc.simulate(TWO, duration=1.0)),
+    ("simulate_multiarea_batch", (TWO, [{}]), lambda: lfc.simulate_many(TWO, [{}],
+                                                                         duration=1.0)),
+])
+def test_old_names_warn_and_call_the_new_ones(old, args, new):
+    with pytest.warns(DeprecationWarning, match=f"lfc.{old} is deprecated"):
+        got = getattr(lfc, old)(*args, duration=1.0)
+    want = new()
+    if isinstance(want, pd.DataFrame):
+        pd.testing.assert_frame_equal(got, want)
+    else:
+        pd.testing.assert_frame_equal(got.trace, want.trace)
+
+
+def test_simulate_batch_warns_and_calls_simulate_many():
+    table = pd.DataFrame({"waveform": ["step"], "channel": ["load"], "amplitude": [0.1],
+                          "freq_hz": [0.0], "start": [0.5], "alpha": [20.0], "Ts": [0.25]})
+    with pytest.warns(DeprecationWarning, match="lfc.simulate_batch is deprecated"):
+        got = lfc.simulate_batch(P, table, duration=1.0, progress=False)
+    pd.testing.assert_frame_equal(got, lfc.simulate_many(P, table, duration=1.0,
+                                                         progress=False))
+
+
+def test_old_grid_names_still_refuse_a_single_area():
+    with pytest.warns(DeprecationWarning), \
+            pytest.raises(ValueError, match="params must be a MultiAreaParams"):
+        lfc.simulate_multiarea(P, duration=1.0)
