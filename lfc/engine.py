@@ -1,17 +1,19 @@
 """The closed loop, compiled once: the linear plant, the generator side and the relays.
 
-One engine advances N scenarios (one after another, each in registers):
+One engine advances N scenarios of one grid (:mod:`lfc.multiarea`; a single
+area is a grid of one area and no tie-line), one after another:
 
-* every control period ``control_period`` the **generator side** runs
+* every control period ``control_period`` each area's **generator side** runs
   (:func:`generator_period`): measurement noise on ``(dw_meas, rocof_meas)``,
   the Kalman estimate (or the state as it is), the incoming command
   ``u_ref = integrator + attack on P_c``, the safety filter (any method of
-  :mod:`lfc.filters`, through its compiled dispatcher), the local integral
-  controller ``d dPc/dt = k_i (dw_ref - dw_meas)`` and the estimator's
-  prediction; the command is held until the next period;
-* every plant step ``dt`` the plant advances exactly (zero-order hold) and the
-  OF2, UF2 and ROCOF relays (:func:`lfc.relays.relay_sample`) see the
-  measured signals.
+  :mod:`lfc.filters`, through its compiled dispatcher), the AGC on the area
+  control error (for one area the local integral controller ``d dPc/dt =
+  k_i (dw_ref - dw_meas)``) and the estimator's prediction; the command is
+  held until the next period;
+* every plant step ``dt`` the plant advances exactly (zero-order hold) and
+  each area's OF2, UF2 and ROCOF relays (:func:`lfc.relays.relay_sample`) see
+  its measured signals (through noise too, with ``relay_noise``).
 
 :func:`lfc.simulate` is N = 1 with a trace; :func:`lfc.simulate_many` is N
 large with metrics only; the ANDES testbed runs :class:`GeneratorSide` (the

@@ -72,3 +72,18 @@ def test_old_grid_names_still_refuse_a_single_area():
     with pytest.warns(DeprecationWarning), \
             pytest.raises(ValueError, match="params must be a MultiAreaParams"):
         lfc.simulate_multiarea(P, duration=1.0)
+
+
+def test_simulate_runs_the_andes_cases_with_their_fitted_design_models():
+    pytest.importorskip("andes")
+    from lfc.testbed import GridCase, MicrogridCase, grid_design, simulate_grid, simulate_testbed
+    from lfc.testbed.fit import design_model
+    micro = lfc.simulate(MicrogridCase(), duration=0.5, pc_attack=ATTACK)
+    pd.testing.assert_frame_equal(micro.trace, simulate_testbed(
+        design_model(), duration=0.5, pc_attack=ATTACK).trace)
+    case = GridCase.kundur()
+    grid = lfc.simulate(case, duration=0.3, attacks={0: {"pc": ATTACK}})
+    pd.testing.assert_frame_equal(grid.trace, simulate_grid(
+        grid_design(case), case=case, duration=0.3, attacks={0: {"pc": ATTACK}}).trace)
+    with pytest.raises(ValueError, match="does not run the ANDES microgrid"):
+        lfc.simulate_many(MicrogridCase(), [], duration=1.0)
