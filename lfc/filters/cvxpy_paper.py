@@ -31,7 +31,7 @@ import cvxpy as cp
 import numpy as np
 from scipy.linalg import expm
 
-from lfc.filters.paper import CONSTRAINTS
+from lfc.filters.base import CONSTRAINTS
 from lfc.model import LFCParams, lfc_matrices
 from lfc.relays import RelaySettings
 

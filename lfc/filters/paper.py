@@ -70,7 +70,6 @@ from lfc.model import LFCParams, discretize, lfc_matrices, output_matrix
 from lfc.relays import RelaySettings
 
 SOLVERS = ("exact", "cvxpy")
-CONSTRAINTS = ("frequency", "rocof")
 OUTSIDE_RULES = ("hold", "push")                  # E9 readings
 CONFLICT_RULES = ("slack", "rocof", "frequency")  # E10 readings
 PREDICTIONS = ("incoming", "applied")             # E5 readings
