@@ -1,21 +1,20 @@
-"""Small helpers that keep the notebooks' code cells short: results I/O, claims,
-documented deviations and the README's generated tables."""
+"""Small helpers that keep the notebooks' code cells short: results I/O, claims
+(checked against :mod:`lfc.experiments.deviations`) and the README's generated tables."""
 
 from __future__ import annotations
 
 import ast
 import json
 import re
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
+from lfc.experiments.deviations import DEVIATIONS
 from lfc.experiments.scenarios import ALL_PLANTS, PLANTS, check_plant, design_params
 from lfc.model import LFCParams
 from lfc.relays import RelaySettings
 from lfc.simulate import SimResult
 
-__all__ = ["DEVIATIONS", "PLANTS", "PLANT_LABELS", "Deviation", "check_parameters", "check_plant",
+__all__ = ["PLANTS", "PLANT_LABELS", "check_parameters", "check_plant",
            "figure_name", "markdown_table", "notebook_parameters", "readme_mismatches",
            "record_claims", "save_table", "setup", "sync_readme", "update_markdown_section",
            "write_metrics"]
@@ -98,98 +97,6 @@ def write_metrics(results_dir: str | Path, runs: dict[str, SimResult],
     path = out / "metrics.json"
     path.write_text(json.dumps(data, indent=2, sort_keys=False))
     return path
-
-
-@dataclass(frozen=True)
-class Deviation:
-    """A claim of the paper that does not hold on a plant, recognized from the run.
-
-    ``matches(metrics)`` says whether the run failed the claim in the documented
-    way (which relay, within what range); ``explain(metrics)`` says why, with the
-    run's numbers.  ``metrics`` maps each run of the notebook to its
-    :meth:`SimResult.metrics` (as in ``metrics.json``).  A failure that does not
-    match, or a documented deviation that no longer occurs, fails the notebook.
-    """
-
-    plant: str
-    claim: str
-    matches: Callable[[dict], bool]
-    explain: Callable[[dict], str]
-
-
-def _fig5_testbed_matches(m: dict) -> bool:
-    """OF2 (not another relay) trips with the SCC, the frequency within 0.01 pu of OF2."""
-    trip = m["scc"]["first_trip"] or {}
-    return trip.get("relay") == "OF2" and 0.03 < m["scc"]["max_abs_dw_meas"] <= 0.04
-
-
-def _fig5_testbed_explain(m: dict) -> str:
-    s = m["scc"]
-    return (f"the fitted design model under-predicts the testbed's frequency near the edge of "
-            f"its safe set, so the SCC's prediction leaves the set only after the frequency "
-            f"has, and outside it the default reading ('hold') only stops the prediction from "
-            f"getting worse: the frequency reaches {1 + s['max_abs_dw_meas']:.4f} pu and OF2 "
-            f"trips at {s['first_trip']['t']:.2f} s (without SCC at "
-            f"{m['no_scc']['first_trip']['t']:.2f} s)")
-
-
-def _certified_areas(m: dict, attack: str, plant: str = "") -> dict[str, dict]:
-    """Notebook 09's metrics of ``attack`` under the certified filters, by area:
-    on the notebook's plant, or with ``plant="model/"`` on the design model."""
-    prefix = f"{plant}{attack}/certified/"
-    return {k.rsplit("/", 1)[1]: v for k, v in m.items() if k.startswith(prefix)}
-
-
-def _held_not_tripped(attack: str) -> Callable[[dict], bool]:
-    """Notebook 09 on ANDES: the certified filters flagged ``outside`` under
-    ``attack`` and no area tripped."""
-    def matches(m: dict) -> bool:
-        runs = _certified_areas(m, attack).values()
-        return bool(runs) and sum(r["outside"] for r in runs) > 0 and not any(
-            r["tripped"] for r in runs)
-    return matches
-
-
-def _held_explain(attack: str) -> Callable[[dict], str]:
-    """Why, from the run: the ``outside`` counts on ANDES and on the design model
-    itself, and assumption (c) (the net disturbance's largest move in a control
-    period against ``load_bound``)."""
-    def explain(m: dict) -> str:
-        andes, model = _certified_areas(m, attack), _certified_areas(m, attack, "model/")
-
-        def counts(runs: dict) -> str:
-            return ", ".join(f"{k} {v['outside']}" for k, v in runs.items())
-
-        if any(v["outside"] for v in model.values()):
-            cause = ("the tie-line flow drifts while a command is held, which ends the "
-                     "guarantee on the fitted model itself too; ANDES not being that model "
-                     "(assumption (a)) adds the rest")
-        else:
-            cause = ("ANDES is not the fitted design model (assumption (a)): on the model "
-                     "itself no filter flags outside")
-        moves = ", ".join(f"{k} {v['disturbance_step']:.3g} pu against {v['load_bound']:.3g}"
-                          for k, v in andes.items())
-        held = all(v["disturbance_step"] <= v["load_bound"] for v in andes.values())
-        return (f"at some control samples no command was certified and the held one failed its "
-                f"re-check (control samples flagged outside on ANDES: {counts(andes)}; on the "
-                f"fitted design model itself, the linear engine with the exact state: "
-                f"{counts(model)}): {cause}. The net disturbance's largest move within a "
-                f"control period on ANDES: {moves} (assumption (c) "
-                f"{'held' if held else 'failed too'}). The filters held their command and no "
-                f"area tripped")
-    return explain
-
-
-# Shown by ``python -m lfc reproduce`` as "no (documented)" and explained in the README
-# ("Where the testbed differs").
-DEVIATIONS = (
-    Deviation("testbed", "with SCC no relay trips", _fig5_testbed_matches, _fig5_testbed_explain),
-    Deviation("testbed", "with SCC frequency stays below OF2", _fig5_testbed_matches,
-              _fig5_testbed_explain),
-    *(Deviation("testbed", f"{attack} attack: no certified filter flags outside",
-                _held_not_tripped(attack), _held_explain(attack))
-      for attack in ("single", "coordinated", "ACE")),
-)
 
 
 def record_claims(results_dir: str | Path, claims: dict[str, bool], check: bool,
