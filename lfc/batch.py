@@ -37,11 +37,12 @@ from tqdm.auto import tqdm
 
 from lfc._files import code_digest, write_atomic
 from lfc.engine import METRICS, Scenarios
-from lfc.filters import CONFLICT_RULES, METHODS, OUTSIDE_RULES, PREDICTIONS, SafetyFilter
+from lfc.filters import (CONFLICT_RULES, METHODS, OUTSIDE_RULES, PREDICTIONS, SafetyFilter,
+                         options_of)
 from lfc.model import LFCParams
 from lfc.relays import RELAY_NAMES, RelaySettings
 from lfc.signals import Chirp, Ramp, Samples, Signal, Sinusoid, Square, Step
-from lfc.simulate import check_timing
+from lfc.simulate import METRIC_KEYS, check_timing
 
 WAVEFORMS = ("sinusoid", "square", "chirp", "step", "ramp", "samples", "none")
 CHANNELS = ("pc", "wref", "load")
@@ -52,11 +53,8 @@ CHIRP_F0 = 0.1  # Hz, where every chirp starts
 PLANT = ("M", "D", "tau_g", "tau_t", "droop")   # optional columns: the row's own plant
 NOISE = ("noise_w", "noise_rocof")             # optional: measurement noise std (pu, pu/s)
 FLAGS = ("declare_noise", "relay_noise")       # optional booleans
-FILTER_COLUMNS = ("alpha", "Ts", "method", "uncertainty", "margin", "declare_noise",
-                  "trips_per_hour", *NOISE, *READINGS)  # the columns that select a filter
-BATCH_METRICS = ("tripped", "first_trip_relay", "first_trip_t", "max_abs_dw_meas",
-                 "max_abs_rocof_meas", "scc_active_fraction", "max_abs_modification",
-                 "mean_abs_modification", "alarms", "final_abs_dw_meas")
+FILTER_COLUMNS = ("method", *dict.fromkeys(c for m in METHODS for c in options_of(m).COLUMNS))
+# the columns that select a filter: each method's options declare theirs
 
 
 def scenario_signal(row: pd.Series, duration: float) -> Signal | None:
@@ -199,7 +197,7 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
 def run_chunk(params: LFCParams, scenarios: pd.DataFrame, duration: float,
               relays: RelaySettings, dt: float, control_period: float) -> pd.DataFrame:
     """Simulate every row of ``scenarios`` with the engine; return the metric
-    columns ``BATCH_METRICS`` with the same index."""
+    columns ``METRIC_KEYS`` with the same index."""
     check_timing(duration, dt, control_period)
     sc = Scenarios(params, duration=duration, dt=dt, control_period=control_period,
                    relays=relays)
@@ -217,7 +215,7 @@ def run_chunk(params: LFCParams, scenarios: pd.DataFrame, duration: float,
 
 
 def metrics_frame(metrics: np.ndarray, n_ctrl: int, index) -> pd.DataFrame:
-    """The engine's ``metrics`` (N, len(METRICS)) as the columns ``BATCH_METRICS``
+    """The engine's ``metrics`` (N, len(METRICS)) as the columns ``METRIC_KEYS``
     (``n_ctrl`` control periods per scenario, ``index`` the rows' labels)."""
     m = dict(zip(METRICS, np.asarray(metrics).T))
     tripped = ~np.isnan(m["first_trip_t"])
@@ -231,8 +229,8 @@ def metrics_frame(metrics: np.ndarray, n_ctrl: int, index) -> pd.DataFrame:
         "scc_active_fraction": m["active"] / n_ctrl,
         "max_abs_modification": m["max_abs_modification"],
         "mean_abs_modification": m["sum_abs_modification"] / n_ctrl,
-        "alarms": m["alarms"].astype(int), "final_abs_dw_meas": m["final_abs_dw_meas"]},
-        index=index)
+        "alarms": m["alarms"].astype(int), "final_abs_dw_meas": m["final_abs_dw_meas"],
+        "outside": m["outside"].astype(int)}, columns=list(METRIC_KEYS), index=index)
 
 
 def _plant(params: LFCParams, row: dict) -> LFCParams:
@@ -251,18 +249,7 @@ def _filter(params: LFCParams, relays: RelaySettings, row: dict) -> SafetyFilter
     if pd.isna(row["alpha"]):
         return None
     method = row.get("method", "paper")
-    if method == "paper":
-        options = {"alpha": float(row["alpha"]), "Ts": float(row["Ts"]),
-                   **{c: row[c] for c in READINGS if c in row and pd.notna(row[c])}}
-    else:
-        noise = tuple(float(row.get(c, 0.0)) for c in NOISE)
-        declared = bool(row.get("declare_noise", False)) and any(noise)
-        box = row.get("uncertainty")
-        rate, margin = row.get("trips_per_hour"), row.get("margin")
-        options = {"uncertainty": 0.0 if box is None or pd.isna(box) else float(box),
-                   "margin": 0.0 if margin is None or pd.isna(margin) else float(margin),
-                   "noise_std": noise if declared else None,
-                   "trips_per_hour": None if rate is None or pd.isna(rate) else float(rate)}
+    options = options_of(method).from_columns(row)
     key = (params, relays, method, tuple(sorted(options.items())))
     if key not in _BUILT:
         if len(_BUILT) >= 64:
@@ -321,7 +308,7 @@ def simulate_table(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
     Returns
     -------
     DataFrame
-        ``scenarios`` with the columns ``BATCH_METRICS`` added (the SCC
+        ``scenarios`` with the columns ``METRIC_KEYS`` added (the SCC
         metrics are 0 without SCC; ``first_trip_relay`` None and
         ``first_trip_t`` NaN without a trip).
     """
@@ -351,7 +338,7 @@ def simulate_table(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
             results[i] = metrics
             bar.update(len(metrics))
     if not chunks:
-        return scenarios.assign(**{c: pd.Series(dtype=float) for c in BATCH_METRICS})
+        return scenarios.assign(**{c: pd.Series(dtype=float) for c in METRIC_KEYS})
     metrics = pd.concat([results[i] for i in range(len(chunks))])
     metrics["first_trip_relay"] = metrics["first_trip_relay"].astype(object).where(
         metrics["tripped"].astype(bool), None)
@@ -424,7 +411,7 @@ def _read_chunk(path: Path, rows: int) -> pd.DataFrame | None:
     if hashlib.sha256(body.encode()).hexdigest() != fields["sha256"]:
         return damaged("checksum mismatch: cut short or changed")
     metrics = pd.read_csv(io.StringIO(body), index_col=0)
-    if len(metrics) != rows or list(metrics.columns) != list(BATCH_METRICS):
+    if len(metrics) != rows or list(metrics.columns) != list(METRIC_KEYS):
         return damaged("unexpected rows or columns")
     return metrics
 

@@ -27,8 +27,11 @@ from lfc.relays import RELAY_NAMES, RelaySettings
 from lfc.signals import Signal
 
 __all__ = ["ALARM_COLUMNS", "METRIC_KEYS", "SimResult", "check_timing", "simulate_area"]
-METRIC_KEYS = ("tripped", "first_trip", "max_abs_dw_meas", "max_abs_rocof_meas",
-               "scc_active_fraction", "max_abs_modification", "alarms")
+METRIC_KEYS = ("tripped", "first_trip_relay", "first_trip_t", "max_abs_dw_meas",
+               "max_abs_rocof_meas", "scc_active_fraction", "max_abs_modification",
+               "mean_abs_modification", "alarms", "final_abs_dw_meas", "outside")
+"""The metrics of a run, defined once: :meth:`SimResult.metrics` and every row of
+:func:`lfc.simulate_many` (the compiled loop's accumulators) have these keys."""
 ALARM_COLUMNS = ("t", "u_ref", "u", "binding", "h_freq", "h_rocof", "margin_freq",
                  "margin_rocof", "infeasible", "outside", "invalid_input", "solver_error",
                  "reason")
@@ -43,11 +46,13 @@ class SimResult:
     trace : DataFrame
         Every plant step: ``t`` (s), ``pc_ref`` and ``pc`` (incoming and applied
         command, pu), the states ``dPg, dPm, dw, dw_meas`` (pu) and
-        ``rocof_meas`` (pu/s), ``p_load`` (pu), ``wref`` (pu) and
-        ``scc_active`` (bool).
+        ``rocof_meas`` (pu/s), ``p_load`` (pu), ``wref`` (pu), ``scc_active``
+        (bool) and the filter's barrier values ``h_freq`` (pu^2) and ``h_rocof``
+        ((pu/s)^2) at the last control sample (NaN without a filter).
     controls : DataFrame
-        Every controller sample: ``t``, ``pc_ref``, ``pc``, ``scc_active``, and
-        the filter's view of the state ``dw_hat``, ``rocof_hat`` and ``p_load_hat``.
+        Every controller sample: ``t``, ``pc_ref``, ``pc``, ``scc_active``, the
+        filter's view of the state ``dw_hat``, ``rocof_hat`` and ``p_load_hat``,
+        and its barrier values ``h_freq``, ``h_rocof`` (:class:`FilterInfo`).
     trips : DataFrame
         Every relay trip: ``relay`` and ``t`` (s).
     alarms : DataFrame
@@ -69,21 +74,40 @@ class SimResult:
         default_factory=lambda: pd.DataFrame(columns=["line", "trip_t", "open_t"]))
 
     def metrics(self) -> dict:
-        """Summary numbers (JSON-serializable), keys ``METRIC_KEYS``."""
-        first = None
-        if len(self.trips):
-            row = self.trips.sort_values("t", kind="stable").iloc[0]
-            first = {"relay": str(row["relay"]), "t": float(row["t"])}
+        """Summary numbers (JSON-serializable), keys ``METRIC_KEYS``: the values
+        of a :func:`lfc.simulate_many` row of the same scenario (where the row
+        has NaN, no trip, this has None).
+
+        ``tripped``, ``first_trip_relay``, ``first_trip_t`` (s): the first relay
+        trip; ``max_abs_dw_meas`` (pu), ``max_abs_rocof_meas`` (pu/s) over the
+        trace, ``final_abs_dw_meas`` (pu) at its end; ``scc_active_fraction``
+        and ``max_abs_modification``, ``mean_abs_modification`` (pu,
+        ``|pc - pc_ref|``) over the control samples; ``alarms`` (control
+        samples that alarmed), ``outside`` (of them, flagged ``outside``).
+        """
+        first = self.first_trip or {"relay": None, "t": None}
         mod = (self.controls["pc"] - self.controls["pc_ref"]).abs()
         return {
             "tripped": bool(len(self.trips) > 0),
-            "first_trip": first,
+            "first_trip_relay": first["relay"],
+            "first_trip_t": first["t"],
             "max_abs_dw_meas": float(self.trace["dw_meas"].abs().max()),
             "max_abs_rocof_meas": float(self.trace["rocof_meas"].abs().max()),
             "scc_active_fraction": float(self.controls["scc_active"].mean()),
             "max_abs_modification": float(mod.max()) if len(mod) else 0.0,
+            "mean_abs_modification": float(mod.mean()) if len(mod) else 0.0,
             "alarms": int(len(self.alarms)),
+            "final_abs_dw_meas": float(abs(self.trace["dw_meas"].iat[-1])),
+            "outside": int(self.alarms["outside"].sum()),
         }
+
+    @property
+    def first_trip(self) -> dict | None:
+        """The first relay trip, ``{"relay": name, "t": s}``, or None."""
+        if not len(self.trips):
+            return None
+        row = self.trips.sort_values("t", kind="stable").iloc[0]
+        return {"relay": str(row["relay"]), "t": float(row["t"])}
 
     def save(self, directory: str | Path) -> Path:
         """Write ``trace.csv``, ``controls.csv``, ``trips.csv``, ``alarms.csv``,
@@ -207,9 +231,12 @@ def result(trace: pd.DataFrame, tc: np.ndarray, ctrl: np.ndarray, trips: pd.Data
     trace.insert(2, "pc", c["u"].to_numpy()[held])
     trace["wref"] = c["wref"].to_numpy()[held]
     trace["scc_active"] = active[held]
+    trace["h_freq"] = c["h_freq"].to_numpy()[held]
+    trace["h_rocof"] = c["h_rocof"].to_numpy()[held]
     controls = pd.DataFrame({"t": tc[:n], "pc_ref": c["u_ref"], "pc": c["u"],
                              "scc_active": active, "dw_hat": c["dw_hat"],
-                             "rocof_hat": c["rocof_hat"], "p_load_hat": c["p_load_hat"]})
+                             "rocof_hat": c["rocof_hat"], "p_load_hat": c["p_load_hat"],
+                             "h_freq": c["h_freq"], "h_rocof": c["h_rocof"]})
     alarm = (flags & ALARM_BITS) != 0
     a = c[alarm]
     fa = flags[alarm]

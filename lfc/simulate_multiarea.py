@@ -288,9 +288,9 @@ def simulate_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
     Returns
     -------
     DataFrame
-        One row per scenario and area: ``scenario``, ``area`` and the columns
-        of :data:`lfc.batch.BATCH_METRICS`, plus ``outside`` (control samples
-        at which the area's filter flagged that its assumptions failed).
+        One row per scenario and area: ``scenario``, ``area`` and the metrics
+        :data:`lfc.simulate.METRIC_KEYS` (the keys of
+        ``simulate(...).metrics()[area]``, with the same values).
     """
     check_timing(duration, dt, control_period)
     if not (isinstance(jobs, int) and jobs >= 1):
@@ -334,5 +334,4 @@ def simulate_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
     out = metrics_frame(flat, n_ctrl, pd.RangeIndex(len(flat)))
     out.insert(0, "area", np.tile(np.arange(n_a), len(rows)))
     out.insert(0, "scenario", np.repeat(np.arange(len(rows)), n_a))
-    out["outside"] = flat[:, METRICS.index("outside")].astype(int)
     return out

@@ -160,7 +160,7 @@ def test_invalid_input_holds_the_last_certified_command():
 
 @pytest.mark.parametrize("kwargs, message", [
     ({"method": "robust"}, "method must be one of"),
-    ({"method": "certified", "solver": "cvxpy"}, "takes no such option"),
+    ({"method": "certified", "solver": "cvxpy"}, "option of method 'paper', not of 'certified'"),
     ({"method": "certified", "margin": 1.0}, "margin must be in"),
     ({"method": "certified", "load_bound": -0.1}, "load_bound"),
     ({"method": "certified", "tightening": 0.5}, "tightening"),

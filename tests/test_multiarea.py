@@ -318,7 +318,7 @@ def test_finding_the_hold_recheck_fails_under_tie_drift_so_the_guarantee_can_end
     assert not r.tripped
     blind = lfc.simulate(THREE, duration=15.0, attacks=attacks, filters=FILTERS3,
                                    feedforward=False)
-    assert blind.metrics()[2]["first_trip"]["relay"] == "ROCOF"
+    assert blind.metrics()[2]["first_trip_relay"] == "ROCOF"
 
 
 # Kundur's two-area system as fitted on ANDES (lfc.testbed.grid_design, rounded): heavy

@@ -20,6 +20,7 @@ from lfc import batch
 from lfc import simulate_many
 from lfc.batch import ChunkWarning
 from lfc.repro.cli import main
+from lfc.simulate import METRIC_KEYS
 
 P = lfc.LFCParams()
 ROW = {"waveform": "sinusoid", "channel": "pc", "amplitude": 0.5, "freq_hz": 1.0,
@@ -128,7 +129,7 @@ def test_property_damaged_chunk_files_never_give_a_wrong_result(tmp_path_factory
     stored metrics exactly, or nothing (and a warning) — never other numbers."""
     folder = tmp_path_factory.mktemp("chunk")
     metrics = pd.DataFrame({c: np.arange(3, dtype=float) * (i + 1)
-                            for i, c in enumerate(batch.BATCH_METRICS)})
+                            for i, c in enumerate(METRIC_KEYS)})
     path = folder / "chunk.csv"
     batch._write_chunk(path, metrics)
     raw = bytearray(path.read_bytes())

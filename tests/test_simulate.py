@@ -11,10 +11,13 @@ P = LFCParams()
 
 def test_equilibrium_stays_put():
     r = simulate(P, duration=2)
-    assert (r.trace.drop(columns="t").to_numpy() == 0).all()
-    assert r.metrics() == {"tripped": False, "first_trip": None, "max_abs_dw_meas": 0.0,
-                           "max_abs_rocof_meas": 0.0, "scc_active_fraction": 0.0,
-                           "max_abs_modification": 0.0, "alarms": 0}
+    assert (r.trace.drop(columns=["t", "h_freq", "h_rocof"]).to_numpy() == 0).all()
+    assert r.trace[["h_freq", "h_rocof"]].isna().all().all()   # no filter, no barrier
+    assert r.metrics() == {"tripped": False, "first_trip_relay": None, "first_trip_t": None,
+                           "max_abs_dw_meas": 0.0, "max_abs_rocof_meas": 0.0,
+                           "scc_active_fraction": 0.0, "max_abs_modification": 0.0,
+                           "mean_abs_modification": 0.0, "alarms": 0,
+                           "final_abs_dw_meas": 0.0, "outside": 0}
 
 
 def test_trace_grid_and_command_hold():
@@ -47,8 +50,8 @@ def test_wref_attack_moves_frequency_reference():
 def test_stop_on_trip_truncates_at_trip():
     full = simulate(P, duration=5, pc_attack=Sinusoid(1.0, 1.0, start=1))
     stop = simulate(P, duration=5, pc_attack=Sinusoid(1.0, 1.0, start=1), stop_on_trip=True)
-    t_trip = full.metrics()["first_trip"]["t"]
-    assert stop.metrics()["first_trip"] == full.metrics()["first_trip"]
+    t_trip = full.first_trip["t"]
+    assert stop.first_trip == full.first_trip
     assert stop.trace.t.iloc[-1] == pytest.approx(t_trip)
     assert len(stop.trips) == 1 and len(full.trips) > 1
     np.testing.assert_array_equal(stop.trace.rocof_meas, full.trace.rocof_meas[:len(stop.trace)])

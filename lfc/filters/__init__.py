@@ -1,32 +1,79 @@
 """Safety filters: the paper's SCC and the certified filter, behind one interface.
 
 ``SafetyFilter(params, relays, method=..., **options)`` builds the method
-registered under that name (``METHODS``; each method is a module here, with its
-options documented on its backend class) and calls it through the compiled
-dispatcher, one state at a time (:meth:`SafetyFilter.filter`) or many
-(:meth:`SafetyFilter.filter_batch`).  A filter never raises for numeric
+registered under that name (:func:`available`; each method is one module here:
+a :class:`~lfc.filters.base.Backend` and its options dataclass, whose fields
+carry unit, default and valid range, :func:`option_table`) and calls it through
+the compiled dispatcher, one state at a time (:meth:`SafetyFilter.filter`) or
+many (:meth:`SafetyFilter.filter_batch`).  A filter never raises for numeric
 trouble and always returns a finite command; ``FilterInfo`` says what it did.
+
+Adding a method: write its module (options, backend, a compiled ``decide`` or
+a Python ``decide_python`` with ``jit = False``), then :func:`register` it; a
+compiled one also gets its line in :func:`lfc.filters.dispatch.decide`
+(numba dispatches on codes known when it compiles).  ``tests/test_conformance.py``
+checks every registered method.
 """
 
 from __future__ import annotations
 
+from dataclasses import fields
+
 import numpy as np
 
-from lfc.filters.base import (ALARM_BITS, ALARM_FLAGS, MEMORY, Backend, FilterInfo,
+from lfc.filters.base import (ALARM_BITS, ALARM_FLAGS, MEMORY, Backend, FilterInfo, Options,
                               binding_names, flag)
-from lfc.filters.certified import CertifiedFilter
+from lfc.filters.certified import CertifiedFilter, CertifiedOptions
 from lfc.filters.dispatch import PYTHON, decide, decide_many, register_python
 from lfc.filters.paper import (CONFLICT_RULES, DEFAULT_READING, OUTSIDE_RULES, PREDICTIONS,
-                               PaperFilter)
+                               PaperFilter, PaperOptions)
 from lfc.model import STATES, LFCParams
 from lfc.relays import RelaySettings
 
 __all__ = ["ALARM_BITS", "ALARM_FLAGS", "CONFLICT_RULES", "DEFAULT_READING", "METHODS",
-           "OUTSIDE_RULES", "PREDICTIONS", "FilterInfo", "SafetyFilter", "alarm_mask",
-           "binding_names"]
+           "OUTSIDE_RULES", "PREDICTIONS", "CertifiedOptions", "FilterInfo", "PaperOptions",
+           "SafetyFilter", "alarm_mask", "available", "binding_names", "option_table",
+           "options_of", "register"]
 
-REGISTRY: dict[str, type[Backend]] = {"paper": PaperFilter, "certified": CertifiedFilter}
-METHODS = tuple(REGISTRY)
+REGISTRY: dict[str, type[Backend]] = {}
+
+
+def register(backend: type[Backend]) -> type[Backend]:
+    """Make ``backend`` a method of :class:`SafetyFilter`, under ``backend.name``."""
+    if not backend.name or backend.name in REGISTRY:
+        raise ValueError(f"a filter method needs a new name, got {backend.name!r}")
+    if not (isinstance(backend.Options, type) and issubclass(backend.Options, Options)):
+        raise ValueError(f"{backend.__name__}.Options must be an Options dataclass")
+    REGISTRY[backend.name] = backend
+    return backend
+
+
+register(PaperFilter)
+register(CertifiedFilter)
+METHODS = tuple(REGISTRY)   # the methods of this release (available() includes later ones)
+
+
+def available() -> tuple[str, ...]:
+    """The names of the registered filter methods."""
+    return tuple(REGISTRY)
+
+
+def _backend(method: str) -> type[Backend]:
+    if method not in REGISTRY:
+        raise ValueError(f"method must be one of {available()}, got {method!r}")
+    return REGISTRY[method]
+
+
+def options_of(method: str) -> type[Options]:
+    """The options dataclass of ``method``."""
+    return _backend(method).Options
+
+
+def option_table(method: str) -> list[dict]:
+    """Each option of ``method``: ``name``, ``default``, ``unit``, ``valid``
+    (range), ``doc``; in declaration order."""
+    return [{"name": f.name, "default": f.default, **f.metadata}
+            for f in fields(options_of(method))]
 
 
 def alarm_mask(flags: dict[str, np.ndarray]) -> np.ndarray:
@@ -45,12 +92,15 @@ class SafetyFilter:
     relays : RelaySettings, optional
         Relay settings defining the safe set (default IEEE 1547 Cat. III).
     method : str
-        ``"paper"`` (default): the paper's CBF-QP, :class:`lfc.filters.paper.PaperFilter`
-        (options ``alpha``, ``Ts``, ``solver``, ``u_min``, ``u_max``,
-        ``slack_weight``, ``outside_rule``, ``conflict``, ``prediction``);
-        ``"certified"``: the filter with a guarantee,
-        :class:`lfc.filters.certified.CertifiedFilter` (options ``period``,
-        ``horizon``, ``load_bound``, ``margin``, ``u_min``, ``u_max``).
+        One of :func:`available`: ``"paper"`` (default), the paper's CBF-QP
+        (options :class:`PaperOptions`: ``alpha``, ``Ts``, ``solver``,
+        ``u_min``, ``u_max``, ``slack_weight``, ``outside_rule``,
+        ``conflict``, ``prediction``); ``"certified"``, the filter with a
+        guarantee (options :class:`CertifiedOptions`: ``horizon``,
+        ``load_bound``, ``margin``, ``uncertainty``, ``noise_std``,
+        ``confidence``, ``trips_per_hour``, ``relay_rate``, ``tightening``,
+        ``u_min``, ``u_max``).  :func:`option_table` lists units, defaults
+        and ranges.
     **options
         The method's options.
 
@@ -63,20 +113,29 @@ class SafetyFilter:
 
     def __init__(self, params: LFCParams, relays: RelaySettings | None = None, *,
                  method: str = "paper", **options) -> None:
-        if method not in REGISTRY:
-            raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+        backend = _backend(method)
+        for name in options:
+            owners = [m for m in available() if m != method and name in
+                      {f.name for f in fields(options_of(m))}]
+            if owners and name not in {f.name for f in fields(backend.Options)}:
+                raise ValueError(f"{name!r} is an option of method {owners[0]!r}, not of "
+                                 f"{method!r} (give method={owners[0]!r}; {method!r} takes "
+                                 f"{', '.join(f.name for f in fields(backend.Options))})")
         self.params = params
         self.relays = relays if relays is not None else RelaySettings()
-        try:
-            self.backend = REGISTRY[method](params, self.relays, **options)
-        except TypeError as err:
-            raise ValueError(f"method {method!r} takes no such option: {err}") from None
+        self.backend = backend(params, self.relays, backend.Options.build(method, options))
         self.method = method
         if self.backend.jit:
             self.method_id, self.data = self.backend.method_id, self.backend.data
         else:   # called back from compiled code
             self.method_id, self.data = PYTHON, register_python(self.backend)
         self.reset()
+
+    @property
+    def options(self) -> Options:
+        """The method's options (``SafetyFilter(params, relays, method=...,
+        **options.as_dict())`` rebuilds this filter)."""
+        return self.backend.options
 
     def __getattr__(self, name: str):
         """The backend's options (``alpha``, ``Ts``, ``cert``, ...) read through."""

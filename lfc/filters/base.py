@@ -2,17 +2,20 @@
 compiled filters return, and the backend interface.
 
 A filter method is one module of :mod:`lfc.filters` with a :class:`Backend`
-subclass: its options (validated at construction), a flat ``data`` array that
-its compiled ``decide`` function reads, and ``memory`` per scenario (e.g. the
-command it holds).  Every call goes through :func:`lfc.filters.dispatch.decide`
+subclass and its :class:`Options` dataclass (each option declared once, with
+its unit, default and valid range; validated when built), a flat ``data``
+array that its compiled ``decide`` function reads, and ``memory`` per scenario
+(e.g. the command it holds).  Every call goes through :func:`lfc.filters.dispatch.decide`
 (one state) or :func:`~lfc.filters.dispatch.decide_many` (N states), the same
 compiled code the engine runs; one state is a batch of one.
 """
 
 from __future__ import annotations
 
+import difflib
 import math
-from typing import NamedTuple
+from dataclasses import MISSING, dataclass, field, fields
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 
@@ -118,20 +121,77 @@ def binding_names(flags: int) -> tuple[str, ...]:
     return tuple(name for name, bit in _BINDING if flags & bit)
 
 
+def option(default: Any, unit: str, valid: str, doc: str) -> Any:
+    """A field of an :class:`Options` dataclass: its default, unit (``""`` when
+    dimensionless), valid range in words and meaning (shown by
+    :func:`lfc.filters.option_table` and in every error about it)."""
+    return field(default=default, metadata={"unit": unit, "valid": valid, "doc": doc})
+
+
+@dataclass(frozen=True)
+class Options:
+    """A filter method's options: subclasses declare each one with :func:`option`
+    and check them in ``__post_init__`` (a ``ValueError`` naming the option and
+    its valid range).  ``COLUMNS`` names the scenario-table columns
+    (:func:`lfc.simulate_many`) that :meth:`from_columns` reads."""
+
+    COLUMNS: ClassVar[tuple[str, ...]] = ()
+
+    @classmethod
+    def build(cls, method: str, given: dict) -> "Options":
+        """The options of ``method`` from keyword arguments; an unknown name is a
+        ``ValueError`` listing the valid ones (with the closest match)."""
+        names = [f.name for f in fields(cls)]
+        unknown = [k for k in given if k not in names]
+        if unknown:
+            close = difflib.get_close_matches(unknown[0], names, n=1)
+            hint = f"; did you mean {close[0]!r}?" if close else ""
+            raise ValueError(f"method {method!r} has no option {unknown[0]!r}{hint} "
+                             f"(its options: {', '.join(names)})")
+        return cls(**given)
+
+    @classmethod
+    def from_columns(cls, row: dict) -> dict:  # pragma: no cover - abstract
+        """Keyword arguments from one scenario-table row (its ``COLUMNS``)."""
+        raise NotImplementedError
+
+    def as_dict(self) -> dict:
+        """Every option and its value (``SafetyFilter(..., **as_dict())`` rebuilds it)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    def changed(self) -> dict:
+        """The options that differ from their defaults."""
+        return {f.name: getattr(self, f.name) for f in fields(self)
+                if f.default is MISSING or getattr(self, f.name) != f.default}
+
+
 class Backend:
     """A filter method: options, compiled data, memory, and how to explain a call.
 
-    Subclasses set ``name`` and ``method_id`` (the compiled dispatcher's code),
-    build ``data`` (float64, read by their compiled ``decide``) in ``__init__``,
-    and implement :meth:`reason` and :meth:`details`.
+    Subclasses set ``name``, ``Options`` (their :class:`Options` dataclass) and
+    ``method_id`` (the compiled dispatcher's code, :mod:`lfc.filters.dispatch`;
+    a backend with ``jit = False`` is called back from compiled code instead and
+    needs none), build ``data`` (float64, read by their compiled ``decide``) in
+    ``__init__``, and implement :meth:`reason` and :meth:`details`.  The
+    options read through as attributes (``backend.alpha``).
     """
 
     name: str = ""
     method_id: int = -1
+    Options: type[Options] = Options
+    jit: bool = True
 
-    def __init__(self, params: LFCParams, relays: RelaySettings) -> None:
-        self.params, self.relays = params, relays
+    def __init__(self, params: LFCParams, relays: RelaySettings, options: Options) -> None:
+        self.params, self.relays, self.options = params, relays, options
         self.data = np.zeros(1)
+
+    def __getattr__(self, name: str):
+        if name == "options":
+            raise AttributeError(name)
+        try:
+            return getattr(self.options, name)
+        except AttributeError:
+            raise AttributeError(f"{type(self).__name__!r} has no attribute {name!r}") from None
 
     def reason(self, flags: int) -> str:  # pragma: no cover - abstract
         raise NotImplementedError
@@ -139,9 +199,11 @@ class Backend:
     def details(self, d0: float, d1: float, flags: int) -> dict:  # pragma: no cover
         raise NotImplementedError
 
-    def describe(self) -> str:  # pragma: no cover - abstract
-        """The constructor call that rebuilds this filter (for ``repr`` and logs)."""
-        raise NotImplementedError
+    def describe(self) -> str:
+        """The constructor call that rebuilds this filter (for ``repr`` and logs):
+        every option, defaults included."""
+        opts = ", ".join(f"{k}={v!r}" for k, v in self.options.as_dict().items())
+        return f"SafetyFilter(method={self.name!r}, {opts})"
 
     def info(self, u_ref: float, out: tuple) -> FilterInfo:
         """A :class:`FilterInfo` from one compiled ``decide`` result."""
@@ -152,6 +214,11 @@ class Backend:
                           binding_names(flags) if flags & ACTIVE else (),
                           self.reason(flags) if flags & ALARM_BITS else "",
                           self.details(d0, d1, flags))
+
+
+def given(value: object) -> bool:
+    """Whether a scenario-table cell holds a value (not None, not NaN)."""
+    return value is not None and not (isinstance(value, float) and math.isnan(value))
 
 
 def check_limits(u_min: float, u_max: float) -> None:

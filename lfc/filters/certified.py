@@ -62,7 +62,8 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
+from typing import ClassVar
 
 import numpy as np
 from scipy.linalg import expm, solve_continuous_lyapunov
@@ -72,7 +73,7 @@ from scipy.stats import chi2, norm
 from lfc._jit import inline, maxnum, minnum
 from lfc._validate import check_nonnegative, check_positive, check_range
 from lfc.filters.base import (ACTIVE, BIND_CERT, BIND_UMAX, BIND_UMIN, INVALID, OUTSIDE,
-                              Backend, check_limits, valid_input)
+                              Backend, Options, check_limits, given, option, valid_input)
 from lfc.model import LFCParams, lfc_matrices, output_matrix
 from lfc.relays import RelaySettings
 
@@ -86,6 +87,10 @@ NUMERIC_MARGIN = 1e-6  # relative tightening that absorbs floating-point differe
 U_MIN, U_MAX, N_PLANTS, N_ROWS, P_LIMIT, F_LIM, R_LIM, HEAD = range(8)
 (EQ_PER_P, EQ_HALF, EQ_HALF_HELD, RHO, RHO_HELD, A_QUAD, Y0_F, Y0_R, Y0_F_HELD, Y0_R_HELD,
  BLOCK_HEAD) = range(11)
+# per output, m rows in each of N_COLS columns: a, b (new), a, b (held), the five of G, l
+COL_A, COL_A_HELD, COL_G, COL_L, N_COLS = 0, 2, 4, 9, 10
+# the terminal ellipsoid after the rows: E (5x5), el (5), eu (5), P (5x5)
+ELL_E, ELL_EL, ELL_EU, ELL_P, ELL_SIZE = 0, 25, 30, 35, 60
 
 
 def box_plants(params: LFCParams, uncertainty: float | dict) -> list[LFCParams]:
@@ -137,6 +142,64 @@ def grid(horizon: float) -> np.ndarray:
     return np.array(times)
 
 
+@dataclass(frozen=True)
+class CertifiedOptions(Options):
+    """Options of the certified filter (``method="certified"``; with ``uncertainty``
+    the robust one); their role in the guarantee: :class:`CertifiedSet`."""
+
+    horizon: float = option(8.0, "s", "[0.2, 20]", "look-ahead before the terminal ellipsoid")
+    load_bound: float = option(0.0, "pu", ">= 0",
+                               "bound on the load's deviation from the p_load given")
+    margin: float = option(0.0, "", "[0, 1)", "extra fractional tightening of both limits")
+    uncertainty: float | dict = option(0.0, "", "[0, 1) or {name: (low, high)} factors",
+                                       "the plant box: a relative half-width of M, D, tau_g, "
+                                       "tau_t, droop, or factors of some")
+    noise_std: tuple[float, float] | None = option(
+        None, "pu, pu/s", "None or two numbers >= 0",
+        "measurement noise std of the Kalman estimate given; None: the exact state")
+    confidence: float = option(0.9999, "", "(0, 1)",
+                               "probability the estimation error lies in the covered ellipsoid")
+    trips_per_hour: float | None = option(None, "1/h", "None or > 0 (needs noise_std)",
+                                          "false trips allowed for relays reading noisy outputs")
+    relay_rate: float = option(1000.0, "Hz", "> 0", "relay sampling rate of trips_per_hour")
+    tightening: float = option(0.005, "", "[1e-4, 0.1]",
+                               "how far an output may move between two certificate samples")
+    u_min: float = option(-math.inf, "pu", "< u_max", "actuator limit on the applied command")
+    u_max: float = option(math.inf, "pu", "> u_min", "actuator limit on the applied command")
+
+    COLUMNS: ClassVar[tuple[str, ...]] = ("uncertainty", "margin", "declare_noise",
+                                          "trips_per_hour", "noise_w", "noise_rocof")
+
+    def __post_init__(self) -> None:
+        check_range("horizon", self.horizon, 0.2, 20.0, closed=True)
+        check_range("tightening", self.tightening, 1e-4, 0.1, closed=True)
+        check_nonnegative("load_bound", self.load_bound)
+        check_range("confidence", self.confidence, 0.0, 1.0)
+        check_positive("relay_rate", self.relay_rate)
+        if not 0.0 <= self.margin < 1.0:
+            raise ValueError(f"margin must be in [0, 1), got {self.margin!r}")
+        if self.trips_per_hour is not None:
+            if self.noise_std is None:
+                raise ValueError("trips_per_hour needs noise_std (the relays' measurement "
+                                 "noise)")
+            check_positive("trips_per_hour", self.trips_per_hour)
+        check_limits(self.u_min, self.u_max)
+        for name in ("load_bound", "margin", "u_min", "u_max"):
+            object.__setattr__(self, name, float(getattr(self, name)))
+
+    @classmethod
+    def from_columns(cls, row: dict) -> dict:
+        """The plant box ``uncertainty``, ``margin``, ``trips_per_hour`` and, with
+        ``declare_noise``, the noise of ``noise_w``, ``noise_rocof`` (pu, pu/s)."""
+        noise = tuple(float(row.get(c, 0.0)) for c in ("noise_w", "noise_rocof"))
+        declared = bool(row.get("declare_noise", False)) and any(noise)
+        box, rate, margin = row.get("uncertainty"), row.get("trips_per_hour"), row.get("margin")
+        return {"uncertainty": float(box) if given(box) else 0.0,
+                "margin": float(margin) if given(margin) else 0.0,
+                "noise_std": noise if declared else None,
+                "trips_per_hour": float(rate) if given(rate) else None}
+
+
 class CertifiedSet:
     """The certified-command intervals for a design model and a box of plants.
 
@@ -177,38 +240,23 @@ class CertifiedSet:
         Actuator limits (pu).
     """
 
-    def __init__(self, params: LFCParams, relays: RelaySettings, *, horizon: float = 8.0,
-                 load_bound: float = 0.0, margin: float = 0.0, uncertainty: float | dict = 0.0,
-                 noise_std: tuple[float, float] | None = None, confidence: float = 0.9999,
-                 trips_per_hour: float | None = None, relay_rate: float = 1000.0,
-                 tightening: float = 0.005, u_min: float = -math.inf,
-                 u_max: float = math.inf) -> None:
-        check_range("horizon", horizon, 0.2, 20.0, closed=True)
-        check_range("tightening", tightening, 1e-4, 0.1, closed=True)
-        check_nonnegative("load_bound", load_bound)
-        check_range("confidence", confidence, 0.0, 1.0)
-        check_positive("relay_rate", relay_rate)
-        if not 0.0 <= margin < 1.0:
-            raise ValueError(f"margin must be in [0, 1), got {margin!r}")
-        if trips_per_hour is not None and noise_std is None:
-            raise ValueError("trips_per_hour needs noise_std (the relays' measurement noise)")
+    def __init__(self, params: LFCParams, relays: RelaySettings, **options) -> None:
+        o = self.options = CertifiedOptions.build("certified", options)
         self.params, self.relays = params, relays
-        self.load_bound, self.margin, self.uncertainty = float(load_bound), float(margin), \
-            uncertainty
-        self.noise_std, self.confidence, self.trips_per_hour = noise_std, confidence, \
-            trips_per_hour
-        self.u_min, self.u_max = float(u_min), float(u_max)
-        self.plants = box_plants(params, uncertainty)
-        cov = _estimate_covariance(params, noise_std) if noise_std is not None else None
-        self.kappa = math.sqrt(chi2.ppf(confidence, len(cov))) if cov is not None else 0.0
-        limits = np.array([relays.F, relays.rocof_limit]) * (1 - margin) * (1 - NUMERIC_MARGIN)
-        if trips_per_hour is not None:
-            check_positive("trips_per_hour", trips_per_hour)
-            kappa_r = -norm.ppf(trips_per_hour / (2 * 3600 * relay_rate))
-            limits = limits - kappa_r * np.asarray(noise_std, float)
-        fine = grid(horizon)
+        self.load_bound, self.margin, self.uncertainty = o.load_bound, o.margin, o.uncertainty
+        self.noise_std, self.confidence, self.trips_per_hour = o.noise_std, o.confidence, \
+            o.trips_per_hour
+        self.u_min, self.u_max = o.u_min, o.u_max
+        self.plants = box_plants(params, o.uncertainty)
+        cov = _estimate_covariance(params, o.noise_std) if o.noise_std is not None else None
+        self.kappa = math.sqrt(chi2.ppf(o.confidence, len(cov))) if cov is not None else 0.0
+        limits = np.array([relays.F, relays.rocof_limit]) * (1 - o.margin) * (1 - NUMERIC_MARGIN)
+        if o.trips_per_hour is not None:
+            kappa_r = -norm.ppf(o.trips_per_hour / (2 * 3600 * o.relay_rate))
+            limits = limits - kappa_r * np.asarray(o.noise_std, float)
+        fine = grid(o.horizon)
         gains = [_curvature_gains(lfc_matrices(p)[0], output_matrix(), fine) for p in self.plants]
-        self.times = _design_grid(params, fine, gains, limits, tightening)
+        self.times = _design_grid(params, fine, gains, limits, o.tightening)
         self.blocks = [_PlantBlock(p, self.times, fine, g, limits, self.load_bound, cov,
                                    self.kappa) for p, g in zip(self.plants, gains)]
         self.n_rows = 2 * len(self.times)
@@ -336,7 +384,10 @@ class _PlantBlock:
         for o in range(2):   # rows alternate frequency, ROCOF: take every other one
             parts += [new[0][o::2], new[1][o::2], held[0][o::2], held[1][o::2],
                       *self.G[o::2].T, self.l[o::2]]
-        return np.concatenate(parts + [self.E.ravel(), self.el, self.eu, self.P.ravel()])
+        out = np.concatenate(parts + [self.E.ravel(), self.el, self.eu, self.P.ravel()])
+        if len(out) != BLOCK_HEAD + N_COLS * len(self.l) + ELL_SIZE:   # the layout above
+            raise RuntimeError("the certified filter's data layout is inconsistent")
+        return out
 
 
 def _rows(hu: np.ndarray, lim: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -471,35 +522,17 @@ def _estimate_covariance(params: LFCParams, noise_std: tuple[float, float]) -> n
 
 
 class CertifiedFilter(Backend):
-    """The certified filter (method ``"certified"``): clip to the certified
-    interval of :class:`CertifiedSet`, or hold the last certified command.
+    """The certified filter (method ``"certified"``), options
+    :class:`CertifiedOptions`: clip to the certified interval of
+    :class:`CertifiedSet`, or hold the last certified command."""
 
-    Parameters
-    ----------
-    params : LFCParams
-        Design model.
-    relays : RelaySettings
-    horizon, load_bound, margin, uncertainty, noise_std, confidence, trips_per_hour,
-    relay_rate, u_min, u_max
-        As in :class:`CertifiedSet` (defaults: 8 s, 0, 0, 0, None, 0.9999, None,
-        1 kHz, unlimited).
-    """
+    name, method_id, Options = "certified", 1, CertifiedOptions
 
-    name, method_id = "certified", 1
-
-    def __init__(self, params: LFCParams, relays: RelaySettings, *, u_min: float = -math.inf,
-                 u_max: float = math.inf, **options) -> None:
-        super().__init__(params, relays)
-        check_limits(u_min, u_max)
-        self.cert = CertifiedSet(params, relays, u_min=u_min, u_max=u_max, **options)
-        self.data, self.jit = self.cert.pack(), True
-
-    def describe(self) -> str:
-        c = self.cert
-        return (f"SafetyFilter(method='certified', load_bound={c.load_bound}, "
-                f"margin={c.margin}, uncertainty={c.uncertainty!r}, "
-                f"noise_std={c.noise_std!r}, confidence={c.confidence}, "
-                f"trips_per_hour={c.trips_per_hour}, u_min={c.u_min}, u_max={c.u_max})")
+    def __init__(self, params: LFCParams, relays: RelaySettings,
+                 options: CertifiedOptions) -> None:
+        super().__init__(params, relays, options)
+        self.cert = CertifiedSet(params, relays, **options.as_dict())
+        self.data = self.cert.pack()
 
     def reason(self, flags: int) -> str:
         if flags & INVALID:
@@ -521,11 +554,13 @@ class CertifiedFilter(Backend):
 def _output_interval(fd: np.ndarray, r0: int, m: int, x: np.ndarray, p: float,
                      held: bool) -> tuple:
     """The interval one output's ``m`` rows (from ``fd[r0]``) allow: ``(lo, hi)``."""
-    a0 = r0 + (2 * m if held else 0)
-    g0 = r0 + 4 * m
+    a0 = r0 + (COL_A_HELD if held else COL_A) * m
+    g0 = r0 + COL_G * m
     a, b = fd[a0:a0 + m], fd[a0 + m:a0 + 2 * m]        # views: the loop reads them in step
     g_0, g_1, g_2 = fd[g0:g0 + m], fd[g0 + m:g0 + 2 * m], fd[g0 + 2 * m:g0 + 3 * m]
-    g_3, g_4, g_l = fd[g0 + 3 * m:g0 + 4 * m], fd[g0 + 4 * m:g0 + 5 * m], fd[g0 + 5 * m:g0 + 6 * m]
+    g_3, g_4 = fd[g0 + 3 * m:g0 + 4 * m], fd[g0 + 4 * m:g0 + 5 * m]
+    l0 = r0 + COL_L * m
+    g_l = fd[l0:l0 + m]
     x0, x1, x2, x3, x4 = x[0], x[1], x[2], x[3], x[4]
     lo, hi = -np.inf, np.inf
     for i in range(m):   # maxnum, minnum: vectorized by LLVM (lfc._jit)
@@ -545,27 +580,28 @@ def _block_interval(fd: np.ndarray, b0: int, n: int, x: np.ndarray, p: float,
         return inf, -inf, inf, -inf                       # the current outputs too close
     m = n // 2
     lo_f, hi_f = _output_interval(fd, b0 + BLOCK_HEAD, m, x, p, held)
-    lo_r, hi_r = _output_interval(fd, b0 + BLOCK_HEAD + 10 * m, m, x, p, held)
+    lo_r, hi_r = _output_interval(fd, b0 + BLOCK_HEAD + N_COLS * m, m, x, p, held)
     centre = fd[b0 + EQ_PER_P] * p                        # room at the equilibrium
     half = fd[b0 + (EQ_HALF_HELD if held else EQ_HALF)]
     lo_f, hi_f = max(lo_f, centre - half), min(hi_f, centre + half)
-    t0 = b0 + BLOCK_HEAD + 10 * n                         # terminal ellipsoid
-    e0, e1, e2, e3, e4 = (p * fd[t0 + 25], p * fd[t0 + 26], p * fd[t0 + 27], p * fd[t0 + 28],
-                          p * fd[t0 + 29])
+    t0 = b0 + BLOCK_HEAD + N_COLS * n                     # terminal ellipsoid
+    el = t0 + ELL_EL                                      # e = E x + el p
+    e0, e1, e2, e3, e4 = (p * fd[el], p * fd[el + 1], p * fd[el + 2], p * fd[el + 3],
+                          p * fd[el + 4])
     for k in range(5):
-        e0 += fd[t0 + k] * x[k]
-        e1 += fd[t0 + 5 + k] * x[k]
-        e2 += fd[t0 + 10 + k] * x[k]
-        e3 += fd[t0 + 15 + k] * x[k]
-        e4 += fd[t0 + 20 + k] * x[k]
+        e0 += fd[t0 + ELL_E + k] * x[k]
+        e1 += fd[t0 + ELL_E + 5 + k] * x[k]
+        e2 += fd[t0 + ELL_E + 10 + k] * x[k]
+        e3 += fd[t0 + ELL_E + 15 + k] * x[k]
+        e4 += fd[t0 + ELL_E + 20 + k] * x[k]
     e = (e0, e1, e2, e3, e4)
     rho = fd[b0 + (RHO_HELD if held else RHO)]
     qb, qc = 0.0, -rho * rho
     for r in range(5):
         pe = 0.0
         for k in range(5):
-            pe += fd[t0 + 35 + 5 * r + k] * e[k]
-        qb += 2.0 * pe * fd[t0 + 30 + r]
+            pe += fd[t0 + ELL_P + 5 * r + k] * e[k]
+        qb += 2.0 * pe * fd[t0 + ELL_EU + r]
         qc += pe * e[r]
     a_quad = fd[b0 + A_QUAD]
     disc = qb * qb - 4 * a_quad * qc
@@ -581,7 +617,7 @@ def _interval(fd: np.ndarray, x: np.ndarray, p: float, held: bool) -> tuple:
     """The interval certified for every plant, per output: ``(lo_f, hi_f, lo_r, hi_r)``."""
     inf = np.inf
     n = int(fd[N_ROWS])
-    stride = BLOCK_HEAD + 10 * n + 60
+    stride = BLOCK_HEAD + N_COLS * n + ELL_SIZE
     lo_f, hi_f, lo_r, hi_r = -inf, inf, -inf, inf
     if abs(p) > fd[P_LIMIT]:
         return inf, -inf, inf, -inf

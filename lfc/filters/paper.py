@@ -57,6 +57,8 @@ numeric trouble; every call returns a finite command.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -64,8 +66,8 @@ from lfc._jit import inline
 from lfc._validate import check_positive
 from lfc.filters.base import (ACTIVE, BIND_FREQ, BIND_ROCOF, BIND_UMAX, BIND_UMIN, INFEASIBLE,
                               INVALID, KIND_FREQ_HI, KIND_FREQ_LO, KIND_ROCOF_HI,
-                              KIND_ROCOF_LO, OUTSIDE, SOLVER_ERROR, Backend, check_choice,
-                              check_limits, valid_input)
+                              KIND_ROCOF_LO, OUTSIDE, SOLVER_ERROR, Backend, Options,
+                              check_choice, check_limits, given, option, valid_input)
 from lfc.model import LFCParams, discretize, lfc_matrices, output_matrix
 from lfc.relays import RelaySettings
 
@@ -74,6 +76,7 @@ OUTSIDE_RULES = ("hold", "push")                  # E9 readings
 CONFLICT_RULES = ("slack", "rocof", "frequency")  # E10 readings
 PREDICTIONS = ("incoming", "applied")             # E5 readings
 DEFAULT_READING = {"outside_rule": "hold", "conflict": "frequency", "prediction": "incoming"}
+READING_NAMES = tuple(DEFAULT_READING)
 G_EPS = 1e-12      # |coefficient on u| below which a constraint cannot be influenced
 BIND_TOL = 1e-7    # relative tolerance to report a bound as binding
 
@@ -83,8 +86,48 @@ P_, Q_, R_, W_, KG_, WL_, LIM2_, SIZE = 7, 17, 19, 21, 31, 33, 35, 37
 _CONFLICT_CODE = {"slack": 0, "frequency": 1, "rocof": 2}
 
 
+@dataclass(frozen=True)
+class PaperOptions(Options):
+    """Options of the paper's SCC (``method="paper"``); the readings are E5, E9, E10."""
+
+    alpha: float = option(20.0, "1/s", "> 0", "barrier gain (paper: 3 and 20)")
+    Ts: float = option(0.25, "s", "> 0", "look-ahead of the prediction (paper: 0.25)")
+    solver: str = option("exact", "", f"one of {SOLVERS}",
+                         "closed form, or the cvxpy/Clarabel reference QP")
+    u_min: float = option(-math.inf, "pu", "< u_max", "actuator limit on the applied command")
+    u_max: float = option(math.inf, "pu", "> u_min", "actuator limit on the applied command")
+    slack_weight: float = option(1e4, "pu^-2", "> 0",
+                                 "penalty on squared violations of conflict='slack'")
+    outside_rule: str = option(DEFAULT_READING["outside_rule"], "", f"one of {OUTSIDE_RULES}",
+                               "E9: what to do when the prediction is outside the safe set")
+    conflict: str = option(DEFAULT_READING["conflict"], "", f"one of {CONFLICT_RULES}",
+                           "E10: which constraint wins when they conflict")
+    prediction: str = option(DEFAULT_READING["prediction"], "", f"one of {PREDICTIONS}",
+                             "E5: the command the prediction holds")
+
+    COLUMNS: ClassVar[tuple[str, ...]] = ("alpha", "Ts", *READING_NAMES)
+
+    def __post_init__(self) -> None:
+        check_positive("alpha", self.alpha)
+        check_positive("Ts", self.Ts)
+        check_positive("slack_weight", self.slack_weight)
+        check_choice("solver", self.solver, SOLVERS)
+        check_choice("outside_rule", self.outside_rule, OUTSIDE_RULES)
+        check_choice("conflict", self.conflict, CONFLICT_RULES)
+        check_choice("prediction", self.prediction, PREDICTIONS)
+        check_limits(self.u_min, self.u_max)
+        for name in ("alpha", "Ts", "slack_weight", "u_min", "u_max"):
+            object.__setattr__(self, name, float(getattr(self, name)))
+
+    @classmethod
+    def from_columns(cls, row: dict) -> dict:
+        """``alpha``, ``Ts`` and any reading the row sets."""
+        return {"alpha": float(row["alpha"]), "Ts": float(row["Ts"]),
+                **{c: row[c] for c in READING_NAMES if given(row.get(c))}}
+
+
 class PaperFilter(Backend):
-    """The paper's CBF-QP (method ``"paper"``); options as in :class:`lfc.SafetyFilter`.
+    """The paper's CBF-QP (method ``"paper"``), options :class:`PaperOptions`.
 
     Parameters
     ----------
@@ -92,53 +135,21 @@ class PaperFilter(Backend):
         Design model.
     relays : RelaySettings
         Relay settings defining the safe set.
-    alpha : float
-        Barrier gain alpha (1/s), > 0. Paper: 3 and 20. Default 20.
-    Ts : float
-        Look-ahead (s), > 0. Paper: 0.25.
-    solver : {"exact", "cvxpy"}
-        Closed-form solution (default) or the cvxpy/Clarabel reference.
-    u_min, u_max : float
-        Optional actuator limits on the applied command (pu), ``u_min < u_max``.
-    slack_weight : float
-        Penalty ``rho`` on squared constraint violations (pu^-2) in the
-        relaxed QP of ``conflict="slack"``, > 0. Default 1e4.
-    outside_rule : {"hold", "push"}
-        E9 (module docstring). Default "hold".
-    conflict : {"slack", "rocof", "frequency"}
-        E10 (module docstring). Default "frequency".
-    prediction : {"incoming", "applied"}
-        E5 (module docstring). Default "incoming".
+    options : PaperOptions
     """
 
-    name, method_id = "paper", 0
+    name, method_id, Options = "paper", 0, PaperOptions
 
-    def __init__(self, params: LFCParams, relays: RelaySettings, *, alpha: float = 20.0,
-                 Ts: float = 0.25, solver: str = "exact", u_min: float = -math.inf,
-                 u_max: float = math.inf, slack_weight: float = 1e4,
-                 outside_rule: str = DEFAULT_READING["outside_rule"],
-                 conflict: str = DEFAULT_READING["conflict"],
-                 prediction: str = DEFAULT_READING["prediction"]) -> None:
-        super().__init__(params, relays)
-        check_positive("alpha", alpha)
-        check_positive("Ts", Ts)
-        check_positive("slack_weight", slack_weight)
-        check_choice("solver", solver, SOLVERS)
-        check_choice("outside_rule", outside_rule, OUTSIDE_RULES)
-        check_choice("conflict", conflict, CONFLICT_RULES)
-        check_choice("prediction", prediction, PREDICTIONS)
-        check_limits(u_min, u_max)
-        self.alpha, self.Ts, self.solver = float(alpha), float(Ts), solver
-        self.u_min, self.u_max, self.slack_weight = float(u_min), float(u_max), float(slack_weight)
-        self.outside_rule, self.conflict, self.prediction = outside_rule, conflict, prediction
+    def __init__(self, params: LFCParams, relays: RelaySettings, options: PaperOptions) -> None:
+        super().__init__(params, relays, options)
         self.limits = np.array([relays.F, relays.rocof_limit])
         self.data = self._pack()
-        self.jit = solver == "exact"
+        self.jit = options.solver == "exact"
         self.reference = None
-        if solver == "cvxpy":
+        if options.solver == "cvxpy":
             from lfc.filters.cvxpy_paper import PaperQP
             self.reference = PaperQP(params, relays, alpha=self.alpha, Ts=self.Ts,
-                                     outside_rule=outside_rule, conflict=conflict,
+                                     outside_rule=self.outside_rule, conflict=self.conflict,
                                      slack_weight=self.slack_weight, u_min=self.u_min,
                                      u_max=self.u_max)
 
@@ -157,12 +168,6 @@ class PaperFilter(Backend):
         d[KG_:WL_], d[WL_:LIM2_] = CAd @ B[:, 0], CAd @ B[:, 1]
         d[LIM2_:SIZE] = self.limits ** 2
         return d
-
-    def describe(self) -> str:
-        return (f"SafetyFilter(method='paper', alpha={self.alpha}, Ts={self.Ts}, "
-                f"solver={self.solver!r}, outside_rule={self.outside_rule!r}, "
-                f"conflict={self.conflict!r}, prediction={self.prediction!r}, "
-                f"u_min={self.u_min}, u_max={self.u_max})")
 
     def reason(self, flags: int) -> str:
         parts = []

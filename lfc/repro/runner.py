@@ -344,10 +344,7 @@ def collect(out: Path, points: list[dict]) -> pd.DataFrame:
         if not _finished(folder):
             continue
         for panel, m in json.loads((folder / "metrics.json").read_text()).items():
-            trip = m.get("first_trip") or {}
-            flat = {k: v for k, v in m.items() if k not in ("first_trip", "parameters")}
+            flat = {k: v for k, v in m.items() if k != "parameters"}
             rows.append({**{k: str(v) if isinstance(v, list) else v for k, v in point.items()},
-                         "run": run_id(point), "panel": panel, **flat,
-                         "first_trip_relay": trip.get("relay"),
-                         "first_trip_t": trip.get("t")})
+                         "run": run_id(point), "panel": panel, **flat})
     return pd.DataFrame(rows)
