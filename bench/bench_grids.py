@@ -6,7 +6,7 @@ scenario (a 0.1 pu load step in area 0 at 1 s; 5 ms ANDES step, 10 ms control
 period):
 
 * ANDES alone: the same system run by ANDES with no callback (the reference);
-* the loop with every area's AGC and no filter (:func:`lfc.testbed.simulate_grid`);
+* the loop with every area's AGC and no filter (``lfc.simulate(case, ...)``);
 * the loop with the certified filter at every area;
 
 with the real-time factor of each (issue 15 asks >= 0.5x for the 39-bus system) and
@@ -22,8 +22,8 @@ import statistics
 import time
 
 import lfc
-from lfc.testbed import GridCase, build_grid, grid_design, prepare_andes, simulate_grid
-from lfc.testbed.plant import init_tds
+from lfc.testbed import GridCase, build_grid, grid_design, prepare_andes
+from lfc.testbed.loop import init_tds
 
 DURATION = 20.0  # s simulated
 STEP = 0.005     # s, ANDES step
@@ -59,12 +59,12 @@ def main() -> None:
     for case in (GridCase.kundur(), GridCase.ieee39()):
         params = grid_design(case)
         bare = andes_alone(case)
-        loop = median_time(lambda: simulate_grid(params, duration=DURATION, loads=load,
-                                                 case=case))
-        cert = median_time(lambda: simulate_grid(params, duration=DURATION, loads=load,
-                                                 case=case,
-                                                 filters={a: "certified"
-                                                          for a in range(case.n_areas)}))
+        loop = median_time(lambda: lfc.simulate(case, design=params, duration=DURATION,
+                                                loads=load))
+        cert = median_time(lambda: lfc.simulate(case, design=params, duration=DURATION,
+                                                loads=load,
+                                                filters={a: "certified"
+                                                         for a in range(case.n_areas)}))
         for name, t in (("ANDES alone (reference)", bare), ("loop, AGC, no filter", loop),
                         ("loop, AGC, certified filters", cert)):
             print(f"{case.name:<8}{name:<30}{t:>10.2f}{DURATION / t:>13.2f}{t / bare:>10.2f}")

@@ -18,8 +18,8 @@ from __future__ import annotations
 import statistics
 import time
 
-from lfc import SafetyFilter, Sinusoid
-from lfc.testbed import MicrogridCase, build_system, prepare_andes, simulate_testbed
+from lfc import SafetyFilter, Sinusoid, simulate
+from lfc.testbed import MicrogridCase, build_system, prepare_andes
 
 DURATION = 20.0  # s simulated
 REPEAT = 3
@@ -56,9 +56,10 @@ def main() -> None:
     attack = Sinusoid(0.5, 1.0, start=1.0)
     build = median_time(lambda: build_system(case))
     bare = andes_alone(case)
-    loop = median_time(lambda: simulate_testbed(params, duration=DURATION, pc_attack=attack))
-    scc = median_time(lambda: simulate_testbed(params, duration=DURATION, pc_attack=attack,
-                                               scc=SafetyFilter(params, alpha=20.0)))
+    loop = median_time(lambda: simulate(case, design=params, duration=DURATION,
+                                        pc_attack=attack))
+    scc = median_time(lambda: simulate(case, design=params, duration=DURATION, pc_attack=attack,
+                                       scc=SafetyFilter(params, alpha=20.0)))
     print(f"20 s scenario, median of {REPEAT} (build + power flow: {build:.2f} s each)")
     print(f"{'run':<34}{'wall (s)':>10}{'x real time':>13}")
     for name, t in (("ANDES alone (reference)", bare), ("testbed loop, no SCC", loop),

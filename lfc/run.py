@@ -12,6 +12,7 @@ plant                      ``simulate`` keywords, result               ``simulat
                            → ``MultiAreaResult``                       keywords
 ``MicrogridCase`` (ANDES)  as ``LFCParams``, plus ``design``, ``fault``  —
 ``GridCase`` (ANDES)       as ``MultiAreaParams``, plus ``design``     a list of dicts
+``AndesPlant`` (yours)     as ``MultiAreaParams``, ``design`` needed   —
 =========================  ==========================================  ===========================
 
 On ANDES the filters and the AGC keep a linear design model, as in the paper:
@@ -27,12 +28,19 @@ from lfc.multiarea import MultiAreaParams
 
 __all__ = ["simulate", "simulate_many"]
 
-PLANTS = "an LFCParams, a MultiAreaParams, an lfc.testbed.MicrogridCase or an lfc.testbed.GridCase"
+PLANTS = ("an LFCParams, a MultiAreaParams, an lfc.testbed.MicrogridCase, an "
+          "lfc.testbed.GridCase or an lfc.testbed.AndesPlant")
+# the methods of lfc.testbed.loop.AndesPlant (a plant of your own on ANDES)
+ANDES_PLANT = ("build", "attach", "measure", "extra", "protect", "actuate", "set_load")
 
 
 def _testbed_kind(plant) -> str | None:
-    """``"microgrid"`` or ``"grid"`` for a testbed case, else None (ANDES is only
-    imported when a testbed case is given)."""
+    """``"microgrid"`` or ``"grid"`` for a testbed case, ``"andes"`` for an
+    ANDES plant (:class:`lfc.testbed.loop.AndesPlant`), else None (ANDES is only
+    imported when one is given)."""
+    if all(callable(getattr(plant, m, None)) for m in ANDES_PLANT) \
+            and hasattr(plant, "n_areas"):
+        return "andes"
     module = type(plant).__module__
     if not module.startswith("lfc.testbed"):
         return None
@@ -63,8 +71,9 @@ def simulate(plant, *, duration: float, design=None, **kwargs):
     **kwargs
         The scenario: for an area, :func:`lfc.simulate.simulate_area`'s
         keywords; for a grid, :func:`lfc.simulate_multiarea.simulate_grid_linear`'s;
-        on ANDES also :func:`lfc.testbed.simulate_testbed`'s or
-        :func:`lfc.testbed.simulate_grid`'s.
+        on ANDES also :func:`lfc.testbed.plant.simulate_microgrid`'s (``fault``,
+        ``overcurrent``, ``step``) or
+        :func:`lfc.testbed.grid_plant.simulate_andes_grid`'s (``step``).
 
     Returns
     -------
@@ -81,14 +90,21 @@ def simulate(plant, *, duration: float, design=None, **kwargs):
         return simulate_grid_linear(plant, duration=duration, **kwargs)
     kind = _testbed_kind(plant)
     if kind == "microgrid":
-        from lfc.testbed import simulate_testbed
         from lfc.testbed.fit import design_model
-        return simulate_testbed(design if design is not None else design_model(plant),
-                                duration=duration, case=plant, **kwargs)
+        from lfc.testbed.plant import simulate_microgrid
+        return simulate_microgrid(design if design is not None else design_model(plant),
+                                  duration=duration, case=plant, **kwargs)
     if kind == "grid":
-        from lfc.testbed import grid_design, simulate_grid
-        return simulate_grid(design if design is not None else grid_design(plant),
-                             duration=duration, case=plant, **kwargs)
+        from lfc.testbed.grid_fit import grid_design
+        from lfc.testbed.grid_plant import simulate_andes_grid
+        return simulate_andes_grid(design if design is not None else grid_design(plant),
+                                   duration=duration, case=plant, **kwargs)
+    if kind == "andes":
+        from lfc.testbed.grid_plant import simulate_andes_grid
+        if design is None:
+            raise ValueError("design is required for an AndesPlant of your own: a "
+                             "MultiAreaParams of its n_areas areas")
+        return simulate_andes_grid(design, duration=duration, plant=plant, **kwargs)
     raise _bad_plant(plant)
 
 
@@ -128,12 +144,16 @@ def simulate_many(plant, scenarios, *, duration: float, design=None, **kwargs):
         return simulate_grid_table(plant, scenarios, duration=duration, **kwargs)
     kind = _testbed_kind(plant)
     if kind == "grid":
-        from lfc.testbed import grid_design, simulate_grid_batch
-        return simulate_grid_batch(design if design is not None else grid_design(plant),
+        from lfc.testbed.grid_fit import grid_design
+        from lfc.testbed.grid_plant import simulate_andes_grid_table
+        return simulate_andes_grid_table(design if design is not None else grid_design(plant),
                                    scenarios, duration=duration, case=plant, **kwargs)
     if kind == "microgrid":
         raise ValueError("simulate_many does not run the ANDES microgrid (one scenario per "
                          "call: simulate(MicrogridCase(), ...))")
+    if kind == "andes":
+        raise ValueError("simulate_many does not run an AndesPlant of your own (one scenario "
+                         "per call: simulate(plant, design=..., ...))")
     raise _bad_plant(plant)
 
 
@@ -141,6 +161,7 @@ def simulate_many(plant, scenarios, *, duration: float, design=None, **kwargs):
 def _deprecated(old: str, new: str) -> None:
     warnings.warn(f"lfc.{old} is deprecated and will be removed in 0.5; use lfc.{new} "
                   f"(the same keywords)", DeprecationWarning, stacklevel=3)
+# (simulate_testbed, simulate_grid, simulate_grid_batch: lfc/testbed/deprecated.py)
 
 
 def simulate_batch(params: LFCParams, scenarios, **kwargs):
@@ -163,3 +184,4 @@ def simulate_multiarea_batch(params: MultiAreaParams, scenarios, **kwargs):
     if not isinstance(params, MultiAreaParams):
         raise ValueError(f"params must be a MultiAreaParams, got {type(params).__name__}")
     return simulate_many(params, scenarios, **kwargs)
+

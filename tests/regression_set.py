@@ -224,22 +224,21 @@ def multiarea_cases() -> dict[str, Callable[[], dict]]:
 
 def testbed_cases() -> dict[str, Callable[[], dict]]:
     def microgrid() -> dict:
-        from lfc import RelaySettings, SafetyFilter, Sinusoid
-        from lfc.testbed import simulate_testbed
+        from lfc import RelaySettings, SafetyFilter, Sinusoid, simulate
+        from lfc.testbed import MicrogridCase
         from lfc.testbed.fit import design_model
         design = design_model()
-        return _sim(simulate_testbed(design, duration=3.0, pc_attack=Sinusoid(0.5, 1.0,
-                                                                               start=1.0),
-                                     scc=SafetyFilter(design, RelaySettings(), alpha=3.0)))
+        return _sim(simulate(MicrogridCase(), design=design, duration=3.0,
+                             pc_attack=Sinusoid(0.5, 1.0, start=1.0),
+                             scc=SafetyFilter(design, RelaySettings(), alpha=3.0)))
 
     def kundur() -> dict:
-        from lfc import Sinusoid
-        from lfc.testbed import GridCase, grid_design, simulate_grid
+        from lfc import Sinusoid, simulate
+        from lfc.testbed import GridCase, grid_design
         case = GridCase.kundur()
-        design = grid_design(case)
-        return _multi(simulate_grid(design, duration=2.0, case=case,
-                                    attacks={0: {"pc": Sinusoid(3.0, 0.5, start=0.5)}},
-                                    filters={0: "paper", 1: "paper"}))
+        return _multi(simulate(case, design=grid_design(case), duration=2.0,
+                               attacks={0: {"pc": Sinusoid(3.0, 0.5, start=0.5)}},
+                               filters={0: "paper", 1: "paper"}))
 
     return {"testbed_microgrid": microgrid, "testbed_kundur": kundur}
 

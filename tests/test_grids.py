@@ -12,8 +12,7 @@ import pytest
 
 import lfc
 from lfc.multiarea import MultiAreaParams
-from lfc.testbed import (GridCase, build_grid, case_design, grid_fit_report, simulate_grid,
-                         simulate_grid_batch)
+from lfc.testbed import GridCase, build_grid, case_design, grid_fit_report
 from lfc.testbed import fit as fitting
 from lfc.testbed import grid_fit
 
@@ -61,8 +60,8 @@ def test_the_area_command_reaches_its_governors_on_the_area_base(fit):
     0.02 pu more than area 1's in steady state (equal droops, one frequency):
     the command is written as ``R u scale / n`` to each governor."""
     params = dataclasses.replace(fit.params, k_agc=(0.0, 0.0))
-    r = simulate_grid(params, duration=40.0, attacks={0: {"pc": lfc.Step(0.02, 1.0)}},
-                        case=CASE)
+    r = lfc.simulate(CASE, design=params, duration=40.0,
+                     attacks={0: {"pc": lfc.Step(0.02, 1.0)}})
     end = r.trace.iloc[-1]
     assert end["pc_0"] == 0.02 and end["pc_1"] == 0.0
     assert end["dPm_0"] - end["dPm_1"] == pytest.approx(0.02, abs=5e-4)
@@ -75,9 +74,10 @@ def test_the_area_command_reaches_its_governors_on_the_area_base(fit):
 def test_batch_equals_one_by_one(fit):
     scenarios = [{"attacks": {1: {"ace": lfc.Step(-0.5, 0.5)}}},
                  {"filters": {0: "certified"}, "loads": {0: lfc.Step(0.05, 0.5)}}]
-    batch = simulate_grid_batch(fit.params, scenarios, duration=2.0, jobs=2, progress=False)
+    batch = lfc.simulate_many(CASE, scenarios, design=fit.params, duration=2.0, jobs=2,
+                              progress=False)
     for s, r in zip(scenarios, batch):
-        one = simulate_grid(fit.params, duration=2.0, **s)
+        one = lfc.simulate(CASE, design=fit.params, duration=2.0, **s)
         pd.testing.assert_frame_equal(one.trace, r.trace)   # NaN barrier values: no filter
 
 
@@ -91,7 +91,7 @@ def test_batch_equals_one_by_one(fit):
 def test_bad_scenarios_are_refused_before_anything_runs(fit, kwargs, message):
     kwargs = {"params": fit.params, "duration": 1.0, **kwargs}
     with pytest.raises(ValueError, match=message):
-        simulate_grid(kwargs.pop("params"), **kwargs)
+        lfc.simulate(CASE, design=kwargs.pop("params"), **kwargs)
 
 
 @pytest.mark.parametrize("change, message", [
@@ -159,8 +159,8 @@ def test_a_tgov1n_area_command_enters_after_the_droop(fit39):
     ``dPm_0 = u - dw / R_0`` with ``R_0`` the case's parallel droop (written
     before the droop, as for a TGOV1, the command would be scaled by R)."""
     params = dataclasses.replace(fit39.params, k_agc=(0.0, 0.0))
-    r = simulate_grid(params, duration=40.0, attacks={0: {"pc": lfc.Step(0.02, 1.0)}},
-                      case=IEEE39)
+    r = lfc.simulate(IEEE39, design=params, duration=40.0,
+                     attacks={0: {"pc": lfc.Step(0.02, 1.0)}})
     end = r.trace.iloc[-1]
     droop = [a.droop for a in case_design(IEEE39).areas]
     for a, u in ((0, 0.02), (1, 0.0)):
@@ -170,9 +170,9 @@ def test_a_tgov1n_area_command_enters_after_the_droop(fit39):
 
 def test_stop_on_trip_ends_at_the_first_trip_of_the_full_run(fit):
     attacks = {a: {"ace": lfc.Step(-2.5, 1.0)} for a in range(2)}
-    full = simulate_grid(fit.params, duration=30.0, attacks=attacks)
+    full = lfc.simulate(CASE, design=fit.params, duration=30.0, attacks=attacks)
     first = min(float(r.trips.t.min()) for r in full.areas if len(r.trips))
-    stopped = simulate_grid(fit.params, duration=30.0, attacks=attacks, stop_on_trip=True)
+    stopped = lfc.simulate(CASE, design=fit.params, duration=30.0, attacks=attacks, stop_on_trip=True)
     assert stopped.tripped and float(stopped.trace.t.iat[-1]) == pytest.approx(first)
     for a, r in enumerate(stopped.areas):
         expected = full.areas[a].trips[full.areas[a].trips.t <= first + 1e-9]

@@ -33,7 +33,8 @@ def test_simulate_many_dispatches_on_the_plant():
 @pytest.mark.parametrize("plant", ["kundur", None, 3.0])
 def test_an_unknown_plant_is_a_clear_error(plant):
     with pytest.raises(ValueError, match="plant must be an LFCParams, a MultiAreaParams, an "
-                                         "lfc.testbed.MicrogridCase or an lfc.testbed.GridCase"):
+                                         "lfc.testbed.MicrogridCase, an lfc.testbed.GridCase "
+                                         "or an lfc.testbed.AndesPlant, got"):
         lfc.simulate(plant, duration=1.0)
     with pytest.raises(ValueError, match="plant must be"):
         lfc.simulate_many(plant, [], duration=1.0)
@@ -76,14 +77,22 @@ def test_old_grid_names_still_refuse_a_single_area():
 
 def test_simulate_runs_the_andes_cases_with_their_fitted_design_models():
     pytest.importorskip("andes")
-    from lfc.testbed import GridCase, MicrogridCase, grid_design, simulate_grid, simulate_testbed
+    from lfc.testbed import (GridCase, MicrogridCase, grid_design, simulate_grid,
+                             simulate_grid_batch, simulate_testbed)
     from lfc.testbed.fit import design_model
     micro = lfc.simulate(MicrogridCase(), duration=0.5, pc_attack=ATTACK)
-    pd.testing.assert_frame_equal(micro.trace, simulate_testbed(
-        design_model(), duration=0.5, pc_attack=ATTACK).trace)
+    with pytest.warns(DeprecationWarning, match="simulate_testbed is deprecated"):
+        old = simulate_testbed(design_model(), duration=0.5, pc_attack=ATTACK)
+    pd.testing.assert_frame_equal(micro.trace, old.trace)
     case = GridCase.kundur()
     grid = lfc.simulate(case, duration=0.3, attacks={0: {"pc": ATTACK}})
-    pd.testing.assert_frame_equal(grid.trace, simulate_grid(
-        grid_design(case), case=case, duration=0.3, attacks={0: {"pc": ATTACK}}).trace)
+    with pytest.warns(DeprecationWarning, match="simulate_grid is deprecated"):
+        old = simulate_grid(grid_design(case), case=case, duration=0.3,
+                            attacks={0: {"pc": ATTACK}})
+    pd.testing.assert_frame_equal(grid.trace, old.trace)
+    with pytest.warns(DeprecationWarning, match="simulate_grid_batch is deprecated"):
+        old = simulate_grid_batch(grid_design(case), [{"attacks": {0: {"pc": ATTACK}}}],
+                                  duration=0.3, jobs=1, progress=False)
+    pd.testing.assert_frame_equal(grid.trace, old[0].trace)
     with pytest.raises(ValueError, match="does not run the ANDES microgrid"):
         lfc.simulate_many(MicrogridCase(), [], duration=1.0)

@@ -11,7 +11,7 @@ from lfc.experiments.scenarios import ATTACK_START, FIG4_AMPLITUDE
 from lfc.model import STATES
 from lfc.simulate import METRIC_KEYS
 from lfc.testbed import (FaultSpec, MicrogridCase, OvercurrentSettings, TestbedError,
-                         build_system, phase_a_current, simulate_testbed)
+                         build_system, phase_a_current)
 from lfc.testbed import fit as fitting
 from lfc.testbed.fit import OUTPUTS, design_model, fit_design_model
 
@@ -32,7 +32,7 @@ def test_builds_power_flow_converges_and_starts_at_nominal():
     ss = build_system(CASE)
     assert ss.PFlow.converged and ss.config.mva == 2.5
     assert np.all((ss.Bus.v.v > 0.98) & (ss.Bus.v.v < 1.01))
-    r = simulate_testbed(CASE.design_params(), duration=0.5)
+    r = lfc.simulate(CASE, design=CASE.design_params(), duration=0.5)
     assert set(STATES) <= set(r.trace.columns)
     assert r.trace.dw_meas.abs().max() < 1e-6 and r.trace.dw.abs().max() < 1e-6
     assert not r.metrics()["tripped"] and set(r.metrics()) == set(METRIC_KEYS)
@@ -72,7 +72,7 @@ def test_testbed_matches_fitted_model_on_a_new_small_signal(fit):
     """A different input from the fit's (a 0.5 Hz, 0.01 pu command oscillation):
     the fitted linear model tracks the testbed within twice the fit error."""
     attack = lfc.Sinusoid(0.01, 0.5, start=0.5)
-    bed = simulate_testbed(fit.params, duration=6.0, pc_attack=attack).trace
+    bed = lfc.simulate(CASE, design=fit.params, duration=6.0, pc_attack=attack).trace
     lin = lfc.simulate(fit.params, duration=6.0, pc_attack=attack, dt=0.005).trace
     for name in ("dw", "dw_meas", "rocof_meas"):
         model = np.interp(bed.t, lin.t, lin[name])
@@ -82,8 +82,8 @@ def test_testbed_matches_fitted_model_on_a_new_small_signal(fit):
 
 def test_rocof_attack_trips_without_scc_and_not_with_it(params):
     attack = lfc.Sinusoid(FIG4_AMPLITUDE, 1.0, start=0.5)
-    bare = simulate_testbed(params, duration=3.0, pc_attack=attack)
-    safe = simulate_testbed(params, duration=3.0, pc_attack=attack,
+    bare = lfc.simulate(CASE, design=params, duration=3.0, pc_attack=attack)
+    safe = lfc.simulate(CASE, design=params, duration=3.0, pc_attack=attack,
                             scc=lfc.SafetyFilter(params, alpha=20.0))
     assert bare.metrics()["first_trip_relay"] == "ROCOF"
     assert not safe.metrics()["tripped"] and len(safe.alarms) > 0
@@ -91,7 +91,7 @@ def test_rocof_attack_trips_without_scc_and_not_with_it(params):
 
 
 def test_stop_on_trip_ends_the_run_at_the_trip(params):
-    r = simulate_testbed(params, duration=3.0, stop_on_trip=True,
+    r = lfc.simulate(CASE, design=params, duration=3.0, stop_on_trip=True,
                          pc_attack=lfc.Sinusoid(FIG4_AMPLITUDE, 1.0, start=0.5))
     assert len(r.trips) == 1 and r.trace.t.iloc[-1] == pytest.approx(r.trips.t.iloc[0])
 
@@ -102,7 +102,7 @@ def test_fault_trips_over_current_relay_within_its_curve_and_recovers(params, xf
     inverse-time one, between the curve's times for the largest and smallest
     fault current seen (the current decays as the machine's flux does)."""
     oc = OvercurrentSettings()
-    r = simulate_testbed(params, duration=3.0, fault=FaultSpec(5, 1.0, xf))
+    r = lfc.simulate(CASE, design=params, duration=3.0, fault=FaultSpec(5, 1.0, xf))
     trip = r.line_trips.iloc[0]
     tr = r.trace
     during = tr[(tr.t > 1.0) & (tr.t <= trip.trip_t)]
@@ -119,8 +119,8 @@ def test_fault_trips_over_current_relay_within_its_curve_and_recovers(params, xf
 
 def test_scc_leaves_fault_protection_unchanged(params):
     fault = FaultSpec(5, ATTACK_START)
-    bare = simulate_testbed(params, duration=2.0, fault=fault)
-    safe = simulate_testbed(params, duration=2.0, fault=fault,
+    bare = lfc.simulate(CASE, design=params, duration=2.0, fault=fault)
+    safe = lfc.simulate(CASE, design=params, duration=2.0, fault=fault,
                             scc=lfc.SafetyFilter(params, alpha=20.0))
     assert safe.line_trips.trip_t.iloc[0] == bare.line_trips.trip_t.iloc[0]
 
@@ -150,7 +150,7 @@ def test_phase_a_waveform_from_a_constant_phasor():
 ])
 def test_unrepresentable_scenarios_fail_before_running(params, kwargs, message):
     with pytest.raises(ValueError, match=message):
-        simulate_testbed(params, duration=2.0, **kwargs)
+        lfc.simulate(CASE, design=params, duration=2.0, **kwargs)
 
 
 def test_bad_case_and_fault_parameters():
@@ -168,7 +168,7 @@ def test_non_convergence_raises_with_time_and_reason(params):
     fault = FaultSpec()
     object.__setattr__(fault, "xf", 1e-7)  # below what ANDES can solve (bypasses the check)
     with pytest.raises(TestbedError, match=r"did not converge at t = 1\.\d+ s"):
-        simulate_testbed(params, duration=2.0, fault=fault)
+        lfc.simulate(CASE, design=params, duration=2.0, fault=fault)
 
 
 def test_fig5_bias_beats_the_paper_scc_on_the_testbed_at_both_outside_readings(params):
@@ -177,8 +177,8 @@ def test_fig5_bias_beats_the_paper_scc_on_the_testbed_at_both_outside_readings(p
     "hold" (the default) then changes nothing, "push" holds the frequency just above
     OF2.  Both trip OF2."""
     kw = dict(duration=20.0, wref_attack=lfc.Step(0.04, start=1.0))
-    hold = simulate_testbed(params, scc=lfc.SafetyFilter(params), **kw).metrics()
-    push = simulate_testbed(params, scc=lfc.SafetyFilter(params, outside_rule="push",
+    hold = lfc.simulate(CASE, design=params, scc=lfc.SafetyFilter(params), **kw).metrics()
+    push = lfc.simulate(CASE, design=params, scc=lfc.SafetyFilter(params, outside_rule="push",
                                                          conflict="slack"), **kw).metrics()
     assert hold["first_trip_relay"] == push["first_trip_relay"] == "OF2"
     assert hold["max_abs_modification"] == 0 and hold["max_abs_dw_meas"] > 0.033
@@ -194,11 +194,11 @@ def test_robust_filter_with_the_fitted_models_box_holds_on_the_testbed(params, f
     from lfc.filters.certified import BOX
     assert all(abs(getattr(fit.initial, n) / getattr(params, n) - 1) <= 0.2 for n in BOX)
     robust = lfc.SafetyFilter(params, method="certified", uncertainty=0.2)
-    fig5 = simulate_testbed(params, duration=20.0, wref_attack=lfc.Step(0.04, start=1.0),
+    fig5 = lfc.simulate(CASE, design=params, duration=20.0, wref_attack=lfc.Step(0.04, start=1.0),
                             scc=robust).metrics()
-    fig4 = simulate_testbed(params, duration=10.0, scc=robust,
+    fig4 = lfc.simulate(CASE, design=params, duration=10.0, scc=robust,
                             pc_attack=lfc.Sinusoid(FIG4_AMPLITUDE, 1.0, start=1.0)).metrics()
-    load = simulate_testbed(params, duration=10.0, scc=robust,
+    load = lfc.simulate(CASE, design=params, duration=10.0, scc=robust,
                             load=lfc.Step(0.1, start=1.0)).metrics()
     assert not (fig5["tripped"] or fig4["tripped"] or load["tripped"])
     assert fig5["max_abs_dw_meas"] < 0.02 and fig4["max_abs_rocof_meas"] < 0.04

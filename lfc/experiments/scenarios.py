@@ -17,13 +17,14 @@ is clear, not marginal (reproduction notes section 4):
 Attacks and disturbances start at 1 s so each plot shows the steady state first.
 
 Every scenario runs on either plant (``plant="linear"``: :func:`lfc.simulate`;
-``plant="testbed"``: the ANDES microgrid, :func:`lfc.testbed.simulate_testbed`)
+``plant="testbed"``: the ANDES microgrid, ``lfc.simulate(MicrogridCase(), design=...)``)
 with the same defaults.  On the testbed the design model is the one fitted to
 it (:func:`lfc.testbed.fit.design_model`).
 """
 
 from __future__ import annotations
 
+from functools import partial
 from typing import Callable
 
 from lfc.model import LFCParams
@@ -65,12 +66,19 @@ def check_plant(plant: str, plants: tuple[str, ...] = PLANTS) -> None:
 
 
 def simulator(plant: str) -> Callable[..., SimResult]:
-    """The simulation function of ``plant``."""
+    """The simulation function of ``plant``, called ``(params, **keywords)``:
+    :func:`lfc.simulate` of ``params``, or of the ANDES microgrid with the
+    design model ``params``."""
     check_plant(plant)
     if plant == "linear":
         return simulate
-    from lfc.testbed import simulate_testbed
-    return simulate_testbed
+    from lfc.testbed import MicrogridCase
+    return partial(_on_microgrid, MicrogridCase())
+
+
+def _on_microgrid(case, params: LFCParams, **kwargs) -> SimResult:
+    """:func:`lfc.simulate` of the microgrid with the design model ``params``."""
+    return simulate(case, design=params, **kwargs)
 
 
 def design_params(plant: str) -> LFCParams:

@@ -81,13 +81,13 @@ def record_experiments(case: MicrogridCase) -> list[dict[str, np.ndarray]]:
     Returns a list of dicts with ``t`` (s), ``u`` (applied command, pu),
     ``p_load`` (pu) and the ``OUTPUTS`` on a uniform grid.
     """
-    from lfc.testbed.plant import simulate_testbed
+    from lfc.testbed.plant import simulate_microgrid
 
     params = case.design_params()
-    runs = [simulate_testbed(params, duration=FIT_DURATION, case=case,
-                             pc_attack=Step(FIT_STEP, 1.0)),
-            simulate_testbed(params, duration=FIT_DURATION, case=case,
-                             load=Step(FIT_STEP, 1.0))]
+    runs = [simulate_microgrid(params, duration=FIT_DURATION, case=case,
+                               pc_attack=Step(FIT_STEP, 1.0)),
+            simulate_microgrid(params, duration=FIT_DURATION, case=case,
+                               load=Step(FIT_STEP, 1.0))]
     out = []
     for r in runs:
         tr = r.trace  # times already rounded to 1 ns by the testbed: a uniform grid

@@ -1,7 +1,7 @@
 """The two-area design model that best describes a grid on ANDES
 (:class:`lfc.testbed.GridCase`: Kundur's or the IEEE 39-bus system).
 
-Two small experiments on the testbed (:func:`lfc.testbed.simulate_grid`,
+Two small experiments on the testbed (:func:`lfc.testbed.simulate_andes_grid`,
 AGC on, no filters): a ``FIT_STEP`` pu command step at area 0's generators and
 a ``FIT_STEP`` pu load step in area 1.  Each area's seven parameters are fitted
 as the microgrid's are (:func:`lfc.testbed.fit.fit_params`), on both
@@ -75,12 +75,12 @@ class GridFit:
 def record_grid_experiments(case: GridCase, initial: MultiAreaParams) -> list:
     """The two experiments (module docstring), run with the design model
     ``initial``'s AGC: their :class:`MultiAreaResult`."""
-    from lfc.testbed.grid_plant import simulate_grid
+    from lfc.testbed.grid_plant import simulate_andes_grid
 
-    return [simulate_grid(initial, duration=FIT_DURATION, case=case,
-                            attacks={0: {"pc": Step(FIT_STEP, 1.0)}}),
-            simulate_grid(initial, duration=FIT_DURATION, case=case,
-                            loads={1: Step(FIT_STEP, 1.0)})]
+    return [simulate_andes_grid(initial, duration=FIT_DURATION, case=case,
+                                attacks={0: {"pc": Step(FIT_STEP, 1.0)}}),
+            simulate_andes_grid(initial, duration=FIT_DURATION, case=case,
+                                loads={1: Step(FIT_STEP, 1.0)})]
 
 
 def fit_grid(case: GridCase | None = None) -> GridFit:

@@ -1,13 +1,11 @@
 """AGC and a filter at every area of an interconnected grid on ANDES:
-:func:`simulate_grid`, the testbed's :func:`lfc.simulate` (a grid).
+:func:`simulate_andes_grid`, the testbed's :func:`lfc.simulate` (a grid).
 
-ANDES integrates the grid (:mod:`lfc.testbed.grid`: Kundur's two-area system
-or the IEEE 39-bus system); before every step it calls back into
-:class:`_GridBed`, which logs the last accepted state and, when a control
-sample is due, runs each area's generator side
-(:class:`lfc.engine.GeneratorSide`, the engine's own code: noise, estimator,
-filter and AGC on the area's ACE) on the area's state in design-model
-coordinates (pu on the area base):
+The grid (:mod:`lfc.testbed.grid`: Kundur's two-area system or the IEEE
+39-bus system) is an :class:`~lfc.testbed.loop.AndesPlant` (:class:`GridPlant`)
+run by the one ANDES adapter, :class:`lfc.testbed.loop.AndesLoop`, with each
+area's generator side (noise, estimator, filter and AGC on the area's ACE).
+Each area's state in design-model coordinates (pu on the area base):
 
 ==============  ==========================================================
 ``dPg``         sum of the area's governor lags ``LAG_y`` (of the case's
@@ -42,7 +40,6 @@ Sn_k / Σ Sn``.  The relays of each area read its meter bus.
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 import pandas as pd
@@ -53,16 +50,17 @@ from lfc.multiarea import MultiAreaParams
 from lfc.relays import RelayBank, RelaySettings
 from lfc.simulate_multiarea import MultiAreaResult, area_filter, multiarea_result
 from lfc.testbed.grid import GridCase, build_grid
-from lfc.testbed.plant import TestbedError, init_tds, run_tds
+from lfc.testbed.loop import AndesLoop, AndesPlant, TestbedError
 
 
-def simulate_grid(params: MultiAreaParams, *, duration: float,
-                    attacks: dict | None = None, loads: dict | None = None,
-                    filters: dict | None = None, relays: RelaySettings | None = None,
-                    estimator=None, noise_std: tuple[float, float] = (0.0, 0.0),
-                    seed: int = 0, control_period: float = 0.01, step: float = 0.005,
-                    stop_on_trip: bool = False, feedforward: bool = True,
-                    case: GridCase | None = None) -> MultiAreaResult:
+def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
+                        attacks: dict | None = None, loads: dict | None = None,
+                        filters: dict | None = None, relays: RelaySettings | None = None,
+                        estimator=None, noise_std: tuple[float, float] = (0.0, 0.0),
+                        seed: int = 0, control_period: float = 0.01, step: float = 0.005,
+                        stop_on_trip: bool = False, feedforward: bool = True,
+                        case: GridCase | None = None, plant: AndesPlant | None = None
+                        ) -> MultiAreaResult:
     """Simulate an interconnected grid on ANDES with AGC and filters; the
     arguments and result of :func:`lfc.simulate` (a grid), plus the ones below.
 
@@ -80,6 +78,9 @@ def simulate_grid(params: MultiAreaParams, *, duration: float,
         ANDES time step (s); ``control_period`` must be a multiple of it.
     case : GridCase
         The grid; default ``GridCase.kundur()``.
+    plant : AndesPlant, optional
+        Instead of ``case``: any ANDES plant (:class:`lfc.testbed.loop.AndesPlant`)
+        of ``params.n_areas`` areas; ``loads`` go to its ``set_load``.
 
     Returns
     -------
@@ -93,14 +94,16 @@ def simulate_grid(params: MultiAreaParams, *, duration: float,
     TestbedError
         If ANDES does not converge (with the time and ANDES' reason).
     """
-    case = case or GridCase.kundur()
-    if not isinstance(params, MultiAreaParams) or params.n_areas != case.n_areas:
-        raise ValueError(f"params must be a MultiAreaParams of {case.n_areas} areas (the "
-                         f"case's), got {params!r}")
+    if plant is not None and case is not None:
+        raise ValueError("give case (a GridCase) or plant (an AndesPlant), not both")
+    plant = plant if plant is not None else GridPlant(case or GridCase.kundur())
+    if not isinstance(params, MultiAreaParams) or params.n_areas != plant.n_areas:
+        raise ValueError(f"params must be a MultiAreaParams of {plant.n_areas} areas (the "
+                         f"plant's), got {params!r}")
     check_positive("duration", duration)
     check_multiple("control_period", control_period, "step", step)
     relays = relays if relays is not None else RelaySettings()
-    n_a = case.n_areas
+    n_a = plant.n_areas
     attacks = check_attacks(attacks, n_a)
     loads = check_area_keys(loads, n_a, "loads")
     filters = check_area_keys(filters, n_a, "filters")
@@ -115,13 +118,18 @@ def simulate_grid(params: MultiAreaParams, *, duration: float,
                           feedforward, control_period, ace_attack=attacks.get(a, {}).get("ace"),
                           k_agc=(float(k_freq[a]), float(k_tie[a])))
             for a, area in enumerate(params.areas)]
-    bed = _GridBed(case, loads, gens, RelayBank(relays, n_a) if stop_on_trip else None)
-    bed.run(duration, step)
-    rows = np.array(bed.rows)
+    loop = AndesLoop(plant, loads, gens, RelayBank(relays, n_a) if stop_on_trip else None)
+    loop.run(duration, step)
+    rows = np.array(loop.rows)
     t = rows[:, 0].round(9)              # ANDES accumulates its time in floating point
-    per_area = rows[:, 1:].reshape(len(rows), n_a, 8)
-    trips = bed.trips if stop_on_trip else _trips(relays, t, per_area)
-    settings = {"plant": "testbed", "case": repr(case), "params": repr(params),
+    per_area = rows[:, 1:1 + 8 * n_a].reshape(len(rows), n_a, 8)   # then the plant's extra
+    if loop.stopped is not None:
+        found, t_stop = loop.stopped
+        trips = _by_area(found, np.array([t_stop]), n_a)
+    else:
+        trips = _trips(relays, t, per_area) if not stop_on_trip else _by_area([], t, n_a)
+    settings = {"plant": "testbed", "case": repr(getattr(plant, "case", plant)),
+                "params": repr(params),
                 "relays": vars(relays), "duration": duration, "step": step,
                 "control_period": control_period, "seed": seed, "noise_std": list(noise_std),
                 "estimator": repr(estimator), "attacks": repr(attacks), "loads": repr(loads),
@@ -147,33 +155,20 @@ def _by_area(found: list[tuple[str, int, int]], t: np.ndarray, n_areas: int
                          columns=["relay", "t"]) for a in range(n_areas)]
 
 
-class _Stop(Exception):
-    """Raised inside the ANDES callback to end a run at a trip."""
+class GridPlant:
+    """An interconnected grid as an :class:`~lfc.testbed.loop.AndesPlant`
+    (module docstring: what is metered, how a command is shared)."""
 
+    def __init__(self, case: GridCase) -> None:
+        self.case, self.n_areas = case, case.n_areas
 
-class _GridBed:
-    """One ANDES run with every area's generator side in its per-step callback."""
+    def build(self):
+        return build_grid(self.case)
 
-    def __init__(self, case: GridCase, loads: dict, gens: list[GeneratorSide],
-                 bank: RelayBank | None) -> None:
-        self.case, self.loads, self.gens, self.bank = case, loads, gens, bank
-        self.ss = build_grid(case)
-        self.rows: list[list[float]] = []
-        self.trips: list[pd.DataFrame] | None = None
-        self.next_j = 0
-        self._load_at = (math.nan, np.zeros(case.n_areas))
-
-    def run(self, duration: float, step: float) -> None:
-        init_tds(self.ss, duration, step)
-        self._addresses()
-        try:
-            self._log(run_tds(self.ss, duration, self._callback))
-        except _Stop:
-            pass
-
-    def _addresses(self) -> None:
-        ss, case = self.ss, self.case
+    def attach(self, ss) -> None:
+        case = self.case
         gen, gov, bus = ss.GENROU, getattr(ss, case.governor), ss.Bus
+        self.gov = gov
         self.gen_uid = [[gen.idx2uid(g) for g in gens] for gens in case.generators]
         self.gov_uid = [[list(gov.syn.v).index(g) for g in gens] for gens in case.generators]
         self.weights = [gen.M.v[u] / gen.M.v[u].sum() for u in map(np.array, self.gen_uid)]
@@ -210,21 +205,19 @@ class _GridBed:
             for end in (0, 1):
                 self.ties.append((areas[end], bus.idx2uid(ends[end]), bus.idx2uid(ends[1 - end]),
                                   y, sh))
-        self.tie0 = self._export()
+        self.tie0 = self._export(ss)
 
-    def _export(self) -> np.ndarray:
+    def _export(self, ss) -> np.ndarray:
         """Each area's tie-line export (pu of its base)."""
-        v, a = self.ss.dae.y[self.v_addr], self.ss.dae.y[self.ang_addr]
+        v, a = ss.dae.y[self.v_addr], ss.dae.y[self.ang_addr]
         p = np.zeros(self.case.n_areas)
         for area, here, there, y, sh in self.ties:
             v1, v2 = v[here] * np.exp(1j * a[here]), v[there] * np.exp(1j * a[there])
             p[area] += (v1 * np.conj((v1 - v2) * y + v1 * sh)).real
         return p / self.case.scale
 
-    def _state(self) -> np.ndarray:
-        """(n_areas, 8): design-model state, p_load, p_tie, p_net (pu of each
-        area's base)."""
-        x, y = self.ss.dae.x, self.ss.dae.y
+    def measure(self, ss, p_load: np.ndarray) -> np.ndarray:
+        x, y = ss.dae.x, ss.dae.y
         s = self.case.scale
         out = np.zeros((self.case.n_areas, 8))
         for i, (gu, vu) in enumerate(zip(self.gen_uid, self.gov_uid)):
@@ -234,50 +227,29 @@ class _GridBed:
             out[i, 3] = y[self.a_f[i]] - 1.0
             out[i, 4] = y[self.a_r[i]]
             out[i, 7] = (y[self.a_pe[gu]] - self.pe0[gu]).sum() / s
-        out[:, 6] = self._export() - self.tie0
+        out[:, 6] = self._export(ss) - self.tie0
+        out[:, 5] = p_load
         return out
 
-    def _p_load(self, t: float) -> np.ndarray:
-        """Each area's dP_L at ``t`` (pu; the last value is kept, as in the microgrid)."""
-        if t != self._load_at[0]:
-            p = np.zeros(self.case.n_areas)
-            for a, load in self.loads.items():
-                p[a] = float(sample_signal(load, np.array([t]), f"loads[{a}]")[0])
-            self._load_at = (t, p)
-        return self._load_at[1]
+    def extra(self) -> tuple[float, ...]:
+        return ()
 
-    def _callback(self, t_attempt, system) -> None:
-        t_next = float(t_attempt)
-        self._log(max(t_next - self.ss.TDS.h, 0.0))
-        p = self._p_load(t_next)
+    def protect(self, t: float) -> None:
+        """No line protection in the grid cases."""
+
+    def actuate(self, ss, area: int, u: float) -> None:
+        self.gov.paux0.v[self.gov_uid[area]] = (self.before_droop[area] * u * self.case.scale
+                                                * self.share[area])
+
+    def set_load(self, ss, p_load: np.ndarray) -> None:
         for i, uid in enumerate(self.ls_uid):
-            self.ss.PQ.Req.v[uid] = p[i] * self.case.scale / self.ls_v0[i] ** 2
-
-    def _log(self, t: float) -> None:
-        """Record the accepted state at ``t`` (once), check relays, control if due."""
-        if self.rows and t <= self.rows[-1][0] + 1e-9:
-            return
-        state = self._state()
-        state[:, 5] = self._p_load(t)
-        self.rows.append([t, *state.ravel()])
-        if self.bank is not None:
-            found = self.bank.update(np.array([t]), state[None, :, 3], state[None, :, 4])
-            if found:
-                self.trips = _by_area(found, np.array([round(t, 9)]), self.case.n_areas)
-                raise _Stop
-        tc = self.gens[0].tc
-        gov = getattr(self.ss, self.case.governor)
-        while self.next_j < len(tc) and tc[self.next_j] <= t + 1e-7:
-            for a, gen in enumerate(self.gens):
-                u = gen.step(self.next_j, state[a, :5], state[a, 7], state[a, 6])
-                gov.paux0.v[self.gov_uid[a]] = (self.before_droop[a] * u * self.case.scale
-                                                * self.share[a])
-            self.next_j += 1
+            ss.PQ.Req.v[uid] = p_load[i] * self.case.scale / self.ls_v0[i] ** 2
 
 
-def simulate_grid_batch(params: MultiAreaParams, scenarios: list[dict], *, jobs: int = 2,
-                        progress: bool = True, **common) -> list[MultiAreaResult]:
-    """Many :func:`simulate_grid` runs in ``jobs`` processes (ANDES holds the
+def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
+                              jobs: int = 2, progress: bool = True,
+                              **common) -> list[MultiAreaResult]:
+    """Many :func:`simulate_andes_grid` runs in ``jobs`` processes (ANDES holds the
     GIL), each scenario a dict of its keyword arguments, ``common`` the ones
     they share; the results in the scenarios' order."""
     from concurrent.futures import ProcessPoolExecutor
@@ -290,16 +262,16 @@ def simulate_grid_batch(params: MultiAreaParams, scenarios: list[dict], *, jobs:
                                                            for s in scenarios):
         raise ValueError(f"scenarios must be a list of dicts, got {scenarios!r}")
     calls = [{**common, **s} for s in scenarios]
-    bar = tqdm(total=len(calls), unit="run", desc="simulate_grid", disable=not progress)
+    bar = tqdm(total=len(calls), unit="run", desc="simulate", disable=not progress)
     if jobs == 1 or len(calls) <= 1:
         out = []
         for kw in calls:
-            out.append(simulate_grid(params, **kw))
+            out.append(simulate_andes_grid(params, **kw))
             bar.update()
         bar.close()
         return out
     with ProcessPoolExecutor(max_workers=min(jobs, len(calls))) as pool:
-        futures = [pool.submit(simulate_grid, params, **kw) for kw in calls]
+        futures = [pool.submit(simulate_andes_grid, params, **kw) for kw in calls]
         for f in futures:
             f.add_done_callback(lambda _: bar.update())
         out = [f.result() for f in futures]

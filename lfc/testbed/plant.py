@@ -1,12 +1,8 @@
-"""The SCC in the loop of the ANDES microgrid: :func:`simulate_testbed`.
+"""The SCC in the loop of the ANDES microgrid: :func:`simulate_microgrid`.
 
-ANDES integrates the network (implicit trapezoidal, fixed ``step`` except
-around events).  Before every step it calls back into :class:`_Testbed`,
-which logs the last accepted state, runs the over-current relay, and, when a
-control sample is due, hands the generator-side loop
-(:class:`lfc.engine.GeneratorSide`: noise, Kalman filter, local integral
-controller, attacks, filter — the engine's own compiled code) the state in the
-design model's coordinates:
+The microgrid is an :class:`~lfc.testbed.loop.AndesPlant` (:class:`MicrogridPlant`)
+run by the one ANDES adapter, :class:`lfc.testbed.loop.AndesLoop`.  Its one
+area's state in the design model's coordinates:
 
 =============  ======================================================
 ``dPg``        governor valve ``TGOV1N.LAG_y`` minus its initial value
@@ -19,7 +15,8 @@ design model's coordinates:
 The returned command is written to ``TGOV1N.paux0`` (added after the droop
 gain; on the 2.5 MVA base it is ΔP_c in machine pu) and held until the next
 sample.  The frequency relays read the bus measurements, as a relay at the
-generator terminals would, including their spikes at a fault.
+generator terminals would, including their spikes at a fault; the
+over-current relay of the protected line runs after every accepted step.
 """
 
 from __future__ import annotations
@@ -39,6 +36,7 @@ from lfc.relays import RelayBank, RelaySettings
 from lfc.signals import SignalLike
 from lfc.simulate import SimResult, result
 from lfc.testbed.case import MicrogridCase, build_system, check_bus
+from lfc.testbed.loop import AndesLoop, BreakerOpens, TestbedError
 from lfc.testbed.protection import OvercurrentRelay, OvercurrentSettings
 
 TESTBED_COLUMNS = ("v_gen", "i_line_re", "i_line_im")
@@ -69,23 +67,17 @@ class FaultSpec:
             raise ValueError(f"xf must be in [1e-4, 1] pu, got {self.xf}")
 
 
-class TestbedError(RuntimeError):
-    """ANDES failed during a run (the message says when and why)."""
-
-    __test__ = False  # not a pytest test class
-
-
-def simulate_testbed(params: LFCParams, *, duration: float,
-                     pc_attack: SignalLike | None = None,
-                     wref_attack: SignalLike | None = None, load: SignalLike | None = None,
-                     fault: FaultSpec | None = None, scc: SafetyFilter | None = None,
-                     relays: RelaySettings | None = None,
-                     estimator: str | KalmanFilter | None = None,
-                     noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0,
-                     control_period: float = 0.01, step: float = 0.005,
-                     stop_on_trip: bool = False, load_feedforward: bool = False,
-                     case: MicrogridCase | None = None,
-                     overcurrent: OvercurrentSettings | None = None) -> SimResult:
+def simulate_microgrid(params: LFCParams, *, duration: float,
+                       pc_attack: SignalLike | None = None,
+                       wref_attack: SignalLike | None = None, load: SignalLike | None = None,
+                       fault: FaultSpec | None = None, scc: SafetyFilter | None = None,
+                       relays: RelaySettings | None = None,
+                       estimator: str | KalmanFilter | None = None,
+                       noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0,
+                       control_period: float = 0.01, step: float = 0.005,
+                       stop_on_trip: bool = False, load_feedforward: bool = False,
+                       case: MicrogridCase | None = None,
+                       overcurrent: OvercurrentSettings | None = None) -> SimResult:
     """Simulate the closed loop on the ANDES microgrid; the same arguments and
     :class:`~lfc.simulate.SimResult` as :func:`lfc.simulate`, plus the ones below.
 
@@ -128,19 +120,21 @@ def simulate_testbed(params: LFCParams, *, duration: float,
     oc = overcurrent or OvercurrentSettings()
     tc = np.arange(n_ctrl) * control_period
 
-    def testbed(open_t: float | None) -> _Testbed:
+    def run(open_t: float | None) -> tuple[AndesLoop, MicrogridPlant]:
         gen = GeneratorSide(params, scc, estimator, noise_std, seed, tc, pc_attack,
                             wref_attack, load_feedforward, control_period)
-        return _Testbed(case, fault, load, gen, OvercurrentRelay(oc),
-                        RelayBank(relays) if stop_on_trip else None, open_t)
+        plant = MicrogridPlant(case, fault, OvercurrentRelay(oc), open_t)
+        loop = AndesLoop(plant, {} if load is None else {0: load}, [gen],
+                         RelayBank(relays) if stop_on_trip else None)
+        return loop, plant
 
-    bed = testbed(None)
-    opened = bed.run(duration, step)
-    if opened is not None:  # second pass: the breaker opening as a scheduled ANDES event
-        bed = testbed(opened)
-        bed.run(duration, step)
-        if bed.oc.open_t is None or abs(bed.oc.open_t - opened) > 1e-9:
-            raise TestbedError(f"the replay's over-current trip ({bed.oc.open_t}) differs "
+    loop, plant = run(None)
+    if loop.run(duration, step):  # second pass: the breaker opening as a scheduled ANDES event
+        opened = plant.oc.open_t
+        loop, plant = run(opened)
+        loop.run(duration, step)
+        if plant.oc.open_t is None or abs(plant.oc.open_t - opened) > 1e-9:
+            raise TestbedError(f"the replay's over-current trip ({plant.oc.open_t}) differs "
                                f"from the first pass ({opened})")
     settings = {"plant": "testbed", "case": repr(case), "params": vars(params),
                 "relays": vars(relays), "duration": duration, "step": step,
@@ -149,7 +143,33 @@ def simulate_testbed(params: LFCParams, *, duration: float,
                 "wref_attack": repr(wref_attack), "load": repr(load), "fault": repr(fault),
                 "overcurrent": repr(oc), "stop_on_trip": stop_on_trip,
                 "load_feedforward": load_feedforward}
-    return bed.result(relays, settings)
+    return _result(loop, plant, relays, settings)
+
+
+def _result(loop: AndesLoop, plant: MicrogridPlant, relays: RelaySettings,
+            settings: dict) -> SimResult:
+    rows = np.array(loop.rows)
+    cols = ("t", *STATES, "p_load", *TESTBED_COLUMNS)
+    trace = pd.DataFrame(rows[:, [0, 1, 2, 3, 4, 5, 6, 9, 10, 11]], columns=list(cols))
+    trace["t"] = trace["t"].round(9)  # ANDES accumulates its time in floating point
+    if loop.stopped is not None:
+        found, t = loop.stopped
+        trips = [(relay, t) for relay, _, _ in found]
+    elif loop.bank is None:
+        found = RelayBank(relays).update(trace["t"].to_numpy(), trace["dw_meas"].to_numpy(),
+                                         trace["rocof_meas"].to_numpy())
+        trips = [(r, float(trace["t"].iat[k])) for r, k, _ in sorted(found, key=lambda f: f[1])]
+    else:
+        trips = []
+    t_end = float(trace["t"].iat[-1])
+    oc = plant.oc
+    line_trips = pd.DataFrame(
+        [(plant.case.protected_line, round(oc.trip_t, 9), round(oc.open_t, 9))]
+        if oc.trip_t is not None and oc.trip_t <= t_end else [],
+        columns=["line", "trip_t", "open_t"])
+    gen = loop.gens[0]
+    return result(trace, gen.tc, gen.ctrl, pd.DataFrame(trips, columns=["relay", "t"]),
+                  gen.scc, settings, line_trips)
 
 
 def _check_scenario(case: MicrogridCase, duration: float, step: float, control_period: float,
@@ -188,77 +208,36 @@ def _check_load(case: MicrogridCase, load: SignalLike | None, duration: float,
         raise ValueError(f"load takes the total load below zero ({total.min():.3f} pu)")
 
 
-def init_tds(ss, duration: float, step: float) -> None:
-    """Configure ANDES' time-domain run of ``ss`` (to ``duration`` at ``step``,
-    s; quiet, no line search, no stored history: the callback logs) and
-    initialize it."""
-    cfg = ss.TDS.config
-    cfg.tf, cfg.tstep, cfg.no_tqdm, cfg.criteria = duration, step, 1, 0
-    cfg.linesearch, cfg.save_every = 0, 0
-    ss.TDS.init()
-
-
-def run_tds(ss, duration: float, callback) -> float:
-    """Run the initialized ``ss`` with ``callback(t, system)`` before every step
-    attempt; return the end time (s), or raise :class:`TestbedError` with ANDES'
-    reason if it stopped before ``duration``."""
-    ss.TDS.callpert = callback
-    ss.TDS.run(no_summary=True)
-    t_end = float(ss.dae.t)
-    if ss.TDS.busted or t_end < duration - 1e-9:
-        raise TestbedError(f"ANDES did not converge at t = {t_end:.4f} s: "
-                           f"{ss.TDS.err_msg or 'the run ended early'}")
-    return t_end
-
-
-class _Stop(Exception):
-    """Raised inside the ANDES callback to end a run early."""
-
-
-class _BreakerOpens(_Stop):
-    """Raised in a first pass when the over-current relay's breaker opens."""
-
-
-class _Testbed:
-    """One ANDES run with the generator-side loop in its per-step callback.
+class MicrogridPlant:
+    """The islanded microgrid as an :class:`~lfc.testbed.loop.AndesPlant`: one
+    area, the load at ``case.load_bus``, a fault beyond the protected line
+    cleared by its over-current relay.
 
     A run with a fault takes two passes.  The first runs the relay in the loop
-    and stops when its breaker opens (``run`` returns that time).  The second
-    (``open_t`` given) schedules that opening as ANDES events (the line is
-    toggled off and the isolated fault removed at ``open_t``), which ANDES
-    handles exactly; switching a line inside the step callback instead failed
-    to converge for faults with xf ≥ 0.1 pu.
+    and stops when its breaker opens.  The second (``open_t`` given) schedules
+    that opening as ANDES events (the line is toggled off and the isolated
+    fault removed at ``open_t``), which ANDES handles exactly; switching a line
+    inside the step callback instead failed to converge for faults with
+    xf ≥ 0.1 pu.
     """
 
-    def __init__(self, case: MicrogridCase, fault: FaultSpec | None, load: SignalLike | None,
-                 gen: GeneratorSide, oc: OvercurrentRelay, bank: RelayBank | None,
+    n_areas = 1
+
+    def __init__(self, case: MicrogridCase, fault: FaultSpec | None, oc: OvercurrentRelay,
                  open_t: float | None) -> None:
-        self.case, self.fault, self.load, self.gen, self.oc = case, fault, load, gen, oc
-        self.bank, self.open_t = bank, open_t
-        kw = {} if fault is None else dict(fault_bus=fault.bus, fault_xf=fault.xf,
-                                           fault_t=fault.t, open_t=open_t)
-        self.ss = build_system(case, **kw)
-        self.rows: list[tuple] = []
-        self.trips: list[tuple[str, float]] = []
-        self.next_j = 0
+        self.case, self.fault, self.oc, self.open_t = case, fault, oc, open_t
         self.line_open = False
-        self._load_at = (math.nan, 0.0)  # (t, dP_L): the last load value evaluated
+        self._extra = (math.nan, math.nan, math.nan)
+        self._current = 0.0
 
-    def run(self, duration: float, step: float) -> float | None:
-        """Integrate to ``duration``; return the breaker-open time if a first
-        pass stopped there, else None."""
-        init_tds(self.ss, duration, step)
-        self._addresses()
-        try:
-            self._log(run_tds(self.ss, duration, self._callback))  # the final accepted state
-        except _BreakerOpens:
-            return self.oc.open_t
-        except _Stop:
-            pass
-        return None
+    def build(self):
+        fault = self.fault
+        kw = {} if fault is None else dict(fault_bus=fault.bus, fault_xf=fault.xf,
+                                           fault_t=fault.t, open_t=self.open_t)
+        return build_system(self.case, **kw)
 
-    def _addresses(self) -> None:
-        ss, case = self.ss, self.case
+    def attach(self, ss) -> None:
+        case = self.case
         gov, line = ss.TGOV1N, ss.Line
         self.ax = np.array([gov.LAG_y.a[0], ss.GENROU.omega.a[0]])
         self.ay = np.array([gov.pout.a[0], ss.BusFreq.f.a[0], ss.BusROCOF.Wf_y.a[0]])
@@ -273,83 +252,43 @@ class _Testbed:
         self.bus_uid = (bus.idx2uid(a), bus.idx2uid(b))
         self.gen_uid = bus.idx2uid(case.generator_bus)
         self.v_addr, self.a_addr = bus.v.a, bus.a.a
-        lstep = ss.PQ.idx2uid("LSTEP")
-        self.lstep, self.lstep_v0 = lstep, float(bus.v.v[bus.idx2uid(case.load_bus)])
+        self.lstep = ss.PQ.idx2uid("LSTEP")
+        self.lstep_v0 = float(bus.v.v[bus.idx2uid(case.load_bus)])
 
-    def _state(self) -> tuple[np.ndarray, float, complex]:
-        """Design-model state (pu), B6 voltage (pu) and line current (pu) now."""
-        x, y = self.ss.dae.x, self.ss.dae.y
-        state = np.array([x[self.ax[0]] - self.x0[0], y[self.ay[0]] - self.x0[1],
-                          x[self.ax[1]] - 1.0, y[self.ay[1]] - 1.0, y[self.ay[2]]])
+    def measure(self, ss, p_load: np.ndarray) -> np.ndarray:
+        """The design-model state, the load, no tie-line, the load as the net
+        disturbance; keeps the B6 voltage and the protected line's current."""
+        x, y = ss.dae.x, ss.dae.y
+        out = np.zeros((1, 8))
+        out[0, :5] = (x[self.ax[0]] - self.x0[0], y[self.ay[0]] - self.x0[1],
+                      x[self.ax[1]] - 1.0, y[self.ay[1]] - 1.0, y[self.ay[2]])
+        out[0, 5] = out[0, 7] = p_load[0]
         v, a = y[self.v_addr], y[self.a_addr]
         if self.line_open:
             current = 0j
         else:
             v1, v2 = (v[u] * np.exp(1j * a[u]) for u in self.bus_uid)
-            current = (v1 - v2) / self.z_line + v1 * self.y_shunt
-        return state, float(v[self.gen_uid]), complex(current)
+            current = complex((v1 - v2) / self.z_line + v1 * self.y_shunt)
+        self._current = abs(current)
+        self._extra = (float(v[self.gen_uid]), current.real, current.imag)
+        return out
 
-    def _p_load(self, t: float) -> float:
-        """dP_L at ``t`` (pu); the callback asks for each step's end time, and the
-        log for the same time one call later, so the last value is kept."""
-        if self.load is None:
-            return 0.0
-        if t != self._load_at[0]:
-            self._load_at = (t, float(sample_signal(self.load, np.array([t]), "load")[0]))
-        return self._load_at[1]
+    def extra(self) -> tuple[float, ...]:
+        """``TESTBED_COLUMNS``: B6 voltage (pu) and the line current phasor (pu)."""
+        return self._extra
 
-    def _callback(self, t_attempt, system) -> None:
-        ss = self.ss
-        t_next = float(t_attempt)
-        self._log(max(t_next - ss.TDS.h, 0.0))
-        ss.PQ.Req.v[self.lstep] = self._p_load(t_next) / self.lstep_v0 ** 2
-
-    def _log(self, t: float) -> None:
-        """Record the accepted state at ``t`` (once), protect, and control if due."""
-        if self.rows and t <= self.rows[-1][0] + 1e-9:
-            return
-        state, v_gen, current = self._state()
-        p_load = self._p_load(t)
-        self.rows.append((t, *state, p_load, v_gen, current.real, current.imag))
-        self._protect(t, abs(current))
-        self._check_relays(t, state)
-        while self.next_j < len(self.gen.tc) and self.gen.tc[self.next_j] <= t + 1e-7:
-            u = self.gen.step(self.next_j, state, p_load)
-            self.ss.TGOV1N.paux0.v[:] = u
-            self.next_j += 1
-
-    def _protect(self, t: float, current: float) -> None:
+    def protect(self, t: float) -> None:
         if self.line_open:
             return
-        self.oc.update(t, current)
+        self.oc.update(t, self._current)
         if self.oc.open_t is None or t < self.oc.open_t - 1e-9:
             return
         if self.open_t is None:
-            raise _BreakerOpens
+            raise BreakerOpens
         self.line_open = True  # ANDES opened it at self.open_t
 
-    def _check_relays(self, t: float, state: np.ndarray) -> None:
-        if self.bank is None:
-            return
-        found = self.bank.update(np.array([t]), state[3:4], state[4:5])
-        if found:
-            self.trips.extend((relay, round(t, 9)) for relay, _, _ in found)  # as the trace
-            raise _Stop
+    def actuate(self, ss, area: int, u: float) -> None:
+        ss.TGOV1N.paux0.v[:] = u
 
-    def result(self, relays: RelaySettings, settings: dict) -> SimResult:
-        cols = ("t", *STATES, "p_load", *TESTBED_COLUMNS)
-        trace = pd.DataFrame(self.rows, columns=list(cols))
-        trace["t"] = trace["t"].round(9)  # ANDES accumulates its time in floating point
-        if self.bank is None:
-            found = RelayBank(relays).update(trace["t"].to_numpy(), trace["dw_meas"].to_numpy(),
-                                             trace["rocof_meas"].to_numpy())
-            self.trips = [(r, float(trace["t"].iat[k])) for r, k, _ in
-                          sorted(found, key=lambda f: f[1])]
-        t_end = float(trace["t"].iat[-1])
-        trips = pd.DataFrame(self.trips, columns=["relay", "t"])
-        line_trips = pd.DataFrame(
-            [(self.case.protected_line, round(self.oc.trip_t, 9), round(self.oc.open_t, 9))]
-            if self.oc.trip_t is not None and self.oc.trip_t <= t_end else [],
-            columns=["line", "trip_t", "open_t"])
-        return result(trace, self.gen.tc, self.gen.ctrl, trips, self.gen.scc, settings,
-                      line_trips)
+    def set_load(self, ss, p_load: np.ndarray) -> None:
+        ss.PQ.Req.v[self.lstep] = p_load[0] / self.lstep_v0 ** 2

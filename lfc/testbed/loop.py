@@ -1,0 +1,186 @@
+"""The one ANDES adapter: the generator sides in the loop of any ANDES case.
+
+ANDES integrates the network (implicit trapezoidal, fixed ``step`` except
+around events).  Before every step it calls back into :class:`AndesLoop`,
+which logs the last accepted state, runs the case's protection and the
+frequency relays, and, when a control sample is due, hands every area's
+generator side (:class:`lfc.engine.GeneratorSide`: noise, estimator, AGC or
+local integrator, attacks, filter — the engine's own compiled code) the area's
+state in design-model coordinates, and applies the command it returns.
+
+A case plugs in as an :class:`AndesPlant`: it builds its ANDES system, meters
+each area (:meth:`AndesPlant.measure`), applies commands and load changes, and
+may protect its lines.  The microgrid (:mod:`lfc.testbed.plant`) and the
+interconnected grids (:mod:`lfc.testbed.grid_plant`) are the two today; a new
+ANDES case is one such class.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Protocol
+
+import numpy as np
+
+from lfc.engine import GeneratorSide, sample_signal
+from lfc.relays import RelayBank
+
+# columns of AndesPlant.measure, per area
+MEASURED = ("dPg", "dPm", "dw", "dw_meas", "rocof_meas", "p_load", "p_tie", "p_net")
+
+
+class TestbedError(RuntimeError):
+    """ANDES failed during a run (the message says when and why)."""
+
+    __test__ = False  # not a pytest test class
+
+
+class Stop(Exception):
+    """Raised inside the ANDES callback to end a run early (a relay tripped)."""
+
+
+class BreakerOpens(Stop):
+    """Raised by a case's protection in a first pass, when its breaker opens."""
+
+
+class AndesPlant(Protocol):
+    """What an ANDES case gives :class:`AndesLoop`.
+
+    ``n_areas`` areas, each with a generator side; every quantity in pu of the
+    area's base (design-model coordinates).
+    """
+
+    n_areas: int
+
+    def build(self):
+        """A fresh ANDES system of the case (set up, not initialized)."""
+
+    def attach(self, ss) -> None:
+        """Find the addresses of what :meth:`measure` reads in the initialized
+        ``ss``; raise :class:`TestbedError` if it did not start at 1 pu frequency."""
+
+    def measure(self, ss, p_load: np.ndarray) -> np.ndarray:
+        """Each area's state now, (n_areas, 8) in the order of ``MEASURED``:
+        the design-model state, the load ``p_load`` applied (pu), the tie-line
+        export and the net disturbance the filter is given (pu)."""
+
+    def extra(self) -> tuple[float, ...]:
+        """The case's own trace columns at the last :meth:`measure` (may be empty)."""
+
+    def protect(self, t: float) -> None:
+        """The case's line protection after a measurement at ``t`` (s); may
+        raise :class:`BreakerOpens`."""
+
+    def actuate(self, ss, area: int, u: float) -> None:
+        """Hold the command ``u`` (pu) at ``area``'s governors."""
+
+    def set_load(self, ss, p_load: np.ndarray) -> None:
+        """Apply each area's load change ``p_load`` (pu, at nominal voltage)."""
+
+
+def init_tds(ss, duration: float, step: float) -> None:
+    """Configure ANDES' time-domain run of ``ss`` (to ``duration`` at ``step``,
+    s; quiet, no line search, no stored history: the callback logs) and
+    initialize it."""
+    cfg = ss.TDS.config
+    cfg.tf, cfg.tstep, cfg.no_tqdm, cfg.criteria = duration, step, 1, 0
+    cfg.linesearch, cfg.save_every = 0, 0
+    ss.TDS.init()
+
+
+def run_tds(ss, duration: float, callback) -> float:
+    """Run the initialized ``ss`` with ``callback(t, system)`` before every step
+    attempt; return the end time (s), or raise :class:`TestbedError` with ANDES'
+    reason if it stopped before ``duration``."""
+    ss.TDS.callpert = callback
+    ss.TDS.run(no_summary=True)
+    t_end = float(ss.dae.t)
+    if ss.TDS.busted or t_end < duration - 1e-9:
+        raise TestbedError(f"ANDES did not converge at t = {t_end:.4f} s: "
+                           f"{ss.TDS.err_msg or 'the run ended early'}")
+    return t_end
+
+
+class AndesLoop:
+    """One ANDES run of ``plant`` with every area's generator side in its
+    per-step callback.
+
+    Parameters
+    ----------
+    plant : AndesPlant
+    loads : dict
+        ``{area: signal}``: each area's load change (pu), updated every ANDES step.
+    gens : list of GeneratorSide
+        One per area, sharing the control sample times.
+    bank : RelayBank or None
+        With ``stop_on_trip``: the relays of every area, which end the run at
+        their first trip (:attr:`stopped`); None: relays are applied to the
+        trace afterwards.
+
+    Attributes
+    ----------
+    rows : list of list
+        One per accepted ANDES step: ``t``, each area's ``MEASURED`` values,
+        then the plant's :meth:`~AndesPlant.extra` columns.
+    stopped : tuple or None
+        ``(found, t)`` when the relays ended the run: :meth:`RelayBank.update`'s
+        trips and the time (s, rounded to 1 ns as the trace).
+    """
+
+    def __init__(self, plant: AndesPlant, loads: dict, gens: list[GeneratorSide],
+                 bank: RelayBank | None) -> None:
+        self.plant, self.loads, self.gens, self.bank = plant, loads, gens, bank
+        self.ss = plant.build()
+        self.rows: list[list[float]] = []
+        self.stopped: tuple | None = None
+        self.next_j = 0
+        self._load_at = (math.nan, np.zeros(plant.n_areas))
+
+    def run(self, duration: float, step: float) -> bool:
+        """Integrate to ``duration``; return True if the plant's protection
+        ended a first pass (:class:`BreakerOpens`)."""
+        init_tds(self.ss, duration, step)
+        self.plant.attach(self.ss)
+        try:
+            self._log(run_tds(self.ss, duration, self._callback))  # the final accepted state
+        except BreakerOpens:
+            return True
+        except Stop:
+            pass
+        return False
+
+    def _p_load(self, t: float) -> np.ndarray:
+        """Each area's dP_L at ``t`` (pu); the callback asks for each step's end
+        time, and the log for the same time one call later, so the last value
+        is kept."""
+        if t != self._load_at[0]:
+            p = np.zeros(self.plant.n_areas)
+            for a, load in self.loads.items():
+                p[a] = float(sample_signal(load, np.array([t]), f"loads[{a}]")[0])
+            self._load_at = (t, p)
+        return self._load_at[1]
+
+    def _callback(self, t_attempt, system) -> None:
+        t_next = float(t_attempt)
+        self._log(max(t_next - self.ss.TDS.h, 0.0))
+        self.plant.set_load(self.ss, self._p_load(t_next))
+
+    def _log(self, t: float) -> None:
+        """Record the accepted state at ``t`` (once), protect, check the relays,
+        and control if due."""
+        if self.rows and t <= self.rows[-1][0] + 1e-9:
+            return
+        state = self.plant.measure(self.ss, self._p_load(t))
+        self.rows.append([t, *state.ravel(), *self.plant.extra()])
+        self.plant.protect(t)
+        if self.bank is not None:
+            found = self.bank.update(np.array([t]), state[None, :, 3], state[None, :, 4])
+            if found:
+                self.stopped = (found, round(t, 9))
+                raise Stop
+        tc = self.gens[0].tc
+        while self.next_j < len(tc) and tc[self.next_j] <= t + 1e-7:
+            for a, gen in enumerate(self.gens):
+                self.plant.actuate(self.ss, a, gen.step(self.next_j, state[a, :5],
+                                                        state[a, 7], state[a, 6]))
+            self.next_j += 1
