@@ -227,6 +227,12 @@ def _run(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarray,
         kinds0, params0, offsets0 = kinds[i, 0], params[i, 0], offsets[i, 0]
         ka0, kb0, kc0, kg0, method0, fd0 = scenario_tables(
             index[i, 0, 0], index[i, 0, 2], ka, kb, kc, kg, kdim, methods, fdata, foff, empty)
+        # what the single-area path reads every plant step, once per scenario
+        r0, r1 = rn[0, 0], rn[0, 1]
+        noisy = r0 > 0.0 or r1 > 0.0
+        met0, start0, due0 = met[0], start[0], due[0]
+        kind, value, on, off = kinds0[LOAD], params0[LOAD, 0], params0[LOAD, 2], \
+            params0[LOAD, 3]
         for j in range(n_ctrl):
             k0 = j * ratio
             t = k0 * dt
@@ -263,23 +269,20 @@ def _run(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarray,
                 ua = u[0]
                 x0, x1, x2, x3, x4 = x[0], x[1], x[2], x[3], x[4]
                 peak_dw, peak_rc = met[0, 2], met[0, 3]
-                r0, r1 = rn[0, 0], rn[0, 1]
-                noisy = r0 > 0.0 or r1 > 0.0
-                met0, start0, due0 = met[0], start[0], due[0]
-                kind, value, on, off = kinds0[LOAD], params0[LOAD, 0], params0[LOAD, 2], \
-                    params0[LOAD, 3]
+                u0, u1, u2, u3, u4 = Bu[0, 0] * ua, Bu[1, 0] * ua, Bu[2, 0] * ua, \
+                    Bu[3, 0] * ua, Bu[4, 0] * ua          # the command's terms, held
                 for k in range(k0, min(k0 + ratio, n_steps)):
                     p0 = _load(kind, value, on, off, kinds0, params0, offsets0, st, sv, k * dt, k)
                     n0 = A[0, 0] * x0 + A[0, 1] * x1 + A[0, 2] * x2 + A[0, 3] * x3 \
-                        + A[0, 4] * x4 + Bu[0, 0] * ua + Bl[0, 0] * p0
+                        + A[0, 4] * x4 + u0 + Bl[0, 0] * p0
                     n1 = A[1, 0] * x0 + A[1, 1] * x1 + A[1, 2] * x2 + A[1, 3] * x3 \
-                        + A[1, 4] * x4 + Bu[1, 0] * ua + Bl[1, 0] * p0
+                        + A[1, 4] * x4 + u1 + Bl[1, 0] * p0
                     n2 = A[2, 0] * x0 + A[2, 1] * x1 + A[2, 2] * x2 + A[2, 3] * x3 \
-                        + A[2, 4] * x4 + Bu[2, 0] * ua + Bl[2, 0] * p0
+                        + A[2, 4] * x4 + u2 + Bl[2, 0] * p0
                     n3 = A[3, 0] * x0 + A[3, 1] * x1 + A[3, 2] * x2 + A[3, 3] * x3 \
-                        + A[3, 4] * x4 + Bu[3, 0] * ua + Bl[3, 0] * p0
+                        + A[3, 4] * x4 + u3 + Bl[3, 0] * p0
                     n4 = A[4, 0] * x0 + A[4, 1] * x1 + A[4, 2] * x2 + A[4, 3] * x3 \
-                        + A[4, 4] * x4 + Bu[4, 0] * ua + Bl[4, 0] * p0
+                        + A[4, 4] * x4 + u4 + Bl[4, 0] * p0
                     x0, x1, x2, x3, x4 = n0, n1, n2, n3, n4
                     trips, peak_dw, peak_rc = _watch(met0, (k + 1) * dt, x3, x4, noisy, r0, r1,
                                                      limits, delays, start0, due0, peak_dw,
