@@ -212,3 +212,27 @@ def test_a_filter_called_back_from_compiled_code_runs_in_a_batch():
         f.reset()
         one.append(f.filter(row, 1.0)[0])
     np.testing.assert_allclose(u, one, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("reading", [{}, {"prediction": "applied"}])
+def test_the_cvxpy_reference_in_the_compiled_loop_applies_the_closed_forms_commands(reading):
+    """A Python filter inside the compiled loop, in an area and in a grid: the
+    cvxpy reference QP applies the closed form's commands (to the solver's
+    tolerance).  Before the fixes the callback was handed every area's memory
+    (it failed to compile), and the reference predicted with the command the
+    closed form had just written over the one applied last (0.84 pu off)."""
+    pytest.importorskip("cvxpy")
+    attack = lfc.Sinusoid(2.0, 0.5)
+    runs = [lfc.simulate(PARAMS, duration=2.0, pc_attack=attack,
+                         scc=lfc.SafetyFilter(PARAMS, alpha=3.0, solver=s, **reading))
+            for s in ("exact", "cvxpy")]
+    assert runs[0].metrics()["alarms"] > 100
+    np.testing.assert_allclose(runs[1].controls["pc"], runs[0].controls["pc"], atol=1e-6)
+    grid = lfc.MultiAreaParams.two_area()
+    attacks = {0: {"pc": attack}, 1: {"pc": lfc.Sinusoid(1.0, 0.3)}}
+    runs = [lfc.simulate(grid, duration=2.0, attacks=attacks, filters={
+        a: lfc.SafetyFilter(area, alpha=3.0, solver=s, **reading)
+        for a, area in enumerate(grid.areas)}) for s in ("exact", "cvxpy")]
+    for a in range(2):
+        np.testing.assert_allclose(runs[1].areas[a].controls["pc"],
+                                   runs[0].areas[a].controls["pc"], atol=1e-6)

@@ -31,17 +31,30 @@ def register_python(backend) -> np.ndarray:
     return np.array([float(key)])
 
 
-def _call_python(key: float, x: np.ndarray, u_ref: float, p: float, mem: np.ndarray) -> tuple:
-    return _PYTHON[int(key)].decide_python(x, u_ref, p, mem)
+def _call_python(key: float, x0: float, x1: float, x2: float, x3: float, x4: float,
+                 u_ref: float, p: float, m0: float, m1: float) -> tuple:
+    """The registered backend's ``decide_python`` on the state and memory given
+    as numbers; returns its ten outputs and the memory after the call."""
+    memory = np.array([m0, m1])
+    out = _PYTHON[int(key)].decide_python(np.array([x0, x1, x2, x3, x4]), u_ref, p, memory)
+    return (*out, memory[0], memory[1])
 
 
 @nb.njit(cache=True)   # holds the GIL: it calls back into Python
 def _decide_python(fd: np.ndarray, x: np.ndarray, u_ref: float, p: float,
                    mem: np.ndarray) -> tuple:
-    with nb.objmode(u="float64", flags="int64", h0="float64", h1="float64", m0="float64",
-                    m1="float64", y0="float64", y1="float64", d0="float64", d1="float64"):
-        u, flags, h0, h1, m0, m1, y0, y1, d0, d1 = _call_python(fd[0], x, u_ref, p, mem)
-    return u, flags, h0, h1, m0, m1, y0, y1, d0, d1
+    # Numbers, not arrays, cross into object mode: handed ``x`` and ``mem``, the
+    # block received a compiled caller's arrays of those names instead (the whole
+    # batch of filter_batch, every area's memory in the engine).
+    key, x0, x1, x2, x3, x4 = fd[0], x[0], x[1], x[2], x[3], x[4]
+    m_in0, m_in1 = mem[0], mem[1]
+    with nb.objmode(u="float64", flags="int64", h0="float64", h1="float64", g0="float64",
+                    g1="float64", y0="float64", y1="float64", d0="float64", d1="float64",
+                    m_out0="float64", m_out1="float64"):
+        u, flags, h0, h1, g0, g1, y0, y1, d0, d1, m_out0, m_out1 = _call_python(
+            key, x0, x1, x2, x3, x4, u_ref, p, m_in0, m_in1)
+    mem[0], mem[1] = m_out0, m_out1
+    return u, flags, h0, h1, g0, g1, y0, y1, d0, d1
 
 
 @inline

@@ -195,12 +195,14 @@ class PaperFilter(Backend):
 
     def decide_python(self, x: np.ndarray, u_ref: float, p_load: float,
                       memory: np.ndarray) -> tuple:
-        """``solver="cvxpy"``: the closed form's flags, the reference QP's command."""
+        """``solver="cvxpy"``: the closed form's flags, the reference QP's command
+        (predicting with the command applied last, read before the closed form
+        overwrites it)."""
+        u_pred = memory[0] if self.prediction == "applied" else u_ref
         out = decide(self.data, x, u_ref, p_load, memory)
         if out[1] & INVALID:
             return out
         from cvxpy.error import SolverError
-        u_pred = memory[0] if self.prediction == "applied" else u_ref
         try:
             u = self.reference.solve(np.asarray(x, float), u_ref, p_load, u_pred)
         except (SolverError, RuntimeError):
