@@ -72,22 +72,15 @@ def decide(method: int, fd: np.ndarray, x: np.ndarray, u_ref: float, p: float,
 
 
 @jit
-def decide_many(method: int, fd: np.ndarray, xs: np.ndarray, u_ref: np.ndarray, p: np.ndarray,
+def decide_many(method: int, fd: np.ndarray, x: np.ndarray, u_ref: np.ndarray, p: np.ndarray,
                 mem: np.ndarray, flags: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """:func:`decide` for N states ``xs`` (N, 5), commands and loads (N,) and
+    """:func:`decide` for N states ``x`` (N, 5), commands and loads (N,) and
     memories (N, MEMORY); writes ``flags`` (N,) and ``values`` (N, 8: h, margin,
-    y, details as pairs) and returns the commands (N,).
-
-    Each row is bound to a variable before the call: given ``xs[i]`` and
-    ``mem[i]`` as expressions, numba's inlining of :func:`decide` handed the
-    whole (N, 5) and (N, MEMORY) arrays to a Python filter's callback
-    (``SafetyFilter(..., solver="cvxpy").filter_batch`` failed to compile; found
-    by ``tests/test_conformance.py``)."""
-    n = xs.shape[0]
+    y, details as pairs) and returns the commands (N,)."""
+    n = x.shape[0]
     u = np.empty(n)
     for i in range(n):
-        row, mem_row = xs[i], mem[i]
-        out = decide(method, fd, row, u_ref[i], p[i], mem_row)
+        out = decide(method, fd, x[i], u_ref[i], p[i], mem[i])
         u[i], flags[i] = out[0], out[1]
         values[i, 0], values[i, 1], values[i, 2], values[i, 3] = out[2], out[3], out[4], out[5]
         values[i, 4], values[i, 5], values[i, 6], values[i, 7] = out[6], out[7], out[8], out[9]
