@@ -42,12 +42,11 @@ from __future__ import annotations
 
 
 import numpy as np
-import pandas as pd
 
 from lfc._validate import check_multiple, check_positive
 from lfc.engine import GeneratorSide, check_area_keys, check_attacks, sample_signal
 from lfc.multiarea import MultiAreaParams
-from lfc.relays import RelayBank, RelaySettings
+from lfc.relays import RelaySettings
 from lfc.simulate_multiarea import MultiAreaResult, area_filter, multiarea_result
 from lfc.testbed.grid import GridCase, build_grid
 from lfc.testbed.loop import AndesLoop, AndesPlant, TestbedError
@@ -118,16 +117,12 @@ def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
                           feedforward, control_period, ace_attack=attacks.get(a, {}).get("ace"),
                           k_agc=(float(k_freq[a]), float(k_tie[a])))
             for a, area in enumerate(params.areas)]
-    loop = AndesLoop(plant, loads, gens, RelayBank(relays, n_a) if stop_on_trip else None)
+    loop = AndesLoop(plant, loads, gens, relays, stop_on_trip)
     loop.run(duration, step)
     rows = np.array(loop.rows)
     t = rows[:, 0].round(9)              # ANDES accumulates its time in floating point
     per_area = rows[:, 1:1 + 8 * n_a].reshape(len(rows), n_a, 8)   # then the plant's extra
-    if loop.stopped is not None:
-        found, t_stop = loop.stopped
-        trips = _by_area(found, np.array([t_stop]), n_a)
-    else:
-        trips = _trips(relays, t, per_area) if not stop_on_trip else _by_area([], t, n_a)
+    trips = loop.trips(t)
     settings = {"plant": "testbed", "case": repr(getattr(plant, "case", plant)),
                 "params": repr(params),
                 "relays": vars(relays), "duration": duration, "step": step,
@@ -138,21 +133,6 @@ def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
     return multiarea_result(params, t, per_area[:, :, :5], per_area[:, :, 5],
                             per_area[:, :, 6], trips, tc, [g.ctrl for g in gens], built,
                             settings, p_net=per_area[:, :, 7])
-
-
-def _trips(relays: RelaySettings, t: np.ndarray, per_area: np.ndarray) -> list[pd.DataFrame]:
-    """Each area's relay trips on its logged measurements."""
-    bank = RelayBank(relays, per_area.shape[1])
-    found = bank.update(t, per_area[:, :, 3], per_area[:, :, 4])
-    return _by_area(found, t, per_area.shape[1])
-
-
-def _by_area(found: list[tuple[str, int, int]], t: np.ndarray, n_areas: int
-             ) -> list[pd.DataFrame]:
-    """:meth:`RelayBank.update`'s trips (relay, sample, area) as one table of
-    ``relay``, ``t`` per area, in time order."""
-    return [pd.DataFrame([(r, float(t[k])) for r, k, j in found if j == a],
-                         columns=["relay", "t"]) for a in range(n_areas)]
 
 
 class GridPlant:

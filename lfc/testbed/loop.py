@@ -21,9 +21,10 @@ import math
 from typing import Protocol
 
 import numpy as np
+import pandas as pd
 
 from lfc.engine import GeneratorSide, sample_signal
-from lfc.relays import RelayBank
+from lfc.relays import RelayBank, RelaySettings
 
 # columns of AndesPlant.measure, per area
 MEASURED = ("dPg", "dPm", "dw", "dw_meas", "rocof_meas", "p_load", "p_tie", "p_net")
@@ -112,10 +113,11 @@ class AndesLoop:
         ``{area: signal}``: each area's load change (pu), updated every ANDES step.
     gens : list of GeneratorSide
         One per area, sharing the control sample times.
-    bank : RelayBank or None
-        With ``stop_on_trip``: the relays of every area, which end the run at
-        their first trip (:attr:`stopped`); None: relays are applied to the
-        trace afterwards.
+    relays : RelaySettings
+        Every area's frequency and ROCOF relays.
+    stop_on_trip : bool
+        End the run at the first trip (:attr:`stopped`); else the relays are
+        applied to the logged trace afterwards (:meth:`trips`).
 
     Attributes
     ----------
@@ -128,8 +130,9 @@ class AndesLoop:
     """
 
     def __init__(self, plant: AndesPlant, loads: dict, gens: list[GeneratorSide],
-                 bank: RelayBank | None) -> None:
-        self.plant, self.loads, self.gens, self.bank = plant, loads, gens, bank
+                 relays: RelaySettings, stop_on_trip: bool) -> None:
+        self.plant, self.loads, self.gens, self.relays = plant, loads, gens, relays
+        self.bank = RelayBank(relays, plant.n_areas) if stop_on_trip else None
         self.ss = plant.build()
         self.rows: list[list[float]] = []
         self.stopped: tuple | None = None
@@ -148,6 +151,20 @@ class AndesLoop:
         except Stop:
             pass
         return False
+
+    def trips(self, t: np.ndarray) -> list[pd.DataFrame]:
+        """Each area's relay trips (``relay``, ``t`` in s, in time order): those
+        that ended the run, or, without ``stop_on_trip``, the relays applied to
+        the logged measurements at the rows' times ``t`` (s, rounded)."""
+        n = self.plant.n_areas
+        if self.stopped is not None:
+            found, t_stop = self.stopped
+            return _by_area(found, np.array([t_stop]), n)
+        if self.bank is not None:
+            return _by_area([], t, n)
+        per_area = np.array(self.rows)[:, 1:1 + 8 * n].reshape(len(self.rows), n, 8)
+        found = RelayBank(self.relays, n).update(t, per_area[:, :, 3], per_area[:, :, 4])
+        return _by_area(found, t, n)
 
     def _p_load(self, t: float) -> np.ndarray:
         """Each area's dP_L at ``t`` (pu); the callback asks for each step's end
@@ -184,3 +201,11 @@ class AndesLoop:
                 self.plant.actuate(self.ss, a, gen.step(self.next_j, state[a, :5],
                                                         state[a, 7], state[a, 6]))
             self.next_j += 1
+
+
+def _by_area(found: list[tuple[str, int, int]], t: np.ndarray, n_areas: int
+             ) -> list[pd.DataFrame]:
+    """:meth:`RelayBank.update`'s trips (relay, sample, area) as one table of
+    ``relay``, ``t`` per area, in time order."""
+    return [pd.DataFrame([(r, float(t[k])) for r, k, j in found if j == a],
+                         columns=["relay", "t"]) for a in range(n_areas)]

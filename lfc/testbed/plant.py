@@ -32,7 +32,7 @@ from lfc.engine import GeneratorSide, sample_signal
 from lfc.estimation import KalmanFilter
 from lfc.filters import SafetyFilter
 from lfc.model import STATES, LFCParams
-from lfc.relays import RelayBank, RelaySettings
+from lfc.relays import RelaySettings
 from lfc.signals import SignalLike
 from lfc.simulate import SimResult, result
 from lfc.testbed.case import MicrogridCase, build_system, check_bus
@@ -124,8 +124,8 @@ def simulate_microgrid(params: LFCParams, *, duration: float,
         gen = GeneratorSide(params, scc, estimator, noise_std, seed, tc, pc_attack,
                             wref_attack, load_feedforward, control_period)
         plant = MicrogridPlant(case, fault, OvercurrentRelay(oc), open_t)
-        loop = AndesLoop(plant, {} if load is None else {0: load}, [gen],
-                         RelayBank(relays) if stop_on_trip else None)
+        loop = AndesLoop(plant, {} if load is None else {0: load}, [gen], relays,
+                         stop_on_trip)
         return loop, plant
 
     loop, plant = run(None)
@@ -143,24 +143,14 @@ def simulate_microgrid(params: LFCParams, *, duration: float,
                 "wref_attack": repr(wref_attack), "load": repr(load), "fault": repr(fault),
                 "overcurrent": repr(oc), "stop_on_trip": stop_on_trip,
                 "load_feedforward": load_feedforward}
-    return _result(loop, plant, relays, settings)
+    return _result(loop, plant, settings)
 
 
-def _result(loop: AndesLoop, plant: MicrogridPlant, relays: RelaySettings,
-            settings: dict) -> SimResult:
+def _result(loop: AndesLoop, plant: MicrogridPlant, settings: dict) -> SimResult:
     rows = np.array(loop.rows)
     cols = ("t", *STATES, "p_load", *TESTBED_COLUMNS)
     trace = pd.DataFrame(rows[:, [0, 1, 2, 3, 4, 5, 6, 9, 10, 11]], columns=list(cols))
     trace["t"] = trace["t"].round(9)  # ANDES accumulates its time in floating point
-    if loop.stopped is not None:
-        found, t = loop.stopped
-        trips = [(relay, t) for relay, _, _ in found]
-    elif loop.bank is None:
-        found = RelayBank(relays).update(trace["t"].to_numpy(), trace["dw_meas"].to_numpy(),
-                                         trace["rocof_meas"].to_numpy())
-        trips = [(r, float(trace["t"].iat[k])) for r, k, _ in sorted(found, key=lambda f: f[1])]
-    else:
-        trips = []
     t_end = float(trace["t"].iat[-1])
     oc = plant.oc
     line_trips = pd.DataFrame(
@@ -168,8 +158,8 @@ def _result(loop: AndesLoop, plant: MicrogridPlant, relays: RelaySettings,
         if oc.trip_t is not None and oc.trip_t <= t_end else [],
         columns=["line", "trip_t", "open_t"])
     gen = loop.gens[0]
-    return result(trace, gen.tc, gen.ctrl, pd.DataFrame(trips, columns=["relay", "t"]),
-                  gen.scc, settings, line_trips)
+    return result(trace, gen.tc, gen.ctrl, loop.trips(trace["t"].to_numpy())[0], gen.scc,
+                  settings, line_trips)
 
 
 def _check_scenario(case: MicrogridCase, duration: float, step: float, control_period: float,
