@@ -96,3 +96,13 @@ def test_simulate_runs_the_andes_cases_with_their_fitted_design_models():
     pd.testing.assert_frame_equal(grid.trace, old[0].trace)
     with pytest.raises(ValueError, match="does not run the ANDES microgrid"):
         lfc.simulate_many(MicrogridCase(), [], duration=1.0)
+
+
+def test_the_plant_check_names_every_method_of_an_andes_plant():
+    """lfc.run recognizes an AndesPlant by its methods without importing the
+    testbed: its list is the protocol's."""
+    pytest.importorskip("andes")
+    from lfc.run import ANDES_PLANT
+    from lfc.testbed.loop import AndesPlant
+    methods = {n for n, v in vars(AndesPlant).items() if callable(v) and not n.startswith("_")}
+    assert set(ANDES_PLANT) == methods
