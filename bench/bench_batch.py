@@ -42,9 +42,10 @@ rng = np.random.default_rng(0)
 table = pd.DataFrame({"waveform": "sinusoid", "channel": "pc",
                       "amplitude": rng.uniform(0.05, 1.5, n), "freq_hz": rng.uniform(0.1, 2.0, n),
                       "start": 1.0, "alpha": rng.choice([3.0, 20.0], n), "Ts": 0.25})
-lfc.simulate_many(lfc.LFCParams(), table.iloc[:10], duration=30.0, progress=False)
+run = lfc.simulate_batch  # the reference's name for simulate_many
+run(lfc.LFCParams(), table.iloc[:10], duration=30.0, progress=False)
 t0 = time.perf_counter()
-lfc.simulate_many(lfc.LFCParams(), table, duration=30.0, progress=False)
+run(lfc.LFCParams(), table, duration=30.0, progress=False)
 print(time.perf_counter() - t0)
 """
 
@@ -95,7 +96,10 @@ def reference_rate() -> float | None:
         try:
             out = subprocess.run([sys.executable, "-c", REFERENCE_RUN, str(REFERENCE_N)],
                                  cwd=tree, env={"PYTHONPATH": str(tree), "PATH": ""},
-                                 capture_output=True, text=True, check=True)
+                                 capture_output=True, text=True)
+            if out.returncode:
+                print(f"reference {REFERENCE} failed: {out.stderr.strip().splitlines()[-1]}")
+                return None
             return REFERENCE_N * DURATION / DT / float(out.stdout.split()[-1])
         finally:
             subprocess.run(["git", "worktree", "remove", "--force", str(tree)], cwd=ROOT,
