@@ -205,7 +205,7 @@ def run_chunk(params: LFCParams, scenarios: pd.DataFrame, duration: float,
         signal = scenario_signal(row, duration)
         channel = row["channel"]
         noise = tuple(float(row.get(c, 0.0)) for c in NOISE)
-        sc.add(plant=_plant(params, row), filters={0: _filter(params, relays, row)},
+        sc.add(plant=_plant(params, row), filters={0: _filter(params, relays, row, control_period)},
                estimator="kalman" if any(noise) else None, noise_std=noise,
                seed=int(row.get("seed", 0)), relay_noise=bool(row.get("relay_noise", False)),
                attacks={0: {channel: signal}} if channel != "load" else None,
@@ -242,14 +242,16 @@ def _plant(params: LFCParams, row: dict) -> LFCParams:
 _BUILT: dict = {}   # filters built in this process, by setting (a certified box takes seconds)
 
 
-def _filter(params: LFCParams, relays: RelaySettings, row: dict) -> SafetyFilter | None:
+def _filter(params: LFCParams, relays: RelaySettings, row: dict,
+            control_period: float) -> SafetyFilter | None:
     """The row's filter (None without SCC): one object per distinct setting and
     process, kept for later chunks (:func:`_execute` builds them before the
     workers fork, so they inherit them)."""
     if pd.isna(row["alpha"]):
         return None
     method = row.get("method", "paper")
-    options = options_of(method).from_columns(row)
+    Options = options_of(method)
+    options = {**Options.from_columns(row), **Options.for_period(control_period)}
     key = (params, relays, method, tuple(sorted(options.items())))
     if key not in _BUILT:
         if len(_BUILT) >= 64:
@@ -362,7 +364,7 @@ def _execute(todo: list, args: tuple, executor: Executor | None):
         for _, chunk, _ in todo:
             for row in chunk.drop_duplicates(
                     subset=[c for c in FILTER_COLUMNS if c in chunk]).to_dict("records"):
-                _filter(params, relays, row)
+                _filter(params, relays, row, cp)
     pool = executor or ProcessPoolExecutor(max_workers=os.cpu_count() or 1)
     try:
         futures = {pool.submit(run_chunk, params, chunk, duration, relays, dt, cp): (i, path)

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lfc._jit import inline, kernel
-from lfc.estimation import KalmanFilter, kf_correct, kf_predict
+from lfc.estimation import KalmanFilter, kf_correct, kf_predict, measurement_std
 from lfc.filters import SafetyFilter
 from lfc.filters.base import ACTIVE, ALARM_BITS, MEMORY, OUTSIDE
 from lfc.filters.dispatch import decide
@@ -373,8 +373,7 @@ def make_estimator(estimator: object, params: LFCParams, control_period: float,
     if estimator is None:
         return None
     if isinstance(estimator, str) and estimator == "kalman":
-        meas = tuple(s if s > 0 else d for s, d in zip(noise_std, (1e-4, 1e-3)))
-        return KalmanFilter(params, control_period, meas_std=meas)
+        return KalmanFilter(params, control_period, meas_std=measurement_std(noise_std))
     if isinstance(estimator, KalmanFilter):
         if not math.isclose(estimator.period, control_period):
             raise ValueError(f"estimator.period ({estimator.period}) must equal "
@@ -553,6 +552,8 @@ class Scenarios:
             scc = filters.get(a)
             if scc is not None and not isinstance(scc, SafetyFilter):
                 raise ValueError(f"filters[{a}] must be a SafetyFilter or None, got {scc!r}")
+            if scc is not None:
+                scc.check_period(self.period)
             kf = make_estimator(estimator, area, self.period, noise_std)
             e_i = -1 if kf is None else self._kf.index(
                 id(kf) if not isinstance(estimator, str) else (a, tuple(noise_std)), lambda: kf)
@@ -665,6 +666,8 @@ class GeneratorSide:
                  noise_std: tuple[float, float], seed: int, tc: np.ndarray, pc_attack,
                  wref_attack, load_feedforward: bool, period: float, *, ace_attack=None,
                  k_agc: tuple[float, float] | None = None) -> None:
+        if scc is not None:
+            scc.check_period(period)
         self.tc, self.scc = tc, scc
         self.noise = make_noise(noise_std, len(tc), seed)
         kf = make_estimator(estimator, design, period, noise_std)

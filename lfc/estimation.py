@@ -40,6 +40,16 @@ def kf_predict(A: np.ndarray, B: np.ndarray, xs: np.ndarray, u: float) -> None:
         xs[0, i] = acc
 
 
+DEFAULT_MEAS_STD = (1e-4, 1e-3)   # pu, pu/s: a Kalman filter's noise model where none is given
+
+
+def measurement_std(noise_std: tuple[float, float]) -> tuple[float, float]:
+    """The Kalman filter's measurement-noise model for measurement noise
+    ``noise_std`` (pu, pu/s): each entry, or ``DEFAULT_MEAS_STD``'s where it is 0
+    (a noise-free channel still needs a positive noise model)."""
+    return tuple(float(s) if s > 0 else d for s, d in zip(noise_std, DEFAULT_MEAS_STD))
+
+
 class KalmanFilter:
     """Steady-state Kalman filter (current-estimate form) on the LFC model.
 
@@ -79,7 +89,7 @@ class KalmanFilter:
     """
 
     def __init__(self, params: LFCParams, period: float = 0.01, *,
-                 meas_std: tuple[float, float] = (1e-4, 1e-3), process_std: float = 1e-4,
+                 meas_std: tuple[float, float] = DEFAULT_MEAS_STD, process_std: float = 1e-4,
                  estimate_load: bool = True, load_std: float = 0.01) -> None:
         check_positive("period", period)
         if len(meas_std) != 2:

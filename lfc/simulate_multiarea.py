@@ -24,7 +24,10 @@ the current state and ``w_i``, and on that period the true ``w_i`` is within
 the bound of it.  (c) holds for the tie-line part by the default bound,
 ``control_period * sum_j T_ij * 2 F`` (both areas' frequencies within the
 relay band ``F``), and fails for a load step larger than the bound, as in
-one area.
+one area.  No bound on ``w_i`` itself is assumed: the certificate holds for any
+constant load (:mod:`lfc.filters.certified`), so the filters keep certifying
+however large the tie-line flow grows (``tests/test_proven_recovery.py``:
+opposite ACE biases of ±3 pu, after which AGC restores frequency and schedule).
 
 Measured, not proven: what happens after an ``outside`` flag.  The held
 command was certified for the net disturbance of an earlier sample; while it
@@ -96,7 +99,8 @@ def area_filter(params: MultiAreaParams, area: int, kind: str | SafetyFilter | N
     if kind == "certified":
         bound = tie_step_bound(params, area, relays, control_period)
         try:
-            return SafetyFilter(model, relays, method="certified", load_bound=bound)
+            return SafetyFilter(model, relays, method="certified", load_bound=bound,
+                                control_period=control_period)
         except ValueError as err:
             raise ValueError(f"filters[{area}]='certified' cannot be built: its tie-line bound "
                              f"load_bound={bound:.4g} pu (control_period * sum T_ij * 2 F) is "

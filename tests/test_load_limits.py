@@ -10,9 +10,11 @@ P, RELAYS = lfc.LFCParams(), lfc.RelaySettings()
 
 def test_the_measured_rocof_lets_steps_above_m_times_the_limit_through():
     """The true ROCOF after a step is dPL / M; the relay reads it through a 50 ms lag,
-    whose peak is about 0.9 dPL / M: steps up to 0.2228 pu do not trip without SCC."""
+    whose peak is about 0.9 dPL / M: steps up to 0.22284 pu do not trip without SCC."""
     threshold = no_scc_threshold(P, RELAYS)
-    assert threshold == pytest.approx(0.2229, abs=2e-4)
+    assert threshold == pytest.approx(0.22285, abs=1e-4)
+    for step, trips in ((0.22284, False), (0.22285, True)):   # the README's numbers
+        assert lfc.simulate(P, duration=5, load=lfc.Step(step, 1.0)).metrics()["tripped"] == trips
     assert threshold > P.M * RELAYS.rocof_limit
     for step, trips in ((threshold - 2e-4, False), (threshold, True)):
         r = lfc.simulate(P, duration=5, load=lfc.Step(step, 1.0))

@@ -17,6 +17,7 @@ checks every registered method.
 
 from __future__ import annotations
 
+import math
 from dataclasses import fields
 
 import numpy as np
@@ -97,9 +98,9 @@ class SafetyFilter:
         ``u_min``, ``u_max``, ``slack_weight``, ``outside_rule``,
         ``conflict``, ``prediction``); ``"certified"``, the filter with a
         guarantee (options :class:`CertifiedOptions`: ``horizon``,
-        ``load_bound``, ``margin``, ``uncertainty``, ``noise_std``,
+        ``load_bound``, ``load_kind``, ``margin``, ``uncertainty``, ``noise_std``,
         ``confidence``, ``trips_per_hour``, ``relay_rate``, ``tightening``,
-        ``u_min``, ``u_max``).  :func:`option_table` lists units, defaults
+        ``u_min``, ``u_max``, ``control_period``).  :func:`option_table` lists units, defaults
         and ranges.
     **options
         The method's options.
@@ -136,6 +137,16 @@ class SafetyFilter:
         """The method's options (``SafetyFilter(params, relays, method=...,
         **options.as_dict())`` rebuilds this filter)."""
         return self.backend.options
+
+    def check_period(self, control_period: float) -> None:
+        """Raise ``ValueError`` if this filter was built for calls at another period
+        than ``control_period`` (s): its option ``control_period``, where it has one
+        (the certified filter's estimation bound depends on it)."""
+        own = getattr(self.options, "control_period", None)
+        if own is not None and not math.isclose(own, control_period, rel_tol=1e-9):
+            raise ValueError(f"the filter was built for control_period={own} s but the "
+                             f"simulation calls it every {control_period} s; build it with "
+                             f"control_period={control_period}")
 
     def __getattr__(self, name: str):
         """The backend's options (``alpha``, ``Ts``, ``cert``, ...) read through."""
@@ -205,10 +216,24 @@ class SafetyFilter:
             ``active``, ``infeasible``, ``outside``, ``invalid_input``,
             ``solver_error`` (N,), ``h``, ``margin``, ``y`` (N, 2) as in
             :class:`FilterInfo`, and the method's ``details`` (N, 2 each).
+
+        Raises
+        ------
+        ValueError
+            If ``x`` is not (N, 5) or the lengths of ``x``, ``u_ref`` and
+            ``p_load`` differ (a programming error, not numeric trouble).
         """
-        x = np.ascontiguousarray(np.asarray(x, float).reshape(-1, 5))
+        x = np.asarray(x, float)
+        if x.shape == (5,):
+            x = x[None]
+        if x.ndim != 2 or x.shape[1] != 5:
+            raise ValueError(f"x must have shape (N, 5) {STATES}, got {x.shape}")
+        x = np.ascontiguousarray(x)
         u_ref = np.asarray(u_ref, float).reshape(-1)
         p = np.zeros(len(u_ref)) if p_load is None else np.asarray(p_load, float).reshape(-1)
+        if not len(x) == len(u_ref) == len(p):
+            raise ValueError(f"x, u_ref and p_load must have the same length N, got "
+                             f"{len(x)}, {len(u_ref)} and {len(p)}")
         if len(self._batch_memory) != len(u_ref):
             self._batch_memory = np.zeros((len(u_ref), MEMORY))
         bits, values = np.zeros(len(u_ref), np.int64), np.zeros((len(u_ref), 8))

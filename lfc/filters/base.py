@@ -155,6 +155,14 @@ class Options:
         """Keyword arguments from one scenario-table row (its ``COLUMNS``)."""
         raise NotImplementedError
 
+    @classmethod
+    def for_period(cls, control_period: float) -> dict:
+        """``{"control_period": control_period}`` for a method whose options depend
+        on the period of its calls (s), else ``{}``: what a simulation adds to the
+        options of a filter it builds."""
+        return ({"control_period": control_period}
+                if "control_period" in {f.name for f in fields(cls)} else {})
+
     def as_dict(self) -> dict:
         """Every option and its value (``SafetyFilter(..., **as_dict())`` rebuilds it)."""
         return {f.name: getattr(self, f.name) for f in fields(self)}

@@ -33,16 +33,30 @@ control-invariant set with a *hold* backup law:
 among the certified plants (``uncertainty``: the design model and the 32
 corners of the box), with the state known within the estimation bound
 (``noise_std``: the Kalman filter's error ellipsoid at ``confidence``; exact
-state without it), a command held between calls, a load deviation
-``|dP_L(t) - p_load| <= load_bound`` from the load given to the filter (when the
-command was certified), ``|p_load| <= P_MAX`` and a start from a state where some
-command is certified (e.g. equilibrium): the measured frequency and ROCOF stay
+state without it), a command held between calls, a load that moves by at most
+``load_bound`` from the load ``p_load`` given to the filter when the command was
+certified (``load_kind``: ``"band"``, ``|dP_L(t) - p_load| <= load_bound`` at
+every instant, any signal; ``"steps"``, the total variation of ``dP_L - p_load``
+from the certification on, its initial offset included, at most ``load_bound``:
+one step, a ramp or any monotone change of at most ``load_bound``, at any
+instant) and a start from a state where some command is certified (e.g.
+equilibrium): the measured frequency and ROCOF stay
 inside ``|dw_meas| <= F`` and ``|rocof_meas| <= rocof_limit`` at every instant,
 whatever the incoming commands are — OF2, UF2 and ROCOF never trip, for any
-relay sampling.  The load is covered by tightening every limit by the load
-bound times the L1 norm of the load-to-output impulse response (conservative),
-and an error ``e_p`` in the load estimate likewise; a bound that leaves
-nothing is rejected at construction.  With ``trips_per_hour``, the limits
+relay sampling.  No bound on ``|p_load|`` is needed: a constant load only
+shifts the equilibrium (command ``u = p`` with ``dPg = dPm = p`` keeps both
+outputs at 0), so in the shifted coordinates ``(x - x_eq(p), u - p)`` every
+condition, the derivative bound included, is the same for every ``p``
+(:func:`_derivative_bound`; ``tests/test_proven_recovery.py``).  The load is
+covered by tightening every limit by ``load_bound`` times the load-to-output
+gain of its kind (:func:`load_gains`: the L1 norm of the impulse response for
+``"band"``, exact for the worst signal; the peak of the step response for
+``"steps"``, exact for one step, 3.7 times smaller on the default plant's
+ROCOF), and an error ``e_p`` in the load estimate by the estimation bound; a
+bound that leaves nothing is rejected at construction, naming what is left
+(:func:`largest_load_bound` finds the largest).  Not covered with
+``noise_std``: the Kalman estimate's transient after a load step (its error
+leaves the steady-state ellipsoid until the load estimate has caught up).  With ``trips_per_hour``, the limits
 are tightened further so that relays reading the outputs through white
 Gaussian noise ``noise_std`` at ``relay_rate`` trip at most that often (a
 union bound over an hour of samples).
@@ -72,6 +86,7 @@ from scipy.stats import chi2, norm
 
 from lfc._jit import inline, maxnum, minnum
 from lfc._validate import check_nonnegative, check_positive, check_range
+from lfc.estimation import KalmanFilter, measurement_std
 from lfc.filters.base import (ACTIVE, BIND_CERT, BIND_UMAX, BIND_UMIN, INVALID, OUTSIDE,
                               Backend, Options, check_limits, given, option, valid_input)
 from lfc.model import LFCParams, lfc_matrices, output_matrix
@@ -80,11 +95,12 @@ from lfc.relays import RelaySettings
 GRID = ((0.05, 1e-3), (0.1, 2e-3), (0.2, 5e-3), (2.0, 1e-2), (60.0, 2e-2))  # (until, step) s
 MIN_STEP, MAX_STEP = 1e-3, 0.1  # s: the sample spacing of adaptive_grid
 BOX = ("M", "D", "tau_g", "tau_t", "droop")  # the parameters an uncertainty box may cover
-P_MAX = 1.0            # pu: largest |p_load| the certificate covers
+LOAD_KINDS = ("band", "steps")   # what load_bound bounds (module docstring)
+LP_LOAD = 1.0          # pu: load range of _derivative_bound's programs (V does not depend on it)
 L1_HORIZON = 60.0      # s over which the load-to-output impulse response is integrated
 NUMERIC_MARGIN = 1e-6  # relative tightening that absorbs floating-point differences
 # layout of the data array decide() reads: a header, then one block per plant
-U_MIN, U_MAX, N_PLANTS, N_ROWS, P_LIMIT, F_LIM, R_LIM, HEAD = range(8)
+U_MIN, U_MAX, N_PLANTS, N_ROWS, F_LIM, R_LIM, HEAD = range(7)
 (EQ_PER_P, EQ_HALF, EQ_HALF_HELD, RHO, RHO_HELD, A_QUAD, Y0_F, Y0_R, Y0_F_HELD, Y0_R_HELD,
  BLOCK_HEAD) = range(11)
 # per output, m rows in each of N_COLS columns: a, b (new), a, b (held), the five of G, l
@@ -148,8 +164,11 @@ class CertifiedOptions(Options):
     the robust one); their role in the guarantee: :class:`CertifiedSet`."""
 
     horizon: float = option(8.0, "s", "[0.2, 20]", "look-ahead before the terminal ellipsoid")
-    load_bound: float = option(0.0, "pu", ">= 0",
-                               "bound on the load's deviation from the p_load given")
+    load_bound: float = option(0.0, "pu", ">= 0 (largest_load_bound: the most)",
+                               "how far the load may move from the p_load given")
+    load_kind: str = option("band", "", "'band' or 'steps'",
+                            "'band': |dP_L - p_load| <= load_bound at every instant; 'steps': "
+                            "its total variation since certification (a step, a ramp)")
     margin: float = option(0.0, "", "[0, 1)", "extra fractional tightening of both limits")
     uncertainty: float | dict = option(0.0, "", "[0, 1) or {name: (low, high)} factors",
                                        "the plant box: a relative half-width of M, D, tau_g, "
@@ -166,6 +185,8 @@ class CertifiedOptions(Options):
                                "how far an output may move between two certificate samples")
     u_min: float = option(-math.inf, "pu", "< u_max", "actuator limit on the applied command")
     u_max: float = option(math.inf, "pu", "> u_min", "actuator limit on the applied command")
+    control_period: float = option(0.01, "s", "(0, 1]",
+                                   "period of the calls (the Kalman estimate's covariance)")
 
     COLUMNS: ClassVar[tuple[str, ...]] = ("uncertainty", "margin", "declare_noise",
                                           "trips_per_hour", "noise_w", "noise_rocof")
@@ -174,30 +195,62 @@ class CertifiedOptions(Options):
         check_range("horizon", self.horizon, 0.2, 20.0, closed=True)
         check_range("tightening", self.tightening, 1e-4, 0.1, closed=True)
         check_nonnegative("load_bound", self.load_bound)
+        if self.load_kind not in LOAD_KINDS:
+            raise ValueError(f"load_kind must be one of {LOAD_KINDS}, got {self.load_kind!r}")
         check_range("confidence", self.confidence, 0.0, 1.0)
         check_positive("relay_rate", self.relay_rate)
+        check_positive("control_period", self.control_period)
+        if self.control_period > 1.0:
+            raise ValueError(f"control_period must lie in (0, 1] s, got {self.control_period!r}")
         if not 0.0 <= self.margin < 1.0:
             raise ValueError(f"margin must be in [0, 1), got {self.margin!r}")
+        if self.noise_std is not None:
+            object.__setattr__(self, "noise_std", _check_noise_std(self.noise_std))
         if self.trips_per_hour is not None:
             if self.noise_std is None:
                 raise ValueError("trips_per_hour needs noise_std (the relays' measurement "
                                  "noise)")
-            check_positive("trips_per_hour", self.trips_per_hour)
+            most = 3600.0 * self.relay_rate   # one trip per relay sample: no tightening left
+            check_range("trips_per_hour", self.trips_per_hour, 0.0, most)
         check_limits(self.u_min, self.u_max)
-        for name in ("load_bound", "margin", "u_min", "u_max"):
+        if not self.u_min <= 0.0 <= self.u_max:
+            raise ValueError(f"u_min <= 0 <= u_max is required (the filter starts by holding "
+                             f"the equilibrium command 0), got u_min={self.u_min!r}, "
+                             f"u_max={self.u_max!r}")
+        for name in ("load_bound", "margin", "u_min", "u_max", "control_period"):
             object.__setattr__(self, name, float(getattr(self, name)))
 
     @classmethod
     def from_columns(cls, row: dict) -> dict:
         """The plant box ``uncertainty``, ``margin``, ``trips_per_hour`` and, with
-        ``declare_noise``, the noise of ``noise_w``, ``noise_rocof`` (pu, pu/s)."""
-        noise = tuple(float(row.get(c, 0.0)) for c in ("noise_w", "noise_rocof"))
-        declared = bool(row.get("declare_noise", False)) and any(noise)
+        ``declare_noise``, the noise model of the row's Kalman estimate
+        (:func:`lfc.estimation.measurement_std` of ``noise_w``, ``noise_rocof``:
+        pu, pu/s)."""
+        noise = measurement_std(tuple(float(row.get(c, 0.0)) for c in ("noise_w",
+                                                                      "noise_rocof")))
+        declared = bool(row.get("declare_noise", False)) and any(
+            float(row.get(c, 0.0)) > 0 for c in ("noise_w", "noise_rocof"))
         box, rate, margin = row.get("uncertainty"), row.get("trips_per_hour"), row.get("margin")
         return {"uncertainty": float(box) if given(box) else 0.0,
                 "margin": float(margin) if given(margin) else 0.0,
                 "noise_std": noise if declared else None,
                 "trips_per_hour": float(rate) if given(rate) else None}
+
+
+def _check_noise_std(noise_std: object) -> tuple[float, float]:
+    """``noise_std`` as two floats, or ``ValueError``: two finite numbers > 0 (the
+    Kalman estimate's measurement noise of ``dw_meas`` and ``rocof_meas``; a
+    zero would be a noise-free channel that no Kalman filter models)."""
+    try:
+        pair = tuple(noise_std)
+    except TypeError:
+        pair = ()
+    if len(pair) != 2:
+        raise ValueError(f"noise_std must be None or a pair (dw_meas, rocof_meas) of stds "
+                         f"(pu, pu/s), got {noise_std!r}")
+    for i, v in enumerate(pair):
+        check_positive(f"noise_std[{i}]", v)
+    return float(pair[0]), float(pair[1])
 
 
 class CertifiedSet:
@@ -215,7 +268,10 @@ class CertifiedSet:
         long enough for the weakly damped corners of a ±20 % box (damping 0.09)
         to settle toward the terminal set.
     load_bound : float
-        Bound on the load deviation from ``p_load`` (pu), >= 0.
+        How far the load may move from the ``p_load`` given (pu), >= 0.
+    load_kind : {"band", "steps"}
+        What ``load_bound`` bounds (module docstring): the deviation at every
+        instant (default) or its total variation since the certification.
     margin : float
         Extra fractional tightening of both limits, in [0, 1).
     uncertainty : float or dict
@@ -248,7 +304,9 @@ class CertifiedSet:
             o.trips_per_hour
         self.u_min, self.u_max = o.u_min, o.u_max
         self.plants = box_plants(params, o.uncertainty)
-        cov = _estimate_covariance(params, o.noise_std) if o.noise_std is not None else None
+        _check_stable(self.plants)
+        cov = (_estimate_covariance(params, o.noise_std, o.control_period)
+               if o.noise_std is not None else None)
         self.kappa = math.sqrt(chi2.ppf(o.confidence, len(cov))) if cov is not None else 0.0
         limits = np.array([relays.F, relays.rocof_limit]) * (1 - o.margin) * (1 - NUMERIC_MARGIN)
         if o.trips_per_hour is not None:
@@ -257,15 +315,16 @@ class CertifiedSet:
         fine = grid(o.horizon)
         gains = [_curvature_gains(lfc_matrices(p)[0], output_matrix(), fine) for p in self.plants]
         self.times = _design_grid(params, fine, gains, limits, o.tightening)
-        self.blocks = [_PlantBlock(p, self.times, fine, g, limits, self.load_bound, cov,
-                                   self.kappa) for p, g in zip(self.plants, gains)]
+        self.blocks = [_PlantBlock(p, self.times, fine, g, limits, self.load_bound,
+                                   o.load_kind, cov, self.kappa)
+                       for p, g in zip(self.plants, gains)]
         self.n_rows = 2 * len(self.times)
         self.tau = max(b.tau for b in self.blocks)   # largest inter-sample tightening (pu, pu/s)
 
     def pack(self) -> np.ndarray:
         """The data array :func:`decide` reads (layout in the module's constants)."""
         head = np.zeros(HEAD)
-        head[:] = (self.u_min, self.u_max, len(self.blocks), self.n_rows, P_MAX,
+        head[:] = (self.u_min, self.u_max, len(self.blocks), self.n_rows,
                    self.relays.F, self.relays.rocof_limit)
         return np.concatenate([head] + [b.pack() for b in self.blocks])
 
@@ -299,19 +358,20 @@ class _PlantBlock:
     """
 
     def __init__(self, plant: LFCParams, times: np.ndarray, fine: np.ndarray,
-                 gains: np.ndarray, limits: np.ndarray, load: float, cov: np.ndarray | None,
-                 kappa: float) -> None:
+                 gains: np.ndarray, limits: np.ndarray, load: float, load_kind: str,
+                 cov: np.ndarray | None, kappa: float) -> None:
         A, B = lfc_matrices(plant)
         C = output_matrix()
         q = -np.linalg.solve(A, B)                       # x_eq = q[:, 0] u + q[:, 1] p
-        l1 = _l1_norms(A, B[:, 1], C)
-        lim = limits - load * l1                          # the load (and its estimate) covered
+        gain = load_gains(A, B[:, 1], C)[load_kind]
+        lim = limits - load * gain                        # the load covered
         if np.any(lim <= 0):
-            most = float(np.min(limits / l1))
-            raise ValueError(f"load_bound must be < {most:.4g} pu for these relays: the "
-                             "certificate tightens each limit by the load bound times the L1 "
-                             "norm of the load-to-output response (a conservative bound), which "
-                             "leaves nothing above that")
+            most = float(np.min(limits / gain))
+            raise ValueError(f"load_bound={load:g} pu is too large: with load_kind="
+                             f"{load_kind!r} it takes {load:g} x {_pair(gain)} of the limits "
+                             f"{_pair(limits)} (frequency pu, ROCOF pu/s) of plant {plant!r}; "
+                             f"it must be < {most:.4g} pu before any other tightening "
+                             f"(largest_load_bound gives the most that can be built)")
         E = _expm_at(A, times)                            # (n, 5, 5)
         G = C @ E                                         # y(t_k) = G x + hu u + hl p
         rest = np.eye(5)[None] - E
@@ -325,25 +385,35 @@ class _PlantBlock:
         t_max, tau0 = tau.max(axis=0), tau[0]
         self.tau = float(np.max(t_max / limits))
         if cov is not None:                    # the state and load estimates' error
-            lim = lim - _error_bound(A, C, q[:, 1], cov, kappa)
+            est = _error_bound(A, C, q[:, 1], cov, kappa)
+            lim = lim - est
+        else:
+            est = np.zeros(2)
+        # the held command's re-check: with "band" the load may still move by the whole
+        # bound around the load given now; with "steps" the variation since its
+        # certification is spent on the way here, so the check is for the load given now
+        held = lim + load * gain if load_kind == "steps" else lim
+        self.budget = {"limits": limits, "load": load * gain, "estimate": est,
+                       "between samples": np.array([t_max, t_max + tau0]).max(axis=0)}
         # new commands: every sample tau_max plus its own tau inside, so that the
         # trajectory stays tau_max inside between samples; the held one: tau_max
         self.plant, self.times = plant, times
-        self.bounds = {"new": lim - t_max - tau, "held": np.broadcast_to(lim - t_max, tau.shape)}
+        self.bounds = {"new": lim - t_max - tau, "held": np.broadcast_to(held - t_max, tau.shape)}
         self.rows = {level: _rows(hu, b) for level, b in self.bounds.items()}
         self.G = (G / hu[..., None]).reshape(-1, 5)       # rows normalized by hu
         self.l = (hl / hu).ravel()
         # the current outputs: for [0, t_1] to stay tau_max (new) or 0 (held) inside
-        self.y0 = {"new": lim - t_max - tau0, "held": lim - tau0}
+        self.y0 = {"new": lim - t_max - tau0, "held": held - tau0}
         if np.any(self.y0["new"] <= 0):
-            raise ValueError("the tightenings (load, estimation error, relay noise, margin) "
-                             "leave nothing of the relay limits")
-        self._terminal(A, C, q, times[-1], lim, t_max, cov, kappa)
+            raise ValueError(f"the tightenings leave nothing of the relay limits: "
+                             f"{self._budget()}; lower load_bound, noise_std, "
+                             f"trips_per_hour or margin")
+        self._terminal(A, C, q, times[-1], {"new": lim, "held": held}, t_max, cov, kappa)
 
-    def _terminal(self, A, C, q, horizon, lim, t_max, cov, kappa) -> None:
+    def _terminal(self, A, C, q, horizon, lims, t_max, cov, kappa) -> None:
         """Continuous-time Lyapunov ellipsoid around the held command's equilibrium,
         the room that leaves the equilibrium, and ``e_T = E x + eu u + el p``."""
-        lim_new = lim - 2 * t_max
+        lim_new = lims["new"] - 2 * t_max
         scale = np.array([1.0, 1.0, lim_new[0], lim_new[0], lim_new[1]])
         self.P = solve_continuous_lyapunov(A.T, -np.diag(scale ** -2.0))
         sigma = np.sqrt(np.einsum("ij,jk,ik->i", C, np.linalg.inv(self.P), C))
@@ -360,17 +430,23 @@ class _PlantBlock:
         self.eq_per_p = -dw_p / dw_u
         self.rho, self.eq_half = {}, {}
         for level, factor in (("new", 2.0), ("held", 1.0)):
-            room = lim - factor * t_max
+            room = lims[level] - factor * t_max
             rho = float(min(0.5 * room[0] / sigma[0], room[1] / sigma[1]))
             if rho <= 0:
-                raise ValueError("the tightenings (load_bound, relay noise, margin, between "
-                                 "samples) leave no room for the terminal set: lower "
-                                 "load_bound, trips_per_hour or margin")
+                raise ValueError(f"the tightenings leave no room for the terminal set: "
+                                 f"{self._budget()}; lower load_bound, noise_std, "
+                                 f"trips_per_hour or margin")
             self.rho[level] = rho - error
             self.eq_half[level] = (room[0] - rho * sigma[0]) / abs(dw_u) - eq_error
         if self.rho["new"] <= 0:
-            raise ValueError("the estimation error leaves no terminal set: lower noise_std or "
-                             "confidence")
+            raise ValueError(f"the estimation error moves the state at the horizon by "
+                             f"{error:.3g} in the terminal set's norm, more than the radius "
+                             f"{self.rho['new'] + error:.3g} the other tightenings leave "
+                             f"({self._budget()}); lower load_bound, noise_std or confidence")
+
+    def _budget(self) -> str:
+        """Each tightening of the limits, for an error message (pu; pu/s)."""
+        return ", ".join(f"{name} {_pair(v)}" for name, v in self.budget.items())
 
     def pack(self) -> np.ndarray:
         """Header, then per output (frequency, ROCOF) its rows column by column
@@ -421,22 +497,30 @@ def _derivative_bound(A: np.ndarray, B: np.ndarray, C: np.ndarray, G: np.ndarray
                       q: np.ndarray) -> np.ndarray:
     """``V >= |x'|`` entrywise, ``x' = A x + B [u; p]``, over every state and
     command whose held outputs satisfy the untightened limits at the samples of
-    ``G, hu, hl`` (a superset of the certified ones) with ``|p| <= P_MAX`` and
-    the equilibrium's frequency inside the limit: ten linear programs."""
+    ``G, hu, hl`` (a superset of the certified ones) and the equilibrium's
+    frequency inside the limit: ten linear programs.
+
+    The value does not depend on the load ``p``: with ``x = x' + x_eq(p, p)`` and
+    ``u = u' + p`` (the equilibrium of command ``p`` under load ``p``, where both
+    outputs are 0: ``dw_eq = (u - p) / (D + 1/droop)``), neither the constraints
+    nor ``x' = A x' + B_u u'`` contain ``p``.  The programs fix ``|p| <= LP_LOAD``
+    only to stay well posed; ``V`` bounds the derivative for every load."""
     Gz = np.concatenate([G.reshape(-1, 5), hu.reshape(-1, 1), hl.reshape(-1, 1)], axis=1)
     lim = np.tile(limits, len(G))
     dw_u, dw_p = (C @ q)[0]
     eq = np.array([[0, 0, 0, 0, 0, dw_u, dw_p], [0, 0, 0, 0, 0, -dw_u, -dw_p]])
     a_ub = np.vstack([Gz, -Gz, eq])
     b_ub = np.concatenate([lim, lim, [limits[0], limits[0]]])
-    bounds = [(None, None)] * 6 + [(-P_MAX, P_MAX)]
+    bounds = [(None, None)] * 6 + [(-LP_LOAD, LP_LOAD)]
     M = np.hstack([A, B])
     V = np.zeros(len(A))
     for i in range(len(A)):
         for sign in (1.0, -1.0):
             res = linprog(-sign * M[i], A_ub=a_ub, b_ub=b_ub, bounds=bounds, method="highs")
-            if res.status != 0:
-                raise RuntimeError(f"bounding the state derivative failed: {res.message}")
+            if res.status != 0:   # unbounded or numerically hopeless: parameters too extreme
+                raise ValueError(f"the certificate cannot bound the state's rate of change for "
+                                 f"these parameters (linear program: {res.message}); check "
+                                 f"params and relays for extreme values")
             V[i] = max(V[i], -res.fun)
     return V
 
@@ -503,22 +587,75 @@ def _expm_at(A: np.ndarray, times: np.ndarray) -> np.ndarray:
     return np.array([expm(A * t) for t in distinct])[back]
 
 
-def _l1_norms(A: np.ndarray, bl: np.ndarray, C: np.ndarray) -> np.ndarray:
-    """``int_0^inf |C e^{At} bl| dt`` per output: the largest output deviation per pu
-    of load deviation (trapezoidal over ``L1_HORIZON`` s at 1 ms, plus 1 %)."""
+def _pair(v) -> str:
+    return f"({v[0]:.3g}, {v[1]:.3g})"
+
+
+def load_gains(A: np.ndarray, bl: np.ndarray, C: np.ndarray) -> dict[str, np.ndarray]:
+    """Per output, the largest deviation per pu of load (``load_kind``):
+
+    * ``"band"``: ``int_0^inf |h(t)| dt`` with ``h = C e^{At} bl`` the load's impulse
+      response: the worst over every signal within ±1 pu (trapezoidal over
+      ``L1_HORIZON`` s at 1 ms, plus 1 %);
+    * ``"steps"``: ``sup_t |S(t)|`` with ``S(t) = C A^-1 (e^{At} - I) bl`` the step
+      response: a load ``L`` of total variation ``V`` moves the output by
+      ``int S(t - s) dL(s)``, at most ``V sup |S|``; on the same grid, plus the
+      most ``S`` can move within half a step (``|h| dt / 2``) and 1 %, and the
+      final value ``-C A^-1 bl``.
+    """
     t = np.arange(0.0, L1_HORIZON, 1e-3)
     w, V = np.linalg.eig(A)
-    resp = np.real((C @ V) @ (np.exp(np.outer(w, t)) * (np.linalg.solve(V, bl))[:, None]))
-    return 1.01 * np.trapezoid(np.abs(resp), t, axis=1)
+    modes = np.linalg.solve(V, bl)
+    resp = np.real((C @ V) @ (np.exp(np.outer(w, t)) * modes[:, None]))
+    step = np.real((C @ V) @ (np.expm1(np.outer(w, t)) * (modes / w)[:, None]))
+    final = np.abs(C @ np.linalg.solve(A, bl))
+    peak = np.maximum(np.abs(step).max(axis=1) + 0.5e-3 * np.abs(resp).max(axis=1), final)
+    return {"band": 1.01 * np.trapezoid(np.abs(resp), t, axis=1), "steps": 1.01 * peak}
 
 
-def _estimate_covariance(params: LFCParams, noise_std: tuple[float, float]) -> np.ndarray:
+def largest_load_bound(params: LFCParams, relays: RelaySettings, *, tol: float = 1e-3,
+                       **options) -> float:
+    """The largest ``load_bound`` (pu, within ``tol``) for which the certified
+    filter with ``options`` can be built: bisection on construction."""
+    check_positive("tol", tol)
+
+    def builds(bound: float) -> bool:
+        try:
+            CertifiedSet(params, relays, **{**options, "load_bound": bound})
+        except ValueError:
+            return False
+        return True
+
+    if not builds(0.0):
+        return 0.0
+    kind = options.get("load_kind", "band")
+    gains = []
+    for plant in box_plants(params, options.get("uncertainty", 0.0)):
+        A, B = lfc_matrices(plant)
+        gains.append(load_gains(A, B[:, 1], output_matrix())[kind])
+    lo, hi = 0.0, float(np.min(np.array([relays.F, relays.rocof_limit]) / np.max(gains, 0)))
+    while hi - lo > tol:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if builds(mid) else (lo, mid)
+    return lo
+
+
+def _estimate_covariance(params: LFCParams, noise_std: tuple[float, float],
+                         period: float) -> np.ndarray:
     """The steady-state error covariance (6 x 6: states and load) of the Kalman
-    filter ``simulate(estimator="kalman", noise_std=noise_std)`` uses."""
-    from lfc.estimation import KalmanFilter
-    kf = KalmanFilter(params, 0.01, meas_std=tuple(s if s > 0 else d for s, d in
-                                                    zip(noise_std, (1e-4, 1e-3))))
-    return kf.posterior_covariance
+    filter ``simulate(estimator="kalman", noise_std=noise_std,
+    control_period=period)`` uses."""
+    return KalmanFilter(params, period, meas_std=noise_std).posterior_covariance
+
+
+def _check_stable(plants: list[LFCParams]) -> None:
+    """``ValueError`` unless every plant of the box is asymptotically stable (the
+    hold backup law needs it: an unstable plant has no certified command)."""
+    for plant in plants:
+        growth = float(np.max(np.linalg.eigvals(lfc_matrices(plant)[0]).real))
+        if growth >= 0:
+            raise ValueError(f"uncertainty: the plant {plant!r} of the box is unstable "
+                             f"(eigenvalue real part {growth:.3g} 1/s >= 0); narrow the box")
 
 
 class CertifiedFilter(Backend):
@@ -619,8 +756,6 @@ def _interval(fd: np.ndarray, x: np.ndarray, p: float, held: bool) -> tuple:
     n = int(fd[N_ROWS])
     stride = BLOCK_HEAD + N_COLS * n + ELL_SIZE
     lo_f, hi_f, lo_r, hi_r = -inf, inf, -inf, inf
-    if abs(p) > fd[P_LIMIT]:
-        return inf, -inf, inf, -inf
     for j in range(int(fd[N_PLANTS])):
         a, b, c, d = _block_interval(fd, HEAD + j * stride, n, x, p, held)
         lo_f, hi_f, lo_r, hi_r = max(lo_f, a), min(hi_f, b), max(lo_r, c), min(hi_r, d)

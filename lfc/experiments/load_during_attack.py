@@ -1,0 +1,114 @@
+"""Legitimate load steps that land while an attack is being filtered.
+
+The certified filter's guarantee covers a load that moves by at most
+``load_bound`` (``load_kind="steps"``: one step, a ramp or any monotone change,
+at any instant).  :func:`battery` checks it where it is weakest: each attack of
+``ATTACKS`` (the Fig. 4 sinusoid, a large slow sinusoid, a square on ω_ref and
+the Fig. 5 bias) with a load step of every size in ``steps`` and both signs at
+``instants`` spread across the attack.  :func:`tradeoff` prices a bound: the
+same battery, the attacks alone (stopped?) and the load steps alone (how much
+the filter alters legitimate AGC commands and delays the frequency's recovery).
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pandas as pd
+
+from lfc.filters import SafetyFilter
+from lfc.model import LFCParams
+from lfc.relays import RelaySettings
+from lfc.run import simulate
+from lfc.signals import Sinusoid, Square, Step
+
+ATTACK_START = 1.0     # s
+ATTACKS = {            # name: simulate keywords; each runs until the end
+    "Fig. 4 sinusoid on P_c (0.5 pu, 1 Hz)": {"pc_attack": Sinusoid(0.5, 1.0, start=ATTACK_START)},
+    "sinusoid on P_c (1.5 pu, 0.5 Hz)": {"pc_attack": Sinusoid(1.5, 0.5, start=ATTACK_START)},
+    "square on ω_ref (0.5 pu, 0.3 Hz)": {"wref_attack": Square(0.5, 0.3, start=ATTACK_START)},
+    "Fig. 5 bias on ω_ref (+0.04 pu)": {"wref_attack": Step(0.04, start=ATTACK_START)},
+}
+RESTORED = 1e-3        # pu: |Δω_meas| below which the frequency counts as restored (Fig. 6)
+
+
+def _severity(m: dict, relays: RelaySettings) -> float:
+    return max(m["max_abs_rocof_meas"] / relays.rocof_limit, m["max_abs_dw_meas"] / relays.F)
+
+
+def battery(params: LFCParams, scc: SafetyFilter | None, steps: tuple[float, ...], *,
+            instants: np.ndarray | None = None, duration: float = 12.0,
+            relays: RelaySettings | None = None, **run) -> pd.DataFrame:
+    """Every attack of ``ATTACKS`` with a load step of each size in ``steps`` (pu),
+    both signs, at each of ``instants`` (s; default 20 from 1.5 to 10.5 s, while
+    the attack runs).  ``run``: further :func:`lfc.simulate` keywords (an
+    estimator, noise, ``load_feedforward``).  One row per run: ``attack``,
+    ``step`` (pu, signed), ``t_step`` (s), ``tripped``, ``outside`` (samples
+    flagged), ``severity`` (largest of the peaks over the relay settings)."""
+    relays = relays or (scc.relays if scc is not None else RelaySettings())
+    instants = np.linspace(1.5, 10.5, 20) if instants is None else np.asarray(instants, float)
+    rows = []
+    for (name, attack), size, sign, t in itertools.product(ATTACKS.items(), steps, (1, -1),
+                                                           instants):
+        res = simulate(params, duration=duration, load=Step(sign * size, start=float(t)),
+                       scc=scc, relays=relays, **attack, **run)
+        m = res.metrics()
+        rows.append({"attack": name, "step": sign * size, "t_step": float(t),
+                     "tripped": m["tripped"], "outside": m["outside"],
+                     "severity": _severity(m, relays)})
+    return pd.DataFrame(rows)
+
+
+def recovery(params: LFCParams, scc: SafetyFilter | None, step: float, *,
+             duration: float = 40.0, relays: RelaySettings | None = None) -> dict:
+    """A load step of ``step`` pu at 1 s, no attack: ``recovery_s`` (s from the
+    step until ``|Δω_meas|`` stays below ``RESTORED``; NaN if never),
+    ``max_modification`` (pu, the largest change the filter made to the AGC's
+    command), ``tripped``."""
+    relays = relays or (scc.relays if scc is not None else RelaySettings())
+    res = simulate(params, duration=duration, load=Step(step, start=1.0), scc=scc,
+                   relays=relays)
+    tr = res.trace
+    above = tr.t[tr.dw_meas.abs() >= RESTORED]
+    if not len(above):
+        restored = 0.0
+    elif float(above.max()) >= float(tr.t.iat[-1]) - 1e-9:
+        restored = float("nan")                       # not restored within the run
+    else:
+        restored = float(above.max()) - 1.0
+    m = res.metrics()
+    return {"recovery_s": restored,
+            "max_modification": m["max_abs_modification"], "tripped": m["tripped"]}
+
+
+def tradeoff(params: LFCParams, filters: dict[str, SafetyFilter | None], bounds: dict[str, float],
+             *, instants: np.ndarray | None = None, **run) -> pd.DataFrame:
+    """One row per filter (name: filter, its ``load_bound`` in ``bounds``): over
+    the battery with steps 0.02 pu up to the bound (and 0.02 pu for a bound of
+    0), ``runs``, ``trips``, ``outside_runs``, ``worst_severity``; the attacks
+    alone, ``attacks_stopped`` (of those that trip without a filter); a
+    legitimate step of the bound (or 0.1 pu), ``max_modification`` (pu) and
+    ``recovery_s`` against ``recovery_s_no_filter``."""
+    rows = []
+    bare = {name: simulate(params, duration=12.0, **a).metrics()["tripped"]
+            for name, a in ATTACKS.items()}
+    free = recovery(params, None, 0.1)
+    for name, scc in filters.items():
+        bound = bounds[name]
+        steps = tuple(s for s in (0.02, 0.05, 0.1, 0.15, 0.2) if s < bound - 1e-9) + \
+            ((bound,) if bound > 0 else (0.02,))
+        table = battery(params, scc, steps, instants=instants, **run)
+        stopped = sum(not simulate(params, duration=12.0, scc=scc, **a).metrics()["tripped"]
+                      for n, a in ATTACKS.items() if bare[n])
+        legit = recovery(params, scc, bound if bound > 0 else 0.1)
+        rows.append({"filter": name, "load_bound": bound, "runs": len(table),
+                     "trips": int(table.tripped.sum()),
+                     "outside_runs": int((table.outside > 0).sum()),
+                     "worst_severity": float(table.severity.max()),
+                     "attacks_stopped": f"{stopped}/{sum(bare.values())}",
+                     "max_modification": legit["max_modification"],
+                     "recovery_s": legit["recovery_s"],
+                     "recovery_s_no_filter": free["recovery_s"] if bound in (0, 0.1)
+                     else recovery(params, None, bound)["recovery_s"]})
+    return pd.DataFrame(rows)

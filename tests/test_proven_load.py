@@ -1,0 +1,98 @@
+"""Load steps during an attack (issue "Proven", item 1): ``load_kind="steps"``
+covers one step (or any monotone change) of at most ``load_bound`` at any instant,
+by the peak of the step response instead of the L1 norm."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import lfc
+from lfc import LFCParams, SafetyFilter
+from lfc.experiments.load_during_attack import battery
+from lfc.filters.certified import box_plants, largest_load_bound, load_gains
+from lfc.model import lfc_matrices, output_matrix
+
+P, RELAYS = LFCParams(), lfc.RelaySettings()
+FIVE = np.linspace(1.5, 10.5, 5)   # s: instants across the attacks
+
+
+@pytest.mark.parametrize("plant", box_plants(P, 0.2)[::8])
+def test_the_step_gain_is_the_step_responses_peak_and_below_the_l1_norm(plant):
+    """Against scipy's step response of the held plant (load input, both outputs)."""
+    from scipy.signal import StateSpace, step
+    A, B = lfc_matrices(plant)
+    g = load_gains(A, B[:, 1], output_matrix())
+    assert np.all(g["steps"] <= g["band"])
+    t = np.arange(0.0, 60.0, 2e-4)
+    peaks = [np.abs(step(StateSpace(A, B[:, 1:2], output_matrix()[i:i + 1], 0.0), T=t)[1]).max()
+             for i in range(2)]
+    assert np.all(g["steps"] >= peaks)                           # a bound
+    assert np.all(g["steps"] <= 1.025 * np.array(peaks))         # and within 2.5 % of it
+
+
+def test_largest_load_bound_meets_the_issues_floors():
+    exact = largest_load_bound(P, RELAYS, load_kind="steps")
+    assert exact >= 0.10
+    assert largest_load_bound(P, RELAYS) == pytest.approx(0.0583, abs=2e-3)   # "band": L1
+    with pytest.raises(ValueError, match=r"load_bound=0.3 pu is too large.*must be < 0.21"):
+        SafetyFilter(P, method="certified", load_kind="steps", load_bound=0.3)
+
+
+def test_largest_load_bound_of_the_robust_configuration():
+    robust = largest_load_bound(P, RELAYS, load_kind="steps", uncertainty=0.2,
+                                noise_std=(1e-4, 1e-3), tol=5e-3)
+    assert robust >= 0.05
+
+
+def test_without_a_load_bound_a_step_during_an_attack_trips():
+    """The audit's finding, pinned: load_bound = 0 covers no load at all."""
+    table = battery(P, SafetyFilter(P, method="certified"), (0.1,), instants=FIVE)
+    assert table.tripped.sum() > 0
+
+
+def test_exact_state_steps_up_to_0p1_pu_during_every_attack_trip_nothing():
+    scc = SafetyFilter(P, method="certified", load_kind="steps", load_bound=0.1)
+    table = battery(P, scc, (0.02, 0.05, 0.1), instants=FIVE)
+    assert len(table) == 4 * 3 * 2 * 5
+    assert table.tripped.sum() == 0 and (table.outside > 0).sum() == 0
+    assert table.severity.max() < 1.0
+
+
+def test_robust_kalman_steps_up_to_0p05_pu_during_every_attack_trip_nothing():
+    scc = SafetyFilter(P, method="certified", load_kind="steps", load_bound=0.05,
+                       uncertainty=0.2, noise_std=(1e-4, 1e-3))
+    table = battery(P, scc, (0.02, 0.05), instants=FIVE, estimator="kalman",
+                    noise_std=(1e-4, 1e-3), seed=3)
+    assert table.tripped.sum() == 0 and (table.outside > 0).sum() == 0
+
+
+def test_finding_at_the_largest_bound_a_full_step_under_attack_freezes_the_filter():
+    """At load_bound 0.2 pu a -0.2 pu step during the ω_ref square leaves no new
+    command certified (each must leave room for another full step) and the held one
+    fails its terminal-set check: ``outside`` until the end, AGC held, no trip."""
+    scc = SafetyFilter(P, method="certified", load_kind="steps", load_bound=0.2)
+    res = lfc.simulate(P, duration=12.0, load=lfc.Step(-0.2, start=4.0), scc=scc,
+                       wref_attack=lfc.Square(0.5, 0.3, start=1.0), load_feedforward=True)
+    m = res.metrics()
+    assert not m["tripped"] and m["outside"] > 500
+    assert res.alarms[res.alarms.outside].t.max() > 11.9
+
+
+def test_the_readmes_tradeoff_table_is_this_runs():
+    """The README's load-during-attack table, recomputed (12 s)."""
+    from pathlib import Path
+
+    from lfc.experiments.load_during_attack import tradeoff
+    bounds = {"band": 0.0, "s0.02": 0.02, "s0.05": 0.05, "s0.1": 0.1, "s0.215": 0.215}
+    filters = {k: SafetyFilter(P, method="certified",
+                               **({"load_kind": "steps", "load_bound": b} if b else {}))
+               for k, b in bounds.items()}
+    table = tradeoff(P, filters, bounds)
+    readme = Path(__file__).parents[1].joinpath("README.md").read_text()
+    for row in table.itertuples():
+        restored = "never" if np.isnan(row.recovery_s) else f"{row.recovery_s:.1f}"
+        cells = (f"| {row.runs} | {row.trips} | {row.outside_runs} | {row.worst_severity:.3f} | "
+                 f"{row.attacks_stopped} |")
+        assert cells in readme, cells
+        assert f"| {restored} ({row.recovery_s_no_filter:.1f}) |" in readme, restored
