@@ -8,8 +8,8 @@ generation with :func:`lfc.simulate_many` (``vectorized=True`` in scipy's
 ``differential_evolution``):
 
 * :func:`family_search`: over the parameters of one waveform family
-  (amplitude and frequency of sinusoids, squares, chirps on P_c; size of a bias
-  or slope of a ramp on ω_ref);
+  (amplitude and frequency of sinusoids, squares, chirps on P_c and of squares
+  on ω_ref; size of a bias or slope of a ramp on ω_ref);
 * :func:`freeform_search`: a free-form attack on P_c, one value per control
   period, bounded by ``±amplitude``;
 * :func:`coordinated_search`: an interconnected grid (:mod:`lfc.multiarea`),
@@ -45,6 +45,7 @@ from lfc.simulate_multiarea import area_filter
 FAMILIES = {
     "sinusoid on P_c": ("pc", "sinusoid", [(0.0, 3.0), (0.05, 3.0)]),
     "square on P_c": ("pc", "square", [(0.0, 3.0), (0.05, 3.0)]),
+    "square on ω_ref": ("wref", "square", [(0.0, 1.0), (0.05, 3.0)]),
     "chirp on P_c": ("pc", "chirp", [(0.0, 3.0), (0.2, 3.0)]),
     "bias on ω_ref": ("wref", "step", [(-0.2, 0.2)]),
     "ramp on ω_ref": ("wref", "ramp", [(-0.05, 0.05)]),
