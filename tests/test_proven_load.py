@@ -96,3 +96,21 @@ def test_the_readmes_tradeoff_table_is_this_runs():
                  f"{row.attacks_stopped} |")
         assert cells in readme, cells
         assert f"| {restored} ({row.recovery_s_no_filter:.1f}) |" in readme, restored
+
+
+def test_every_test_the_readmes_guarantees_table_names_exists():
+    import re
+    from pathlib import Path
+    root = Path(__file__).parents[1]
+    readme = root.joinpath("README.md").read_text()
+    start = readme.index("**Guarantees at a glance.**")
+    table = readme[start:readme.index("**What is measured, not proven**", start)]
+    named = re.findall(r"`(tests/test_\w+\.py)::(test_\w+)`", table)
+    bare = re.findall(r"(?<![:\w/])`(test_\w+)`", table)
+    assert len(named) >= 8
+    files = {f for f, _ in named}
+    for f, name in named:
+        assert re.search(rf"^def {name}\(", root.joinpath(f).read_text(), re.M), (f, name)
+    for name in bare:   # a test named without its file: in one of the files the table names
+        assert any(re.search(rf"^def {name}\(", root.joinpath(f).read_text(), re.M)
+                   for f in files), name
