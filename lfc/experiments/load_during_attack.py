@@ -83,25 +83,28 @@ def recovery(params: LFCParams, scc: SafetyFilter | None, step: float, *,
 
 
 def tradeoff(params: LFCParams, filters: dict[str, SafetyFilter | None], bounds: dict[str, float],
-             *, instants: np.ndarray | None = None, **run) -> pd.DataFrame:
+             *, instants: np.ndarray | None = None, relays: RelaySettings | None = None,
+             **run) -> pd.DataFrame:
     """One row per filter (name: filter, its ``load_bound`` in ``bounds``): over
     the battery with steps 0.02 pu up to the bound (and 0.02 pu for a bound of
     0), ``runs``, ``trips``, ``outside_runs``, ``worst_severity``; the attacks
     alone, ``attacks_stopped`` (of those that trip without a filter); a
     legitimate step of the bound (or 0.1 pu), ``max_modification`` (pu) and
     ``recovery_s`` against ``recovery_s_no_filter``."""
+    relays = relays or RelaySettings()
     rows = []
-    bare = {name: simulate(params, duration=12.0, **a).metrics()["tripped"]
+    bare = {name: simulate(params, duration=12.0, relays=relays, **a).metrics()["tripped"]
             for name, a in ATTACKS.items()}
-    free = recovery(params, None, 0.1)
+    free = recovery(params, None, 0.1, relays=relays)
     for name, scc in filters.items():
         bound = bounds[name]
         steps = tuple(s for s in (0.02, 0.05, 0.1, 0.15, 0.2) if s < bound - 1e-9) + \
             ((bound,) if bound > 0 else (0.02,))
-        table = battery(params, scc, steps, instants=instants, **run)
-        stopped = sum(not simulate(params, duration=12.0, scc=scc, **a).metrics()["tripped"]
+        table = battery(params, scc, steps, instants=instants, relays=relays, **run)
+        stopped = sum(not simulate(params, duration=12.0, scc=scc, relays=relays,
+                                   **a).metrics()["tripped"]
                       for n, a in ATTACKS.items() if bare[n])
-        legit = recovery(params, scc, bound if bound > 0 else 0.1)
+        legit = recovery(params, scc, bound if bound > 0 else 0.1, relays=relays)
         rows.append({"filter": name, "load_bound": bound, "runs": len(table),
                      "trips": int(table.tripped.sum()),
                      "outside_runs": int((table.outside > 0).sum()),
@@ -110,5 +113,5 @@ def tradeoff(params: LFCParams, filters: dict[str, SafetyFilter | None], bounds:
                      "max_modification": legit["max_modification"],
                      "recovery_s": legit["recovery_s"],
                      "recovery_s_no_filter": free["recovery_s"] if bound in (0, 0.1)
-                     else recovery(params, None, bound)["recovery_s"]})
+                     else recovery(params, None, bound, relays=relays)["recovery_s"]})
     return pd.DataFrame(rows)

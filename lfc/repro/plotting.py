@@ -299,6 +299,35 @@ def severity_figure(red, title: str) -> Figure:
     return fig
 
 
+def load_bound_figure(table, title: str) -> Figure:
+    """The load-during-attack trade-off (:func:`lfc.experiments.load_during_attack.tradeoff`)
+    per ``load_bound``: runs of the battery that trip and that flag ``outside``
+    (left, the battery's size dashed), and the time a legitimate step of the bound
+    takes to be restored with and without the filter (right; never: not plotted)."""
+    labels = [f"{b:g}" for b in table.load_bound]
+    x = np.arange(len(table))
+    fig, (left, right) = plt.subplots(1, 2, figsize=(12, 4.2), layout="constrained")
+    left.bar(x - 0.2, table.trips, 0.4, color="tab:red", label="runs that trip")
+    left.bar(x + 0.2, table.outside_runs, 0.4, color="tab:gray", label="runs flagging outside")
+    left.plot(x, table.runs, "k--", lw=1, marker="_", ms=20, label="runs in the battery")
+    left.set_xticks(x, labels)
+    left.set_xlabel("load_bound (pu)")
+    left.set_ylabel("runs (load step during an attack)")
+    left.legend(fontsize=8)
+    right.bar(x - 0.2, table.recovery_s, 0.4, color="tab:green", label="certified filter")
+    right.bar(x + 0.2, table.recovery_s_no_filter, 0.4, color="tab:blue", label="no filter")
+    for i in np.flatnonzero(np.isnan(table.recovery_s.to_numpy(float))):
+        right.annotate("never", (x[i] - 0.2, 0), ha="center", va="bottom", color="tab:green")
+    right.set_xticks(x, labels)
+    right.set_xlabel("load_bound (pu); legitimate step of that size (0.1 pu at 0)")
+    right.set_ylabel("time until |Δω| stays < 1e-3 pu (s)")
+    right.legend(fontsize=8)
+    for ax in (left, right):
+        ax.grid(alpha=0.3, axis="y")
+    fig.suptitle(title)
+    return fig
+
+
 def readings_figure(summary, title: str) -> Figure:
     """The paper's filter at each reading (rows) and alpha (bars): attacks of the
     maps stopped (left; the number that trip without SCC dashed) and false alarms
