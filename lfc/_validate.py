@@ -42,6 +42,16 @@ def check_range(name: str, value: float, low: float, high: float, *,
         raise ValueError(f"{name} must lie in {interval}, got {value!r}")
 
 
+def check_flag(name: str, value: object) -> bool:
+    """Raise ``TypeError`` unless ``value`` is a bool (Python's or numpy's): a string
+    such as ``"no"`` or ``"False"`` is truthy and would silently mean yes."""
+    import numpy as np
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be True or False, got {value!r} "
+                        f"({type(value).__name__})")
+    return bool(value)
+
+
 def check_multiple(name: str, value: float, of_name: str, of: float) -> int:
     """Raise ``ValueError`` unless ``value`` is a positive integer multiple of
     ``of`` (both > 0); return the integer ratio."""

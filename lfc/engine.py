@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lfc._jit import inline, kernel
+from lfc._validate import check_flag
 from lfc.estimation import KalmanFilter, kf_correct, kf_predict, measurement_std
 from lfc.filters import SafetyFilter
 from lfc.filters.base import ACTIVE, ALARM_BITS, MEMORY, OUTSIDE
@@ -543,6 +544,8 @@ class Scenarios:
         loads = check_area_keys(loads, n, "loads")
         filters = check_area_keys(filters, n, "filters")
         noisy = check_noise(noise_std)
+        feedforward = check_flag("load_feedforward", feedforward)
+        relay_noise = check_flag("relay_noise", relay_noise)
         if relay_noise and not noisy:
             raise ValueError("relay_noise=True needs noise_std > 0 (the relays' measurement "
                              "noise)")
@@ -575,6 +578,7 @@ class Scenarios:
         return len(self._rows) - 1
 
     def run(self, *, trace: bool = False, stop_on_trip: bool = False) -> Run:
+        stop_on_trip = check_flag("stop_on_trip", stop_on_trip)
         """Run every scenario added; ``trace`` keeps everything (one scenario only)."""
         grid, n = self.grid, len(self._rows)
         n_a, n_s = grid.n_areas, grid.n_states

@@ -98,7 +98,13 @@ class MultiAreaParams:
             value = getattr(self, name)
             if value is None:
                 continue
-            value = tuple(float(v) for v in value)
+            if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
+                raise TypeError(f"{name} must be a sequence of {n} numbers (one per area), "
+                                f"got {value!r}")
+            try:
+                value = tuple(float(v) for v in value)
+            except (TypeError, ValueError):
+                value = ()
             if len(value) != n or not all(math.isfinite(v) and (v > low if strict else v >= low)
                                           for v in value):
                 raise ValueError(f"{name} must be {n} finite numbers "

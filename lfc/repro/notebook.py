@@ -35,7 +35,8 @@ def _parameter_cells(namespace: dict) -> tuple[str, str]:
 
 
 def check_parameters(namespace: dict) -> None:
-    """Fail fast on a name papermill injected that the notebook does not know.
+    """Fail fast on a name papermill injected that the notebook does not know, or
+    of another kind than its default.
 
     Call as ``check_parameters(globals())`` in the first cell after the
     parameters: it reads the parameters cell and papermill's injected cell
@@ -48,6 +49,41 @@ def check_parameters(namespace: dict) -> None:
     if unknown:
         raise ValueError(f"unknown parameter(s) {unknown} for this notebook; it takes "
                          f"{sorted(known)}")
+    declared = _literals(defaults)
+    for name in sorted(_assigned(injected)):
+        if name in declared and name in namespace:
+            _check_type(name, namespace[name], declared[name])
+
+
+def _literals(source: str) -> dict[str, object]:
+    """The top-level assignments of ``source`` whose value is a literal."""
+    values = {}
+    for node in ast.parse(source).body:
+        if isinstance(node, ast.Assign) and len(node.targets) == 1 \
+                and isinstance(node.targets[0], ast.Name):
+            try:
+                values[node.targets[0].id] = ast.literal_eval(node.value)
+            except ValueError:
+                pass
+    return values
+
+
+def _check_type(name: str, value: object, default: object) -> None:
+    """``TypeError`` unless an injected ``value`` has its default's kind: a bool for a
+    bool (papermill's ``-r check_claims False`` gives the string "False", which is
+    truthy), a number for a number, a string for a string, a list for a list (None
+    as a default allows anything)."""
+    from numbers import Real
+    kinds = ((bool, "True or False"), (Real, "a number"), (str, "a string"),
+             ((list, tuple), "a list"))
+    for kind, words in kinds:
+        if isinstance(default, kind):
+            ok = isinstance(value, kind) and (kind is bool or not isinstance(value, bool))
+            if not ok:
+                raise TypeError(f"notebook parameter {name} must be {words} like its default "
+                                f"{default!r}, got {value!r} ({type(value).__name__}); with "
+                                f"papermill give it with -p (typed), not -r (raw string)")
+            return
 
 
 def notebook_parameters(namespace: dict) -> dict:

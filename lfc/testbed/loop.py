@@ -23,6 +23,7 @@ from typing import Protocol
 import numpy as np
 import pandas as pd
 
+from lfc._validate import check_flag
 from lfc.engine import GeneratorSide, sample_signal
 from lfc.relays import RelayBank, RelaySettings
 
@@ -132,7 +133,8 @@ class AndesLoop:
     def __init__(self, plant: AndesPlant, loads: dict, gens: list[GeneratorSide],
                  relays: RelaySettings, stop_on_trip: bool) -> None:
         self.plant, self.loads, self.gens, self.relays = plant, loads, gens, relays
-        self.bank = RelayBank(relays, plant.n_areas) if stop_on_trip else None
+        self.bank = (RelayBank(relays, plant.n_areas)
+                     if check_flag("stop_on_trip", stop_on_trip) else None)
         self.ss = plant.build()
         self.rows: list[list[float]] = []
         self.stopped: tuple | None = None
