@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 import lfc
-from lfc import LFCParams, MultiAreaParams, Step
+from lfc import LFCParams, MultiAreaParams
 from lfc.repro.notebook import check_parameters
 
 TWO = MultiAreaParams.two_area()
