@@ -17,6 +17,7 @@ import itertools
 import numpy as np
 import pandas as pd
 
+from lfc.experiments.redteam import severity
 from lfc.filters import SafetyFilter
 from lfc.model import LFCParams
 from lfc.relays import RelaySettings
@@ -31,10 +32,6 @@ ATTACKS = {            # name: simulate keywords; each runs until the end
     "Fig. 5 bias on ω_ref (+0.04 pu)": {"wref_attack": Step(0.04, start=ATTACK_START)},
 }
 RESTORED = 1e-3        # pu: |Δω_meas| below which the frequency counts as restored (Fig. 6)
-
-
-def _severity(m: dict, relays: RelaySettings) -> float:
-    return max(m["max_abs_rocof_meas"] / relays.rocof_limit, m["max_abs_dw_meas"] / relays.F)
 
 
 def battery(params: LFCParams, scc: SafetyFilter | None, steps: tuple[float, ...], *,
@@ -56,7 +53,7 @@ def battery(params: LFCParams, scc: SafetyFilter | None, steps: tuple[float, ...
         m = res.metrics()
         rows.append({"attack": name, "step": sign * size, "t_step": float(t),
                      "tripped": m["tripped"], "outside": m["outside"],
-                     "severity": _severity(m, relays)})
+                     "severity": float(severity(m, relays))})
     return pd.DataFrame(rows)
 
 
@@ -95,7 +92,6 @@ def tradeoff(params: LFCParams, filters: dict[str, SafetyFilter | None], bounds:
     rows = []
     bare = {name: simulate(params, duration=12.0, relays=relays, **a).metrics()["tripped"]
             for name, a in ATTACKS.items()}
-    free = recovery(params, None, 0.1, relays=relays)
     for name, scc in filters.items():
         bound = bounds[name]
         steps = tuple(s for s in (0.02, 0.05, 0.1, 0.15, 0.2) if s < bound - 1e-9) + \
@@ -104,7 +100,8 @@ def tradeoff(params: LFCParams, filters: dict[str, SafetyFilter | None], bounds:
         stopped = sum(not simulate(params, duration=12.0, scc=scc, relays=relays,
                                    **a).metrics()["tripped"]
                       for n, a in ATTACKS.items() if bare[n])
-        legit = recovery(params, scc, bound if bound > 0 else 0.1, relays=relays)
+        size = bound if bound > 0 else 0.1              # a legitimate step of the bound
+        legit = recovery(params, scc, size, relays=relays)
         rows.append({"filter": name, "load_bound": bound, "runs": len(table),
                      "trips": int(table.tripped.sum()),
                      "outside_runs": int((table.outside > 0).sum()),
@@ -112,6 +109,6 @@ def tradeoff(params: LFCParams, filters: dict[str, SafetyFilter | None], bounds:
                      "attacks_stopped": f"{stopped}/{sum(bare.values())}",
                      "max_modification": legit["max_modification"],
                      "recovery_s": legit["recovery_s"],
-                     "recovery_s_no_filter": free["recovery_s"] if bound in (0, 0.1)
-                     else recovery(params, None, bound, relays=relays)["recovery_s"]})
+                     "recovery_s_no_filter": recovery(params, None, size,
+                                                      relays=relays)["recovery_s"]})
     return pd.DataFrame(rows)

@@ -232,10 +232,9 @@ class CertifiedOptions(Options):
         ``declare_noise``, the noise model of the row's Kalman estimate
         (:func:`lfc.estimation.measurement_std` of ``noise_w``, ``noise_rocof``:
         pu, pu/s)."""
-        noise = measurement_std(tuple(float(row.get(c, 0.0)) for c in ("noise_w",
-                                                                      "noise_rocof")))
-        declared = bool(row.get("declare_noise", False)) and any(
-            float(row.get(c, 0.0)) > 0 for c in ("noise_w", "noise_rocof"))
+        raw = tuple(float(row.get(c, 0.0)) for c in ("noise_w", "noise_rocof"))
+        noise = measurement_std(raw)
+        declared = bool(row.get("declare_noise", False)) and any(v > 0 for v in raw)
         box, rate, margin = row.get("uncertainty"), row.get("trips_per_hour"), row.get("margin")
         return {"uncertainty": float(box) if given(box) else 0.0,
                 "margin": float(margin) if given(margin) else 0.0,
@@ -369,7 +368,7 @@ class _PlantBlock:
         A, B = lfc_matrices(plant)
         C = output_matrix()
         q = -np.linalg.solve(A, B)                       # x_eq = q[:, 0] u + q[:, 1] p
-        gain = load_gains(A, B[:, 1], C)[load_kind]
+        self.load_gain = gain = load_gains(A, B[:, 1], C)[load_kind]   # per pu of load_bound
         lim = limits - load * gain                        # the load covered
         if np.any(lim <= 0):
             most = float(np.min(limits / gain))
@@ -400,7 +399,7 @@ class _PlantBlock:
         # certification is spent on the way here, so the check is for the load given now
         held = lim + load * gain if load_kind == "steps" else lim
         self.budget = {"limits": limits, "load": load * gain, "estimate": est,
-                       "between samples": np.array([t_max, t_max + tau0]).max(axis=0)}
+                       "between samples": t_max + tau0}
         # new commands: every sample tau_max plus its own tau inside, so that the
         # trajectory stays tau_max inside between samples; the held one: tau_max
         self.plant, self.times = plant, times
@@ -622,7 +621,9 @@ def load_gains(A: np.ndarray, bl: np.ndarray, C: np.ndarray) -> dict[str, np.nda
 def largest_load_bound(params: LFCParams, relays: RelaySettings, *, tol: float = 1e-3,
                        **options) -> float:
     """The largest ``load_bound`` (pu, within ``tol``) for which the certified
-    filter with ``options`` can be built: bisection on construction."""
+    filter with ``options`` can be built: bisection on construction, from 0 (a
+    ``ValueError`` if even that cannot be built) up to where the load alone takes a
+    whole limit at some plant."""
     check_positive("tol", tol)
 
     def builds(bound: float) -> bool:
@@ -632,14 +633,9 @@ def largest_load_bound(params: LFCParams, relays: RelaySettings, *, tol: float =
             return False
         return True
 
-    if not builds(0.0):
-        return 0.0
-    kind = options.get("load_kind", "band")
-    gains = []
-    for plant in box_plants(params, options.get("uncertainty", 0.0)):
-        A, B = lfc_matrices(plant)
-        gains.append(load_gains(A, B[:, 1], output_matrix())[kind])
-    lo, hi = 0.0, float(np.min(np.array([relays.F, relays.rocof_limit]) / np.max(gains, 0)))
+    unloaded = CertifiedSet(params, relays, **{**options, "load_bound": 0.0})
+    gains = np.max([b.load_gain for b in unloaded.blocks], axis=0)
+    lo, hi = 0.0, float(np.min(np.array([relays.F, relays.rocof_limit]) / gains))
     while hi - lo > tol:
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if builds(mid) else (lo, mid)
