@@ -132,3 +132,32 @@ def test_box_corners_with_steps_and_ramps_during_attacks_trip_nothing(corner):
             for load in (lfc.Step(-0.1, start=t0), lfc.Ramp(0.05, start=t0, stop=t0 + 2.0)):
                 m = lfc.simulate(plant, duration=12.0, load=load, scc=scc, **attack).metrics()
                 assert not m["tripped"]
+
+
+def test_red_team_winners_replay_exactly_and_steps_during_them_trip_nothing():
+    """The battery's attacks extended by the red team's winners against the
+    certified filter (a short search of every family and a free-form attack on the
+    design model): each replays to the severity the search reported, and 0.02–0.1
+    pu load steps during the three strongest trip nothing with ``steps`` 0.1."""
+    from lfc.experiments.redteam import (FAMILIES, Defender, family_search,
+                                         freeform_search, replay, severity)
+    certified = Defender("certified", method="certified")
+    found = [family_search(P, certified, f, duration=8.0, maxiter=2, popsize=3)
+             for f in FAMILIES] + [freeform_search(P, certified, maxiter=2, popsize=1)]
+    for f in found:
+        run = lfc.simulate(P, duration=8.0 if f["search"] in FAMILIES else 6.0,
+                           scc=SafetyFilter(P, method="certified"), **replay(f, 8.0))
+        assert float(severity(run.metrics(), RELAYS)) == pytest.approx(f["severity"], abs=1e-12)
+    strongest = sorted(found, key=lambda f: -f["severity"])[:3]
+    assert strongest[-1]["severity"] > 0.95                     # they ride the limits
+    winners = {f["search"]: replay(f, 8.0) for f in strongest}
+    scc = SafetyFilter(P, method="certified", load_kind="steps", load_bound=0.1)
+    table = battery(P, scc, (0.02, 0.05, 0.1), instants=FIVE, attacks=winners)
+    assert len(table) == 3 * 3 * 2 * 5
+    assert table.tripped.sum() == 0 and (table.outside > 0).sum() == 0
+
+
+def test_replay_refuses_what_it_cannot_replay():
+    from lfc.experiments.redteam import replay
+    with pytest.raises(ValueError, match="found\\['search'\\] must be one of"):
+        replay({"search": "bias on ACE", "theta": (1.0,)}, 8.0)

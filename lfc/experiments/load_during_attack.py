@@ -5,7 +5,8 @@ The certified filter's guarantee covers a load that moves by at most
 at any instant).  :func:`battery` checks it where it is weakest: each attack of
 ``ATTACKS`` (the Fig. 4 sinusoid, a large slow sinusoid, a square on ω_ref and
 the Fig. 5 bias) with a load step of every size in ``steps`` and both signs at
-``instants`` spread across the attack.  :func:`tradeoff` prices a bound: the
+``instants`` spread across the attack; ``attacks`` adds others (the red team's
+winners, :func:`lfc.experiments.redteam.replay`).  :func:`tradeoff` prices a bound: the
 same battery, the attacks alone (stopped?) and the load steps alone (how much
 the filter alters legitimate AGC commands and delays the frequency's recovery).
 """
@@ -36,17 +37,19 @@ RESTORED = 1e-3        # pu: |Δω_meas| below which the frequency counts as res
 
 def battery(params: LFCParams, scc: SafetyFilter | None, steps: tuple[float, ...], *,
             instants: np.ndarray | None = None, duration: float = 12.0,
-            relays: RelaySettings | None = None, **run) -> pd.DataFrame:
-    """Every attack of ``ATTACKS`` with a load step of each size in ``steps`` (pu),
-    both signs, at each of ``instants`` (s; default 20 from 1.5 to 10.5 s, while
-    the attack runs).  ``run``: further :func:`lfc.simulate` keywords (an
+            relays: RelaySettings | None = None, attacks: dict | None = None,
+            **run) -> pd.DataFrame:
+    """Every attack of ``attacks`` (default ``ATTACKS``; name: simulate keywords)
+    with a load step of each size in ``steps`` (pu), both signs, at each of
+    ``instants`` (s; default 20 from 1.5 to 10.5 s, while the attack runs).  ``run``: further :func:`lfc.simulate` keywords (an
     estimator, noise, ``load_feedforward``).  One row per run: ``attack``,
     ``step`` (pu, signed), ``t_step`` (s), ``tripped``, ``outside`` (samples
     flagged), ``severity`` (largest of the peaks over the relay settings)."""
     relays = relays or (scc.relays if scc is not None else RelaySettings())
     instants = np.linspace(1.5, 10.5, 20) if instants is None else np.asarray(instants, float)
+    attacks = ATTACKS if attacks is None else attacks
     rows = []
-    for (name, attack), size, sign, t in itertools.product(ATTACKS.items(), steps, (1, -1),
+    for (name, attack), size, sign, t in itertools.product(attacks.items(), steps, (1, -1),
                                                            instants):
         res = simulate(params, duration=duration, load=Step(sign * size, start=float(t)),
                        scc=scc, relays=relays, **attack, **run)
@@ -81,25 +84,28 @@ def recovery(params: LFCParams, scc: SafetyFilter | None, step: float, *,
 
 def tradeoff(params: LFCParams, filters: dict[str, SafetyFilter | None], bounds: dict[str, float],
              *, instants: np.ndarray | None = None, relays: RelaySettings | None = None,
-             **run) -> pd.DataFrame:
+             attacks: dict | None = None, **run) -> pd.DataFrame:
     """One row per filter (name: filter, its ``load_bound`` in ``bounds``): over
     the battery with steps 0.02 pu up to the bound (and 0.02 pu for a bound of
     0), ``runs``, ``trips``, ``outside_runs``, ``worst_severity``; the attacks
     alone, ``attacks_stopped`` (of those that trip without a filter); a
     legitimate step of the bound (or 0.1 pu), ``max_modification`` (pu) and
-    ``recovery_s`` against ``recovery_s_no_filter``."""
+    ``recovery_s`` against ``recovery_s_no_filter``.  ``attacks``: as in
+    :func:`battery`."""
     relays = relays or RelaySettings()
+    attacks = ATTACKS if attacks is None else attacks
     rows = []
     bare = {name: simulate(params, duration=12.0, relays=relays, **a).metrics()["tripped"]
-            for name, a in ATTACKS.items()}
+            for name, a in attacks.items()}
     for name, scc in filters.items():
         bound = bounds[name]
         steps = tuple(s for s in (0.02, 0.05, 0.1, 0.15, 0.2) if s < bound - 1e-9) + \
             ((bound,) if bound > 0 else (0.02,))
-        table = battery(params, scc, steps, instants=instants, relays=relays, **run)
+        table = battery(params, scc, steps, instants=instants, relays=relays,
+                        attacks=attacks, **run)
         stopped = sum(not simulate(params, duration=12.0, scc=scc, relays=relays,
                                    **a).metrics()["tripped"]
-                      for n, a in ATTACKS.items() if bare[n])
+                      for n, a in attacks.items() if bare[n])
         size = bound if bound > 0 else 0.1              # a legitimate step of the bound
         legit = recovery(params, scc, size, relays=relays)
         rows.append({"filter": name, "load_bound": bound, "runs": len(table),

@@ -178,7 +178,28 @@ def family_search(params: LFCParams, defender: Defender, family: str, *,
     return {"defender": defender.name, "search": family, "severity": sev,
             "tripped": bool(row.tripped), "first_trip": row.first_trip_relay,
             "attack": ", ".join(f"{v:.4g}" for v in theta[:len(bounds)]),
+            "theta": tuple(map(float, theta[:len(bounds)])),
             **search.describe(params, theta[len(bounds):])}
+
+
+def replay(found, duration: float) -> dict:
+    """The :func:`lfc.simulate` keywords that replay a found attack: a result of
+    :func:`family_search` (its ``search`` family and ``theta``) or of
+    :func:`freeform_search` (its ``values`` and ``sample_period``), as a
+    ``pc_attack`` or ``wref_attack`` signal starting at ``ATTACK_START``;
+    ``duration`` (s) ends a chirp, as in the search's runs."""
+    if found["search"] in FAMILIES:
+        row = _family_table(found["search"], np.asarray(found["theta"], float)[:, None],
+                            Defender("replay")).iloc[0]
+        channel = row["channel"]
+    elif found["search"].startswith("free-form"):
+        row = _samples_table(np.asarray(found["values"], float)[:, None],
+                             found["sample_period"], Defender("replay")).iloc[0]
+        channel = "pc"
+    else:
+        raise ValueError(f"found['search'] must be one of {list(FAMILIES)} or a free-form "
+                         f"search, got {found['search']!r}")
+    return {f"{channel}_attack": scenario_signal(row, duration)}
 
 
 def _samples_table(values: np.ndarray, period: float, defender: Defender) -> pd.DataFrame:
@@ -206,7 +227,8 @@ def freeform_search(params: LFCParams, defender: Defender, *, amplitude: float =
     return {"defender": defender.name, "search": f"free-form on P_c (±{amplitude:g} pu)",
             "severity": sev, "tripped": bool(row.tripped), "first_trip": row.first_trip_relay,
             "attack": f"{n} values, max |value| {np.abs(values).max():.3g} pu",
-            "values": tuple(map(float, values)), **search.describe(params, theta[n:])}
+            "values": tuple(map(float, values)), "sample_period": control_period,
+            **search.describe(params, theta[n:])}
 
 
 def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
