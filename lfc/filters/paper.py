@@ -34,6 +34,10 @@ Reading of the paper (reproduction notes E2, E5, E6, E9, E10):
   actuator allows.  ``"frequency"`` or ``"rocof"`` meets that constraint
   (within the actuator limits) and comes as close to the other as it allows.
   Flagged ``infeasible``.
+* A command within ``BOUND_ULPS`` (8) units in the last place of a bound
+  satisfies it: not clipped, not flagged ``active``.  The bounds' last bits
+  depend on the machine's BLAS kernel, and a steady state exactly on a bound
+  (the hold rule's ``dh/dt = 0``) must get the same decision everywhere.
 * A constraint whose coefficient on ``u`` vanishes (``|g| <= 1e-12``) cannot
   be influenced by the command: it is dropped, and flagged ``infeasible`` if
   it is violated.
@@ -79,6 +83,12 @@ DEFAULT_READING = {"outside_rule": "hold", "conflict": "frequency", "prediction"
 READING_NAMES = tuple(DEFAULT_READING)
 G_EPS = 1e-12      # |coefficient on u| below which a constraint cannot be influenced
 BIND_TOL = 1e-7    # relative tolerance to report a bound as binding
+# A command within BOUND_ULPS units in the last place of a bound satisfies it: the
+# bounds come out of matrix exponentials and BLAS, whose last bits depend on the
+# machine (OpenBLAS's core type), so a steady state exactly on a bound (the hold
+# rule's dh/dt = 0) must not be clipped and flagged on one machine and not another.
+BOUND_ULPS = 8.0
+EPS = 2.220446049250313e-16
 
 # layout of the data array read by decide()
 ALPHA, U_MIN, U_MAX, RHO, PUSH, CONFLICT, APPLIED = range(7)
@@ -276,6 +286,8 @@ def decide(fd: np.ndarray, x: np.ndarray, u_ref: float, p: float, mem: np.ndarra
     feasible = lo <= hi
     if feasible:
         u = min(max(u_ref, lo), hi)
+        if abs(u - u_ref) <= BOUND_ULPS * EPS * abs(u) and u_min <= u_ref <= u_max:
+            u = u_ref                # on the bound within round-off: satisfied
     elif fd[CONFLICT] == 0.0:
         u = min(max(_relaxed(u_ref, k0, b0, k1, b1, fd[RHO]), u_min), u_max)
     elif fd[CONFLICT] == 1.0:        # frequency first
@@ -287,7 +299,9 @@ def decide(fd: np.ndarray, x: np.ndarray, u_ref: float, p: float, mem: np.ndarra
     admissible = u_min <= u_ref <= u_max
     for k, b, c, h, lo_bit, hi_bit in ((k0, b0, c0, h0, KIND_FREQ_LO, KIND_FREQ_HI),
                                        (k1, b1, c1, h1, KIND_ROCOF_LO, KIND_ROCOF_HI)):
-        admissible = admissible and (k != 1 or u_ref >= b) and (k != -1 or u_ref <= b)
+        slack = BOUND_ULPS * EPS * abs(b)
+        admissible = (admissible and (k != 1 or u_ref >= b - slack)
+                      and (k != -1 or u_ref <= b + slack))
         if k == 0 and c < 0:
             feasible = False
         if h <= 0:
