@@ -161,3 +161,38 @@ def test_replay_refuses_what_it_cannot_replay():
     from lfc.experiments.redteam import replay
     with pytest.raises(ValueError, match="found\\['search'\\] must be one of"):
         replay({"search": "bias on ACE", "theta": (1.0,)}, 8.0)
+
+
+def test_the_readmes_bound_price_table_is_this_runs():
+    """The README's table of what a load bound costs when nothing attacks (robust
+    configuration, Kalman estimate, seed 1), recomputed (≈ 50 s)."""
+    from pathlib import Path
+
+    from lfc.experiments.load_during_attack import bound_price
+    noise = (1e-4, 1e-3)
+    steps = (0.05, 0.1, 0.15, 0.19, -0.19)
+    table = bound_price(P, (0.0, 0.02, 0.05, 0.1), steps,
+                        options={"uncertainty": 0.2, "noise_std": noise},
+                        estimator="kalman", noise_std=noise, seed=1)
+    readme = Path(__file__).parents[1].joinpath("README.md").read_text()
+    for row in table.to_dict("records"):
+        name = "0 (default)" if row["load_bound"] == 0 else f"{row['load_bound']:g}"
+        alarms = " / ".join(str(row[f"alarms {s:g}"]) for s in steps)
+        cells = (f"| {name} | {100 * row['room_freq']:.1f} %, {100 * row['room_rocof']:.1f} % "
+                 f"| {alarms} | {int(row['tripped'])} |")
+        assert cells in readme, cells
+    assert not table.tripped.any()
+    assert (table["alarms 0.05"] == 0).all()       # a step within every bound: no alarm
+
+
+def test_finding_unmeasured_a_step_above_the_bound_is_never_restored():
+    """Exact state, the load unmeasured (the filter is given 0): a legitimate
+    0.19 pu step above ``load_bound=0.05`` is never restored (the filter keeps
+    cutting the AGC's command); fed forward, it is."""
+    scc = SafetyFilter(P, method="certified", load_kind="steps", load_bound=0.05)
+    run = dict(duration=41.0, load=lfc.Step(0.19, start=1.0), scc=scc)
+    unmeasured = lfc.simulate(P, **run)
+    assert unmeasured.trace.dw_meas.iloc[-1] == pytest.approx(-0.0217, abs=5e-4)
+    assert unmeasured.metrics()["alarms"] > 3900
+    measured = lfc.simulate(P, **run, load_feedforward=True)
+    assert abs(measured.trace.dw_meas.iloc[-1]) < 1e-3

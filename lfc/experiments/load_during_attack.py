@@ -8,7 +8,9 @@ the Fig. 5 bias) with a load step of every size in ``steps`` and both signs at
 ``instants`` spread across the attack; ``attacks`` adds others (the red team's
 winners, :func:`lfc.experiments.redteam.replay`).  :func:`tradeoff` prices a bound: the
 same battery, the attacks alone (stopped?) and the load steps alone (how much
-the filter alters legitimate AGC commands and delays the frequency's recovery).
+the filter alters legitimate AGC commands and delays the frequency's recovery);
+:func:`bound_price` what a bound costs when nothing attacks (the room it takes
+from the limits, the alarms it raises on legitimate load steps).
 """
 
 from __future__ import annotations
@@ -117,4 +119,33 @@ def tradeoff(params: LFCParams, filters: dict[str, SafetyFilter | None], bounds:
                      "recovery_s": legit["recovery_s"],
                      "recovery_s_no_filter": recovery(params, None, size,
                                                       relays=relays)["recovery_s"]})
+    return pd.DataFrame(rows)
+
+
+def bound_price(params: LFCParams, bounds: tuple[float, ...], steps: tuple[float, ...], *,
+                options: dict | None = None, relays: RelaySettings | None = None,
+                **run) -> pd.DataFrame:
+    """What a ``load_bound`` (``load_kind="steps"``; 0: no load covered) costs when
+    nothing attacks: one row per bound, the certified filter with ``options``
+    (e.g. the robust configuration's ``uncertainty`` and ``noise_std``),
+    ``room_freq`` and ``room_rocof`` (the fraction of F and of the ROCOF setting
+    the load's tightening leaves, design plant) and, for each legitimate load
+    step in ``steps`` (pu, alone, at 1 s, 41 s run; ``run``: :func:`lfc.simulate`
+    keywords such as the estimator), ``alarms <step>`` (control periods with an
+    alarm) and whether any run tripped (``tripped``)."""
+    relays = relays or RelaySettings()
+    rows = []
+    for bound in bounds:
+        scc = SafetyFilter(params, relays, method="certified", **(options or {}),
+                           **({"load_kind": "steps", "load_bound": bound} if bound else {}))
+        gain = scc.cert.blocks[0].load_gain
+        room = 1.0 - bound * gain / np.array([relays.F, relays.rocof_limit])
+        row = {"load_bound": bound, "room_freq": float(room[0]), "room_rocof": float(room[1]),
+               "tripped": False}
+        for step in steps:
+            m = simulate(params, duration=41.0, load=Step(step, start=1.0), scc=scc,
+                         relays=relays, **run).metrics()
+            row[f"alarms {step:g}"] = int(m["alarms"])
+            row["tripped"] = row["tripped"] or bool(m["tripped"])
+        rows.append(row)
     return pd.DataFrame(rows)

@@ -174,7 +174,9 @@ class CertifiedOptions(Options):
 
     horizon: float = option(8.0, "s", "[0.2, 20]", "look-ahead before the terminal ellipsoid")
     load_bound: float = option(0.0, "pu", ">= 0 (largest_load_bound: the most)",
-                               "how far the load may move from the p_load given")
+                               "how far the load may move from the p_load given; 0 covers "
+                               "none (nominal, like uncertainty=0); a bound costs room "
+                               "and alarms (load_during_attack.bound_price)")
     load_kind: str = option("band", "", "'band' or 'steps'",
                             "'band': |dP_L - p_load| <= load_bound at every instant; 'steps': "
                             "its total variation since certification (a step, a ramp)")
@@ -375,11 +377,15 @@ class _PlantBlock:
         lim = limits - load * gain                        # the load covered
         if np.any(lim <= 0):
             most = float(np.min(limits / gain))
+            steps = load_gains(A, B[:, 1], C)["steps"]
+            hint = (f"; load_kind='steps' (one step, a ramp or any monotone change) takes "
+                    f"{_pair(steps)} per pu and allows < {float(np.min(limits / steps)):.4g} pu"
+                    if load_kind == "band" else "")
             raise ValueError(f"load_bound={load:g} pu is too large: with load_kind="
                              f"{load_kind!r} it takes {load:g} x {_pair(gain)} of the limits "
                              f"{_pair(limits)} (frequency pu, ROCOF pu/s) of plant {plant!r}; "
                              f"it must be < {most:.4g} pu before any other tightening "
-                             f"(largest_load_bound gives the most that can be built)")
+                             f"(largest_load_bound gives the most that can be built){hint}")
         E = _expm_at(A, times)                            # (n, 5, 5)
         G = C @ E                                         # y(t_k) = G x + hu u + hl p
         rest = np.eye(5)[None] - E
