@@ -22,13 +22,14 @@ concurrent runs on one folder are safe.
 
 from __future__ import annotations
 
+import difflib
 import hashlib
 import io
 import math
 import os
 import warnings
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
-from dataclasses import replace
+from dataclasses import fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -55,6 +56,10 @@ NOISE = ("noise_w", "noise_rocof")             # optional: measurement noise std
 FLAGS = ("declare_noise", "relay_noise")       # optional booleans
 FILTER_COLUMNS = ("method", *dict.fromkeys(c for m in METHODS for c in options_of(m).COLUMNS))
 # the columns that select a filter: each method's options declare theirs
+INPUTS = tuple(dict.fromkeys((*REQUIRED, "stop", "values", "sample_period", *READINGS, *PLANT,
+                              *NOISE, *FLAGS, "seed", *FILTER_COLUMNS)))
+KNOWN = (*INPUTS, *METRIC_KEYS)      # any other column is a label, carried through
+TYPO_CUTOFF = 0.85   # difflib ratio above which an unknown column is taken for a typo
 
 
 def scenario_signal(row: pd.Series, duration: float) -> Signal | None:
@@ -94,6 +99,13 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
     missing = [c for c in REQUIRED if c not in scenarios.columns]
     if missing:
         raise ValueError(f"scenarios is missing column(s) {missing}; required: {list(REQUIRED)}")
+    for col in scenarios.columns:
+        close = ([] if col in KNOWN or not isinstance(col, str) else
+                 difflib.get_close_matches(col, KNOWN, n=1, cutoff=TYPO_CUTOFF))
+        if close:
+            raise ValueError(f"column {col!r} is not a scenario column; did you mean "
+                             f"{close[0]!r}? (scenario columns: {', '.join(INPUTS)}; a column "
+                             f"not close to one of them is carried through as a label)")
     for col, allowed in (("waveform", WAVEFORMS), ("channel", CHANNELS)):
         bad = ~scenarios[col].isin(allowed)
         if bad.any():
@@ -137,6 +149,8 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
         if col not in scenarios.columns:
             continue
         bad = ~scenarios[col].isin(allowed)
+        if col in READINGS:                # NaN: the default reading
+            bad &= scenarios[col].notna()
         if bad.any():
             raise ValueError(f"column {col!r} must be one of {allowed}; row "
                              f"{scenarios.index[bad][0]!r} has {scenarios[col][bad].iloc[0]!r}")
@@ -192,6 +206,41 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
     if bad.any():
         raise ValueError(f"column 'alpha' must be > 0 or NaN (no SCC); row "
                          f"{scenarios.index[bad][0]!r} has {scenarios['alpha'][bad].iloc[0]!r}")
+    _check_unused(scenarios)
+
+
+def _neutral(column: str):
+    """The value of a filter column that asks for nothing (its option's default;
+    ``declare_noise``: False)."""
+    for method in METHODS:
+        found = {f.name: f.default for f in fields(options_of(method))}
+        if column in found:
+            return found[column]
+    return False
+
+
+def _check_unused(scenarios: pd.DataFrame) -> None:
+    """A filter column set (not NaN, not its neutral value) on a row whose filter
+    does not read it — a row without SCC, or of another method — is refused: it
+    would be silently ignored."""
+    has_scc = scenarios["alpha"].notna()
+    method = (scenarios["method"] if "method" in scenarios.columns
+              else pd.Series("paper", scenarios.index))
+    for col in FILTER_COLUMNS:
+        if col in ("method", "alpha", "Ts", *NOISE) or col not in scenarios.columns:
+            continue
+        users = [m for m in METHODS if col in options_of(m).COLUMNS]
+        neutral = _neutral(col)
+        values = scenarios[col]
+        set_ = values.notna() & (values != neutral if neutral is not None else True)
+        bad = set_ & ~(has_scc & method.isin(users))
+        if bad.any():
+            row = scenarios.index[bad][0]
+            whose = ("has no SCC (alpha NaN)" if not has_scc[row]
+                     else f"is method {method[row]!r}")
+            raise ValueError(f"column {col!r} is set ({values[row]!r}) on row {row!r}, which "
+                             f"{whose}: only method(s) {users} read it; leave it NaN"
+                             f"{'' if neutral is None else f' or {neutral!r}'} there")
 
 
 def run_chunk(params: LFCParams, scenarios: pd.DataFrame, duration: float,
@@ -280,19 +329,25 @@ def simulate_table(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
         ``method`` (``"paper"``, the default, or ``"certified"``; the certified
         filter ignores ``alpha`` and ``Ts`` but runs only where ``alpha`` is not
         NaN), the paper filter's readings ``outside_rule``, ``conflict``,
-        ``prediction``, the row's own plant ``M``, ``D``, ``tau_g``, ``tau_t``,
-        ``droop`` (the filter keeps the design model ``params``), measurement
-        noise ``noise_w`` (pu), ``noise_rocof`` (pu/s) with its ``seed`` (noise
-        > 0: the generator side uses a Kalman estimate, as
-        ``simulate(estimator="kalman")`` does), and the certified filter's
+        ``prediction`` (NaN: the default reading), the row's own plant ``M``,
+        ``D``, ``tau_g``, ``tau_t``, ``droop`` (the filter keeps the design
+        model ``params``), measurement noise ``noise_w`` (pu), ``noise_rocof``
+        (pu/s) with its ``seed`` (noise > 0: the generator side uses a Kalman
+        estimate built, like the filter, on the design model ``params``, not on
+        the row's plant), and the certified filter's
         ``uncertainty`` (its plant box, NaN or 0: the design model only),
         ``margin`` (NaN: 0) and
         ``declare_noise`` (True: it covers the row's noise, ``noise_std``) with
         its ``trips_per_hour`` (NaN: none), and
         ``relay_noise`` (True: the relays read through the row's noise too, as
-        ``simulate(relay_noise=True)``).  A row equals
-        :func:`lfc.simulate` with the same plant, noise and seed.  Other
-        columns are carried through.
+        ``simulate(relay_noise=True)``).  A row equals, bitwise,
+        ``lfc.simulate(row_plant, scc=SafetyFilter(params, ...),
+        estimator=KalmanFilter(params, control_period, meas_std=...),
+        noise_std=..., seed=...)`` with the same attack (``tests/test_batch.py``).
+        A filter column set on a row whose filter does not read it (a row
+        without SCC, or of another method) is refused, and so is a column
+        whose name is close to a scenario column's (a typo); other columns
+        are carried through as labels.
     duration, dt, control_period : float
         As in :func:`lfc.simulate` (s).
     relays : RelaySettings, optional

@@ -198,3 +198,100 @@ def test_bad_settings_raise():
         simulate_many(P, random_scenarios(3, 0), duration=1.0, chunk_size=0)
     with pytest.raises(ValueError, match="control_period"):
         simulate_many(P, random_scenarios(3, 0), duration=1.0, control_period=0.0015)
+
+
+# -- a row is the simulate call that matches it ----------------------------------------------
+_FILTERS: dict = {}
+
+
+def _matching_filter(spec: tuple, noise: tuple[float, float]):
+    """The filter a row of ``spec`` selects, built independently of the batch."""
+    from lfc.estimation import measurement_std
+    kind, value = spec
+    key = (spec, noise if kind == "declared" else None)
+    if key not in _FILTERS:
+        if kind == "paper":
+            alpha, reading = value
+            _FILTERS[key] = lfc.SafetyFilter(P, alpha=alpha, Ts=0.25, outside_rule=reading)
+        elif kind == "certified":
+            _FILTERS[key] = lfc.SafetyFilter(P, method="certified", uncertainty=value)
+        else:
+            _FILTERS[key] = lfc.SafetyFilter(P, method="certified",
+                                             noise_std=measurement_std(noise))
+    return _FILTERS[key]
+
+
+FILTER_SPECS = [("none", None), ("paper", (3.0, "hold")), ("paper", (20.0, "push")),
+                ("certified", 0.0), ("certified", 0.2), ("declared", None)]
+ROW = st.fixed_dictionaries({
+    "filter": st.sampled_from(FILTER_SPECS),
+    "noisy": st.booleans(),
+    "seed": st.integers(0, 3),
+    "plant": st.one_of(st.none(), st.tuples(*[st.floats(0.8, 1.2)] * 5)),
+    "attack": st.tuples(st.sampled_from(["pc", "wref"]), st.sampled_from(["sinusoid", "square"]),
+                        st.floats(0.1, 1.0), st.floats(0.2, 1.5)),
+})
+
+
+def _row(r: dict) -> dict:
+    channel, waveform, amp, freq = r["attack"]
+    kind, value = r["filter"]
+    noise = (1e-4, 1e-3) if r["noisy"] or kind == "declared" else (0.0, 0.0)
+    row = {"waveform": waveform, "channel": channel,
+           "amplitude": amp * (0.08 if channel == "wref" else 1.0), "freq_hz": freq,
+           "start": 1.0, "alpha": np.nan, "Ts": 0.25, "method": "paper",
+           "outside_rule": np.nan, "uncertainty": np.nan, "declare_noise": False,
+           "noise_w": noise[0], "noise_rocof": noise[1], "seed": r["seed"]}
+    if kind == "paper":
+        row.update(alpha=value[0], outside_rule=value[1])
+    elif kind in ("certified", "declared"):
+        row.update(alpha=20.0, method="certified", uncertainty=value if kind == "certified"
+                   else np.nan, declare_noise=kind == "declared")
+    if r["plant"] is not None:
+        row.update({n: getattr(P, n) * f for n, f in zip(("M", "D", "tau_g", "tau_t", "droop"),
+                                                         r["plant"])})
+    return row
+
+
+@settings(max_examples=8, deadline=None)
+@given(st.lists(ROW, min_size=6, max_size=6))
+def test_every_batch_row_is_the_matching_simulate_call(rows):
+    """Issue "Hardened": a row equals ``simulate`` on the row's plant with the
+    filter and the Kalman estimator built on the design model (what the docstring
+    says), for every filter, estimator and row plant."""
+    from dataclasses import replace
+
+    from lfc.estimation import KalmanFilter, measurement_std
+    table = pd.DataFrame([_row(r) for r in rows])
+    res = simulate_many(P, table, duration=4.0, chunk_size=3, progress=False)
+    for r, (i, row) in zip(rows, table.iterrows()):
+        noise = (row.noise_w, row.noise_rocof)
+        plant = P if r["plant"] is None else replace(
+            P, **{n: row[n] for n in ("M", "D", "tau_g", "tau_t", "droop")})
+        scc = None if r["filter"][0] == "none" else _matching_filter(r["filter"], noise)
+        estimator = (KalmanFilter(P, 0.01, meas_std=measurement_std(noise))
+                     if noise[0] > 0 else None)
+        sig = scenario_signal(row, 4.0)
+        m = lfc.simulate(plant, duration=4.0, scc=scc, estimator=estimator, noise_std=noise,
+                         seed=int(row.seed), **{CHANNEL_ARG[row.channel]: sig}).metrics()
+        assert same_metrics(m, res.loc[i]), (i, r)
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda d: d.assign(uncertainy=0.2), "did you mean 'uncertainty'"),
+    (lambda d: d.assign(seeds=1), "did you mean 'seed'"),
+    (lambda d: d.assign(alpha=20.0, uncertainty=0.2), "only method\\(s\\) \\['certified'\\]"),
+    (lambda d: d.assign(alpha=np.nan, outside_rule="push"), "has no SCC"),
+    (lambda d: d.assign(alpha=20.0, method="certified", conflict="slack"), "is method 'certified'"),
+])
+def test_a_column_that_would_be_ignored_is_refused(change, message):
+    with pytest.raises(ValueError, match=message):
+        simulate_many(P, change(random_scenarios(3, 0)), duration=1.0, progress=False)
+
+
+def test_label_columns_neutral_values_and_nan_readings_pass():
+    table = random_scenarios(4, 0).assign(alpha=[np.nan, 3.0, 20.0, 20.0], label="x",
+                                          uncertainty=0.0,
+                                          outside_rule=[np.nan, "push", np.nan, "hold"])
+    res = simulate_many(P, table, duration=1.0, progress=False)
+    assert list(res.label) == ["x"] * 4
