@@ -1,42 +1,71 @@
-"""Argument checks shared by the parameter classes (clear ``ValueError`` messages).
+"""Argument checks shared by the parameter classes (clear messages naming the
+parameter and its valid range).
 
 A number is a real (Python or numpy) that is not a bool: ``True`` is not a time
-constant.
+constant.  A value of the wrong type (a string where a number belongs) raises
+:class:`ParameterTypeError`, never coerced; a number out of range ``ValueError``.
 """
 
 from __future__ import annotations
 
 import math
-from numbers import Real
+from numbers import Integral, Real
+
+
+class ParameterTypeError(TypeError, ValueError):
+    """A parameter of the wrong type.  A ``TypeError``, and a ``ValueError`` too,
+    so that code catching bad input as ``ValueError`` still catches it."""
 
 
 def _is_number(value: object) -> bool:
     return isinstance(value, Real) and not isinstance(value, bool)
 
 
+def check_number(name: str, value: object) -> None:
+    """Raise :class:`ParameterTypeError` unless ``value`` is a number."""
+    if not _is_number(value):
+        raise ParameterTypeError(f"{name} must be a number, got {value!r} "
+                                 f"({type(value).__name__})")
+
+
 def check_positive(name: str, value: float) -> None:
-    """Raise ``ValueError`` unless ``value`` is a finite number > 0."""
-    if not (_is_number(value) and math.isfinite(value) and value > 0):
+    """Raise unless ``value`` is a finite number > 0."""
+    check_number(name, value)
+    if not (math.isfinite(value) and value > 0):
         raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
 
 
 def check_nonnegative(name: str, value: float) -> None:
-    """Raise ``ValueError`` unless ``value`` is a finite number >= 0."""
-    if not (_is_number(value) and math.isfinite(value) and value >= 0):
+    """Raise unless ``value`` is a finite number >= 0."""
+    check_number(name, value)
+    if not (math.isfinite(value) and value >= 0):
         raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
 
 
 def check_finite(name: str, value: float) -> None:
-    """Raise ``ValueError`` unless ``value`` is a finite number."""
-    if not (_is_number(value) and math.isfinite(value)):
+    """Raise unless ``value`` is a finite number."""
+    check_number(name, value)
+    if not math.isfinite(value):
         raise ValueError(f"{name} must be a finite number, got {value!r}")
+
+
+def check_index(name: str, value: object, n: int) -> int:
+    """Raise unless ``value`` is an integer (not a bool, not 0.7) in ``[0, n)``;
+    return it as an int."""
+    if not isinstance(value, Integral) or isinstance(value, bool):
+        raise ParameterTypeError(f"{name} must be an integer index in [0, {n - 1}], got "
+                                 f"{value!r} ({type(value).__name__})")
+    if not 0 <= value < n:
+        raise ValueError(f"{name} must be an integer index in [0, {n - 1}], got {value!r}")
+    return int(value)
 
 
 def check_range(name: str, value: float, low: float, high: float, *,
                 closed: bool = False) -> None:
-    """Raise ``ValueError`` unless ``low < value < high`` (``closed``:
+    """Raise unless ``value`` is a number with ``low < value < high`` (``closed``:
     ``low <= value <= high``)."""
-    inside = _is_number(value) and (low <= value <= high if closed else low < value < high)
+    check_number(name, value)
+    inside = low <= value <= high if closed else low < value < high
     if not inside:
         interval = f"[{low}, {high}]" if closed else f"({low}, {high})"
         raise ValueError(f"{name} must lie in {interval}, got {value!r}")
@@ -47,7 +76,7 @@ def check_flag(name: str, value: object) -> bool:
     such as ``"no"`` or ``"False"`` is truthy and would silently mean yes."""
     import numpy as np
     if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{name} must be True or False, got {value!r} "
+        raise ParameterTypeError(f"{name} must be True or False, got {value!r} "
                         f"({type(value).__name__})")
     return bool(value)
 

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lfc._jit import inline, kernel
-from lfc._validate import check_flag
+from lfc._validate import check_flag, check_index
 from lfc.estimation import KalmanFilter, kf_correct, kf_predict, measurement_std
 from lfc.filters import SafetyFilter
 from lfc.filters.base import ACTIVE, ALARM_BITS, MEMORY, OUTSIDE
@@ -465,8 +465,7 @@ def check_area_keys(mapping: dict | None, n_areas: int, name: str) -> dict:
     if not isinstance(mapping, dict):
         raise ValueError(f"{name} must be a dict {{area: ...}}, got {mapping!r}")
     for key in mapping:
-        if not (isinstance(key, (int, np.integer)) and 0 <= key < n_areas):
-            raise ValueError(f"{name} has key {key!r}; areas are 0 to {n_areas - 1}")
+        check_index(f"a key of {name} (an area)", key, n_areas)
     return mapping
 
 

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from lfc._validate import ParameterTypeError, check_index, check_number
 from lfc.model import STATES, LFCParams, discretize, lfc_matrices, zoh
 
 N_AREA_STATES = len(STATES)
@@ -79,10 +80,12 @@ class MultiAreaParams:
         for k, line in enumerate(self.tie):
             try:
                 i, j, coef = line
-                i, j, coef = int(i), int(j), float(coef)
             except (TypeError, ValueError):
                 raise ValueError(f"tie[{k}] must be (i, j, T_ij), got {line!r}") from None
-            if not (0 <= i < n and 0 <= j < n and i != j):
+            i, j = check_index(f"tie[{k}]'s i", i, n), check_index(f"tie[{k}]'s j", j, n)
+            check_number(f"tie[{k}]'s T_ij", coef)
+            coef = float(coef)
+            if i == j:
                 raise ValueError(f"tie[{k}] must join two different areas in [0, {n - 1}], "
                                  f"got {line!r}")
             if not (math.isfinite(coef) and coef > 0):
@@ -99,12 +102,11 @@ class MultiAreaParams:
             if value is None:
                 continue
             if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
-                raise TypeError(f"{name} must be a sequence of {n} numbers (one per area), "
-                                f"got {value!r}")
-            try:
-                value = tuple(float(v) for v in value)
-            except (TypeError, ValueError):
-                value = ()
+                raise ParameterTypeError(f"{name} must be a sequence of {n} numbers (one per "
+                                         f"area), got {value!r}")
+            for k, v in enumerate(value):
+                check_number(f"{name}[{k}]", v)
+            value = tuple(float(v) for v in value)
             if len(value) != n or not all(math.isfinite(v) and (v > low if strict else v >= low)
                                           for v in value):
                 raise ValueError(f"{name} must be {n} finite numbers "

@@ -83,7 +83,7 @@ def test_batch_equals_one_by_one(fit):
 
 @pytest.mark.parametrize("kwargs, message", [
     ({"params": MultiAreaParams.three_area()}, "params must be a MultiAreaParams of 2 areas"),
-    ({"attacks": {2: {"pc": lfc.Step(1.0)}}}, "attacks has key 2"),
+    ({"attacks": {2: {"pc": lfc.Step(1.0)}}}, r"a key of attacks \(an area\)"),
     ({"attacks": {0: {"load": lfc.Step(1.0)}}}, "attacks\\[0\\] must be a dict with keys"),
     ({"control_period": 0.0125}, "control_period"),
     ({"duration": -1.0}, "duration"),

@@ -34,7 +34,7 @@ def test_numpy_bools_are_bools():
 def test_a_bias_given_as_a_string_is_refused_not_split_into_digits():
     with pytest.raises(TypeError, match="bias must be a sequence of 2 numbers"):
         MultiAreaParams(areas=TWO.areas, tie=TWO.tie, bias="12")
-    with pytest.raises(ValueError, match="bias must be 2 finite numbers"):
+    with pytest.raises(TypeError, match=r"bias\[0\] must be a number, got 'a'"):
         MultiAreaParams(areas=TWO.areas, tie=TWO.tie, bias=("a", 2))
 
 
@@ -64,3 +64,28 @@ def test_a_number_parameter_takes_numbers_only(injected, value, ok):
 
 def test_a_parameter_whose_default_is_none_takes_anything():
     check_parameters(_namespace("alpha = None\n", "alpha = 3.0\n", alpha=3.0))
+
+
+@pytest.mark.parametrize("tie, message", [
+    (((0.7, 1, 1.0),), r"tie\[0\]'s i must be an integer index in \[0, 1\], got 0.7"),
+    (((0, True, 1.0),), r"tie\[0\]'s j must be an integer index"),
+    (((0, 1, "1.0"),), r"tie\[0\]'s T_ij must be a number, got '1.0'"),
+])
+def test_a_tie_line_index_or_coefficient_of_another_type_is_refused(tie, message):
+    """An area index 0.7 was area 0; a coefficient "1.0" was 1.0."""
+    with pytest.raises(TypeError, match=message):
+        MultiAreaParams(areas=TWO.areas, tie=tie)
+
+
+@pytest.mark.parametrize("key", [0.7, "0", True])
+def test_an_area_key_must_be_an_integer(key):
+    with pytest.raises(TypeError, match=r"a key of attacks \(an area\) must be an integer"):
+        lfc.simulate(TWO, duration=0.1, attacks={key: {"pc": lfc.Step(0.1)}})
+
+
+def test_a_wrong_type_is_a_type_error_that_value_error_handlers_still_catch():
+    from lfc._validate import ParameterTypeError
+    with pytest.raises(ParameterTypeError, match="alpha must be a number, got '20'"):
+        lfc.SafetyFilter(LFCParams(), alpha="20")
+    assert issubclass(ParameterTypeError, TypeError) and issubclass(ParameterTypeError,
+                                                                    ValueError)

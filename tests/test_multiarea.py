@@ -138,7 +138,7 @@ def test_discretization_matches_the_continuous_model():
     (dict(areas=(lfc.LFCParams(), "x")), "areas must be a non-empty"),
     (dict(areas=(lfc.LFCParams(), lfc.LFCParams(f_nominal=50.0))), "share one f_nominal"),
     (dict(areas=(lfc.LFCParams(),) * 2, tie=((0, 0, 1.0),)), "two different areas"),
-    (dict(areas=(lfc.LFCParams(),) * 2, tie=((0, 2, 1.0),)), "two different areas"),
+    (dict(areas=(lfc.LFCParams(),) * 2, tie=((0, 2, 1.0),)), r"tie\[0\]'s j must be an integer index in \[0, 1\], got 2"),
     (dict(areas=(lfc.LFCParams(),) * 2, tie=((0, 1, -1.0),)), "T_ij must be a finite"),
     (dict(areas=(lfc.LFCParams(),) * 2, tie=((0, 1, 1.0), (1, 0, 2.0))), "repeats the line"),
     (dict(areas=(lfc.LFCParams(),) * 2, tie=((0, 1),)), r"tie\[0\] must be \(i, j, T_ij\)"),
@@ -152,7 +152,7 @@ def test_bad_grid_names_the_parameter(kwargs, message):
 
 
 @pytest.mark.parametrize("kwargs, message", [
-    (dict(attacks={2: {"pc": lfc.Step(1.0)}}), "attacks has key 2; areas are 0 to 1"),
+    (dict(attacks={2: {"pc": lfc.Step(1.0)}}), r"a key of attacks \(an area\) must be an integer index in \[0, 1\], got 2"),
     (dict(attacks={0: {"load": lfc.Step(1.0)}}), r"attacks\[0\] must be a dict with keys"),
     (dict(filters={0: "cbf"}), r"filters\[0\] must be one of"),
     (dict(loads=[lfc.Step(1.0)]), "loads must be a dict"),
