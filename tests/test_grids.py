@@ -5,6 +5,8 @@ filters do on them is checked by notebook 09's claims on both
 (tests/test_notebooks.py)."""
 
 import dataclasses
+import functools
+import hashlib
 import json
 
 import pandas as pd
@@ -47,12 +49,48 @@ def test_the_fit_cache_round_trips_exactly(fit, tmp_path, monkeypatch):
     path = fitting._cache_path(CASE, "grid-fit")
     assert path.parent == tmp_path
     fitting._write_report(path, fit, grid_fit._encode)
-    assert fitting._read_report(path, grid_fit._decode) == fit
+    check = functools.partial(grid_fit._check, CASE)
+    assert fitting._read_report(path, grid_fit._decode, check) == fit
     stored = json.loads(path.read_text())
     stored["payload"] = stored["payload"].replace('"T": ', '"T": 1')    # a changed value
     path.write_text(json.dumps(stored))
     with pytest.warns(RuntimeWarning, match="damaged cache file"):
-        assert fitting._read_report(path, grid_fit._decode) is None
+        assert fitting._read_report(path, grid_fit._decode, check) is None
+
+
+@pytest.mark.parametrize("damage, reason", [
+    (lambda d: d.update(T=float("nan")), "T must be a finite number > 0"),
+    (lambda d: d["areas"][0]["params"].update(M=-5.0), "M must be a finite number > 0"),
+    (lambda d: d.update(areas=d["areas"] * 2 + d["areas"][:1]), "the fit has 5 areas, the case 2"),
+    (lambda d: d["areas"][1]["error"].update(dw=float("nan")), "error must map each output"),
+])
+def test_a_cached_fit_with_a_valid_checksum_but_insane_values_is_refit(fit, tmp_path,
+                                                                      monkeypatch, damage,
+                                                                      reason):
+    """Issue "Hardened": the checksum says the file is what was written, not that
+    what was written is a model; NaN, -5 or a five-area fit are refused on read."""
+    monkeypatch.setenv("LFC_CACHE_DIR", str(tmp_path))
+    path = fitting._cache_path(CASE, "grid-fit")
+    data = grid_fit._encode(fit)
+    damage(data)
+    payload = json.dumps(data, sort_keys=True)
+    path.write_text(json.dumps({"payload": payload,
+                                "sha256": hashlib.sha256(payload.encode()).hexdigest()}))
+    with pytest.warns(RuntimeWarning, match=f"damaged cache file .*{reason}"):
+        assert fitting._read_report(path, grid_fit._decode,
+                                    functools.partial(grid_fit._check, CASE)) is None
+
+
+def test_a_grid_case_cannot_put_one_machine_in_two_areas():
+    with pytest.raises(ValueError, match="machine 'GENROU_1' in area 0 and area 1"):
+        GridCase(generators=(("GENROU_1", "GENROU_2"), ("GENROU_1", "GENROU_3")))
+
+
+def test_a_design_model_on_another_mva_base_is_refused(fit):
+    other = dataclasses.replace(fit.params, areas=tuple(
+        dataclasses.replace(a, s_base_mva=100.0) for a in fit.params.areas))
+    with pytest.raises(ValueError, match=r"on \[100.0\] MVA, the case's on 1800.0 MVA"):
+        lfc.simulate(CASE, design=other, duration=1.0)
 
 
 def test_the_area_command_reaches_its_governors_on_the_area_base(fit):

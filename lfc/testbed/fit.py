@@ -185,8 +185,21 @@ def decode_report(data: dict) -> FitReport:
                      data["error"], data["initial_error"])
 
 
-def _read_report(path: Path, decode: Callable[[dict], Any] = decode_report) -> Any:
-    """The cached fit at ``path``; None if absent, damaged (with a warning)."""
+def check_report(report: FitReport) -> None:
+    """Raise ``ValueError`` unless a fit is physically sane: its models valid
+    (:class:`LFCParams` checks every parameter) and its errors finite and >= 0."""
+    for name in ("error", "initial_error"):
+        value = getattr(report, name)
+        if not (isinstance(value, dict) and all(math.isfinite(v) and v >= 0
+                                                for v in value.values())):
+            raise ValueError(f"{name} must map each output to a finite number >= 0, got "
+                             f"{value!r}")
+
+
+def _read_report(path: Path, decode: Callable[[dict], Any] = decode_report,
+                 check: Callable[[Any], None] = check_report) -> Any:
+    """The cached fit at ``path``; None if absent, damaged or not sane (``check``
+    raises ``ValueError``; with a warning)."""
     if not path.exists():
         return None
     try:
@@ -194,7 +207,9 @@ def _read_report(path: Path, decode: Callable[[dict], Any] = decode_report) -> A
         payload = stored["payload"]
         if hashlib.sha256(payload.encode()).hexdigest() != stored["sha256"]:
             raise ValueError("checksum mismatch")
-        return decode(json.loads(payload))
+        report = decode(json.loads(payload))
+        check(report)
+        return report
     except (OSError, ValueError, KeyError, TypeError) as err:
         warnings.warn(f"damaged cache file {path} ({err}); fitting again", RuntimeWarning,
                       stacklevel=2)
@@ -219,11 +234,13 @@ def _write_report(path: Path, report: Any,
 
 def cached_fit(case: object, kind: str, fit: Callable[[Any], Any],
                encode: Callable[[Any], dict] = encode_report,
-               decode: Callable[[dict], Any] = decode_report) -> Any:
+               decode: Callable[[dict], Any] = decode_report,
+               check: Callable[[Any, Any], None] = lambda case, r: check_report(r)) -> Any:
     """``fit(case)`` read from its cache file (:func:`_cache_path`), or computed
-    and written there when the file is absent or damaged."""
+    and written there when the file is absent, damaged (its checksum) or not
+    physically sane (``check(case, report)`` raises ``ValueError``)."""
     path = _cache_path(case, kind)
-    report = _read_report(path, decode)
+    report = _read_report(path, decode, lambda r: check(case, r))
     if report is None:
         report = fit(case)
         _write_report(path, report, encode)

@@ -123,6 +123,13 @@ class GridCase:
         if not all(self.generators):
             raise ValueError(f"generators must name at least one machine per area, got "
                              f"{self.generators!r}")
+        seen: dict = {}
+        for a, machines in enumerate(self.generators):
+            for m in machines:
+                if m in seen:
+                    raise ValueError(f"generators names machine {m!r} in area {seen[m]} and "
+                                     f"area {a}: each machine belongs to one area")
+                seen[m] = a
         if self.governor not in GOVERNORS:
             raise ValueError(f"governor must be one of {GOVERNORS}, got {self.governor!r}")
         if not self.tie_lines:

@@ -20,6 +20,7 @@ ANDES runs of ``FIT_DURATION``) is cached on disk as the microgrid's is
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -28,8 +29,8 @@ from scipy.integrate import cumulative_trapezoid
 
 from lfc.multiarea import MultiAreaParams
 from lfc.signals import Step
-from lfc.testbed.fit import (OUTPUTS, FitReport, cached_fit, decode_report, encode_report,
-                             fit_params)
+from lfc.testbed.fit import (OUTPUTS, FitReport, cached_fit, check_report, decode_report,
+                             encode_report, fit_params)
 from lfc.testbed.grid import GridCase, case_design
 
 FIT_STEP = 0.02      # pu of the area base (36 MW in Kundur's), small enough to stay linear
@@ -139,6 +140,20 @@ def _decode(data: dict) -> GridFit:
                      float(data["tie_error"]))
 
 
+def _check(case: GridCase, fit: GridFit) -> None:
+    """Raise ``ValueError`` unless a (cached) fit is sane for ``case``: one area
+    fit per area, each sane (:func:`check_report`), a tie-line coefficient finite
+    and > 0, a tie-line error finite and >= 0."""
+    if len(fit.areas) != case.n_areas:
+        raise ValueError(f"the fit has {len(fit.areas)} areas, the case {case.n_areas}")
+    for report in fit.areas:
+        check_report(report)
+    if not (math.isfinite(fit.T) and fit.T > 0):
+        raise ValueError(f"T must be a finite number > 0, got {fit.T!r}")
+    if not (math.isfinite(fit.tie_error) and fit.tie_error >= 0):
+        raise ValueError(f"tie_error must be a finite number >= 0, got {fit.tie_error!r}")
+
+
 @lru_cache(maxsize=4)
 def _fitted(case: GridCase) -> GridFit:
-    return cached_fit(case, "grid-fit", fit_grid, _encode, _decode)
+    return cached_fit(case, "grid-fit", fit_grid, _encode, _decode, _check)

@@ -99,6 +99,13 @@ def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
     if not isinstance(params, MultiAreaParams) or params.n_areas != plant.n_areas:
         raise ValueError(f"params must be a MultiAreaParams of {plant.n_areas} areas (the "
                          f"plant's), got {params!r}")
+    if isinstance(plant, GridPlant):
+        bases = {a.s_base_mva for a in params.areas}
+        if bases != {plant.case.area_mva}:
+            raise ValueError(f"params' areas are on {sorted(bases)} MVA, the case's on "
+                             f"{plant.case.area_mva} MVA (area_mva): the commands and "
+                             f"measurements would be scaled wrongly; give a design model on "
+                             f"the case's base")
     check_positive("duration", duration)
     check_multiple("control_period", control_period, "step", step)
     relays = relays if relays is not None else RelaySettings()
