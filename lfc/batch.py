@@ -460,17 +460,45 @@ def _read_chunk(path: Path, rows: int) -> pd.DataFrame | None:
     except (OSError, UnicodeDecodeError) as err:
         return damaged(f"unreadable: {err}")
     header, _, body = text.partition("\n")
-    fields = dict(f.split("=", 1) for f in header.removeprefix(CHUNK_MAGIC).split() if "=" in f)
-    if not header.startswith(CHUNK_MAGIC) or set(fields) != {"rows", "sha256"}:
+    head = dict(f.split("=", 1) for f in header.removeprefix(CHUNK_MAGIC).split() if "=" in f)
+    if not header.startswith(CHUNK_MAGIC) or set(head) != {"rows", "sha256"}:
         return damaged("no lfc-chunk header")
-    if fields["rows"] != str(rows):
-        return damaged(f"{fields['rows']} rows stored, {rows} expected")
-    if hashlib.sha256(body.encode()).hexdigest() != fields["sha256"]:
+    if head["rows"] != str(rows):
+        return damaged(f"{head['rows']} rows stored, {rows} expected")
+    if hashlib.sha256(body.encode()).hexdigest() != head["sha256"]:
         return damaged("checksum mismatch: cut short or changed")
     metrics = pd.read_csv(io.StringIO(body), index_col=0)
     if len(metrics) != rows or list(metrics.columns) != list(METRIC_KEYS):
         return damaged("unexpected rows or columns")
-    return metrics
+    insane = _insane(metrics)
+    return damaged(insane) if insane else metrics
+
+
+def _insane(metrics: pd.DataFrame) -> str | None:
+    """Why stored metrics cannot be a run's (None if they can): peaks and
+    fractions finite and >= 0, counts integers >= 0, a trip time and relay
+    exactly on the rows that tripped."""
+    tripped = metrics["tripped"]
+    if not tripped.isin([True, False]).all():
+        return "'tripped' is not True or False"
+    tripped = tripped.astype(bool)
+    for col in ("max_abs_dw_meas", "max_abs_rocof_meas", "scc_active_fraction",
+                "max_abs_modification", "mean_abs_modification", "final_abs_dw_meas",
+                "alarms", "outside"):
+        values = pd.to_numeric(metrics[col], errors="coerce")
+        if not (np.isfinite(values) & (values >= 0)).all():
+            return f"{col!r} is not finite and >= 0"
+        if col in ("alarms", "outside") and not (values == np.round(values)).all():
+            return f"{col!r} is not a count"
+    if (metrics["scc_active_fraction"] > 1).any():
+        return "'scc_active_fraction' > 1"
+    t = pd.to_numeric(metrics["first_trip_t"], errors="coerce")
+    if not ((tripped & (t >= 0)) | (~tripped & t.isna())).all():
+        return "'first_trip_t' is not a time >= 0 exactly where 'tripped'"
+    relay = metrics["first_trip_relay"]
+    if not ((tripped & relay.isin(RELAY_NAMES)) | (~tripped & relay.isna())).all():
+        return "'first_trip_relay' is not a relay exactly where 'tripped'"
+    return None
 
 
 def _digest(chunk: pd.DataFrame, args: tuple) -> str:

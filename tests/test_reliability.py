@@ -20,7 +20,6 @@ from lfc import batch
 from lfc import simulate_many
 from lfc.batch import ChunkWarning
 from lfc.repro.cli import main
-from lfc.simulate import METRIC_KEYS
 
 P = lfc.LFCParams()
 ROW = {"waveform": "sinusoid", "channel": "pc", "amplitude": 0.5, "freq_hz": 1.0,
@@ -121,6 +120,38 @@ def test_two_runs_on_one_folder_at_once(tmp_path):
     assert not list(tmp_path.glob("*.tmp")) and len(chunk_files(tmp_path)) == 8
 
 
+SANE_METRICS = pd.DataFrame({
+    "tripped": [False, True, False], "first_trip_relay": [None, "ROCOF", None],
+    "first_trip_t": [np.nan, 2.5, np.nan], "max_abs_dw_meas": [0.01, 0.02, 0.0],
+    "max_abs_rocof_meas": [0.03, 0.06, 0.0], "scc_active_fraction": [0.0, 0.25, 1.0],
+    "max_abs_modification": [0.0, 0.5, 1.5], "mean_abs_modification": [0.0, 0.1, 0.7],
+    "alarms": [0, 25, 100], "final_abs_dw_meas": [0.0, 0.01, 0.002], "outside": [0, 3, 0]})
+
+
+@pytest.mark.parametrize("col, value, why", [
+    ("max_abs_dw_meas", np.nan, "'max_abs_dw_meas' is not finite and >= 0"),
+    ("max_abs_rocof_meas", -5.0, "'max_abs_rocof_meas' is not finite and >= 0"),
+    ("alarms", 2.5, "'alarms' is not a count"),
+    ("scc_active_fraction", 1.5, "'scc_active_fraction' > 1"),
+    ("first_trip_t", 3.0, "'first_trip_t' is not a time >= 0 exactly where 'tripped'"),
+    ("first_trip_relay", "OF3", "'first_trip_relay' is not a relay"),
+])
+def test_a_chunk_with_a_valid_checksum_but_impossible_metrics_is_recomputed(tmp_path, col,
+                                                                          value, why):
+    """Issue "Hardened": the checksum says the file is what was written, not that
+    what was written is a run's metrics (NaN, -5, a fractional count, a trip time
+    without a trip)."""
+    metrics = SANE_METRICS.astype({"alarms": float}).copy()
+    metrics.loc[0, col] = value
+    path = tmp_path / "chunk.csv"
+    batch._write_chunk(path, metrics)
+    with pytest.warns(ChunkWarning, match=why):
+        assert batch._read_chunk(path, 3) is None
+    batch._write_chunk(path, SANE_METRICS)
+    pd.testing.assert_frame_equal(batch._read_chunk(path, 3).reset_index(drop=True),
+                                  SANE_METRICS, check_dtype=False)
+
+
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow,
                                                                    HealthCheck.function_scoped_fixture])
 @given(data=st.data())
@@ -128,8 +159,7 @@ def test_property_damaged_chunk_files_never_give_a_wrong_result(tmp_path_factory
     """Random truncation and byte changes of a stored chunk: reading it gives the
     stored metrics exactly, or nothing (and a warning) — never other numbers."""
     folder = tmp_path_factory.mktemp("chunk")
-    metrics = pd.DataFrame({c: np.arange(3, dtype=float) * (i + 1)
-                            for i, c in enumerate(METRIC_KEYS)})
+    metrics = SANE_METRICS.copy()
     path = folder / "chunk.csv"
     batch._write_chunk(path, metrics)
     raw = bytearray(path.read_bytes())
@@ -205,10 +235,10 @@ def test_property_a_scenario_table_is_refused_or_simulated_correctly(rows, bad, 
 @pytest.mark.parametrize("call, message", [
     (lambda: lfc.simulate(lfc.LFCParams(droop=1e-20), duration=1.0), "droop=1e-20"),
     (lambda: lfc.simulate(P, duration=1e-4), "duration must be at least one plant step"),
-    (lambda: lfc.simulate(P, duration="10"), "duration must be a finite number"),
-    (lambda: lfc.simulate(P, duration=True), "duration must be a finite number"),
-    (lambda: lfc.LFCParams(M="4"), "M must be a finite number"),
-    (lambda: lfc.LFCParams(M=True), "M must be a finite number"),
+    (lambda: lfc.simulate(P, duration="10"), "duration must be a number, got"),
+    (lambda: lfc.simulate(P, duration=True), "duration must be a number, got"),
+    (lambda: lfc.LFCParams(M="4"), "M must be a number, got"),
+    (lambda: lfc.LFCParams(M=True), "M must be a number, got"),
     (lambda: lfc.simulate(P, duration=1.0, dt=np.nan), "dt must be a finite number"),
     (lambda: lfc.Step(0.1, 2.0, stop=1.0), "stop must be > start"),
     (lambda: lfc.SafetyFilter(P, method="certified", horizon=60.0),
