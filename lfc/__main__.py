@@ -1,7 +1,16 @@
 """``python -m lfc``: the command line (:mod:`lfc.repro.cli`)."""
 
+import os
 import sys
 
-from lfc.repro.cli import main
+from lfc.repro.cli import INTERRUPTED, main
 
-sys.exit(main())
+code = main()
+if code == INTERRUPTED:
+    # Ctrl-C: the kernels and workers are stopped (cli.main); a papermill thread
+    # may still wait on its dead kernel's socket, and joining it would hang the
+    # exit, so leave at once (every file is written atomically: nothing partial).
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
+sys.exit(code)

@@ -421,15 +421,25 @@ def _execute(todo: list, args: tuple, executor: Executor | None):
                     subset=[c for c in FILTER_COLUMNS if c in chunk]).to_dict("records"):
                 _filter(params, relays, row, cp)
     pool = executor or ProcessPoolExecutor(max_workers=os.cpu_count() or 1)
+    wait, futures = True, {}
     try:
         futures = {pool.submit(run_chunk, params, chunk, duration, relays, dt, cp): (i, path)
                    for i, chunk, path in todo}
         for fut in as_completed(futures):
             i, path = futures[fut]
             yield finish(i, fut.result(), path)
+    except KeyboardInterrupt:          # stop the workers now, not after their chunks
+        if executor is None:
+            for proc in list((getattr(pool, "_processes", None) or {}).values()):
+                proc.terminate()
+            wait = False
+        else:
+            for fut in futures:
+                fut.cancel()
+        raise
     finally:
         if executor is None:
-            pool.shutdown(cancel_futures=True)
+            pool.shutdown(wait=wait, cancel_futures=True)
 
 
 class ChunkWarning(UserWarning):

@@ -1,7 +1,8 @@
 """The book: the executed notebooks of the last reproduce as a static HTML site.
 
 ``python -m lfc book`` renders ``build/reproduce/<name>[_testbed]/<notebook>``
-(executing any that are missing, as ``reproduce`` would) with nbconvert into
+(executing any that are missing, incomplete — an interrupted or failed run — or
+damaged, as ``reproduce`` would) with nbconvert into
 ``build/book/``: one page per notebook, its figures inline (the executed
 notebook holds them), and ``index.html`` with the figure gallery, each figure
 linking to its chapter, and whether the chapter's claims were reproduced.
@@ -10,6 +11,7 @@ linking to its chapter, and whether the chapter's claims were reproduced.
 from __future__ import annotations
 
 import html
+import json
 import shutil
 from pathlib import Path
 
@@ -30,13 +32,38 @@ figcaption { font-size: .85rem; margin-top: .3rem; }
 """
 
 
+class BookError(RuntimeError):
+    """Chapters that could not be executed or rendered; the rest of the book is built."""
+
+
+def complete(executed: Path) -> bool:
+    """Whether an executed notebook ran to its end without an error: readable,
+    and papermill marked every code cell ``completed`` and no exception."""
+    try:
+        nb = json.loads(executed.read_text(encoding="utf-8"))
+        if nb["metadata"].get("papermill", {}).get("exception"):
+            return False
+        return all(c["metadata"].get("papermill", {}).get("status") == "completed"
+                   for c in nb["cells"] if c["cell_type"] == "code")
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return False
+
+
 def build_book(only: list[str] | None = None, build_dir: Path = runner.ROOT / "build",
                figures_dir: Path = runner.ROOT / "figures") -> Path:
     """Render the book; return the path of its ``index.html``.
 
     ``only``: a subset of the chapters (``lfc.repro.manifest``).  A chapter whose
-    executed notebook is missing under ``build_dir/reproduce/`` is executed first
-    (figures to ``figures_dir``, as ``python -m lfc reproduce``).
+    executed notebook under ``build_dir/reproduce/`` is missing or not
+    :func:`complete` is executed first (figures to ``figures_dir``, as ``python
+    -m lfc reproduce``).
+
+    Raises
+    ------
+    BookError
+        After building the rest of the book, naming each chapter that failed
+        (its executed notebook and the error); its page is left out, and the
+        next call executes it again.
     """
     from nbconvert import HTMLExporter
 
@@ -45,15 +72,23 @@ def build_book(only: list[str] | None = None, build_dir: Path = runner.ROOT / "b
     out = build_dir / "book"
     (out / "figures").mkdir(parents=True, exist_ok=True)
     exporter = HTMLExporter()
-    entries = []
+    entries, failed = [], []
     for c in chapters:
         for plant in c.plants:
             label = figure_name(c.name, plant)
             executed = build_dir / "reproduce" / label / c.notebook
-            if not executed.exists():
-                runner.reproduce([c.name], plant, jobs=1, figures_dir=figures_dir,
-                                 build_dir=build_dir)
-            body, _ = exporter.from_filename(str(executed))
+            if not complete(executed):
+                outcome, = runner.reproduce([c.name], plant, jobs=1, figures_dir=figures_dir,
+                                            build_dir=build_dir)
+                if not complete(executed):
+                    failed.append(f"{label} ({executed}): {outcome.error or 'did not finish'}")
+                    (out / f"{label}.html").unlink(missing_ok=True)
+                    continue
+            try:
+                body, _ = exporter.from_filename(str(executed))
+            except Exception as err:          # nbconvert's errors name no file
+                failed.append(f"{label} ({executed}): cannot render: {err}")
+                continue
             (out / f"{label}.html").write_text(body, encoding="utf-8")
             for png in c.figure_files(plant):
                 if (figures_dir / png).exists():
@@ -61,6 +96,9 @@ def build_book(only: list[str] | None = None, build_dir: Path = runner.ROOT / "b
             entries.append((c, plant, label, runner.read_json(executed.parent / "claims.json")))
     index = out / "index.html"
     index.write_text(_index(entries, out), encoding="utf-8")
+    if failed:
+        raise BookError(f"{len(failed)} chapter(s) failed, the rest of the book is in {index}: "
+                        + "; ".join(failed))
     return index
 
 

@@ -117,6 +117,9 @@ def _readme(check: bool) -> int:
     return 0
 
 
+INTERRUPTED = 130   # exit code after Ctrl-C (128 + SIGINT)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; return the exit code (2: a usage or input error,
     printed as one line on stderr; 130: interrupted)."""
@@ -155,9 +158,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {_one_line(err)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
+        runner.stop_kernels()
         print("interrupted: finished runs and chunks are kept; rerun the same command to "
               "resume", file=sys.stderr)
-        return 130
+        return INTERRUPTED
 
 
 def _grid(params: list[list[str]]) -> dict[str, list]:

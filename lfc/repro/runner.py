@@ -16,7 +16,9 @@ import math
 import os
 import re
 import shutil
+import signal
 import tempfile
+import threading
 import time
 import warnings
 from concurrent.futures import Executor, ThreadPoolExecutor, as_completed
@@ -52,6 +54,27 @@ class RunOutcome:
     deviations: dict[str, str] = field(default_factory=dict)
 
 
+_LIVE: set = set()                 # kernel managers whose kernel is running (stop_kernels)
+_LIVE_LOCK = threading.Lock()
+
+
+def stop_kernels() -> int:
+    """Kill every kernel this process started that still runs, with its process
+    group (the kernel's own worker processes); return how many.  Ctrl-C calls
+    it: a papermill thread waiting on a dead kernel ends within a second."""
+    with _LIVE_LOCK:
+        live = list(_LIVE)
+    for km in live:
+        group = getattr(km.provisioner, "pgid", None) or getattr(km.provisioner, "pid", None)
+        if group:
+            try:
+                os.killpg(group, signal.SIGKILL)
+            except OSError:
+                pass
+        shutil.rmtree(km._socket_dir, ignore_errors=True)
+    return len(live)
+
+
 class IPCKernelManager(KernelManager):
     """A kernel that talks over local IPC sockets, not TCP: nothing leaves the
     machine, and the kernel has no reason to warn about unencrypted TCP.
@@ -79,7 +102,14 @@ class IPCKernelManager(KernelManager):
         if not self.shutting_down:
             await super()._async_interrupt_kernel()
 
+    async def _async_launch_kernel(self, kernel_cmd: list[str], **kw) -> None:
+        await super()._async_launch_kernel(kernel_cmd, **kw)
+        with _LIVE_LOCK:
+            _LIVE.add(self)
+
     async def _async_cleanup_resources(self, restart: bool = False) -> None:
+        with _LIVE_LOCK:
+            _LIVE.discard(self)
         await super()._async_cleanup_resources(restart=restart)
         if not restart:
             shutil.rmtree(self._socket_dir, ignore_errors=True)
@@ -120,11 +150,20 @@ def read_json(path: Path) -> dict:
 
 
 def _progress(futures: dict, desc: str) -> list:
+    """The futures' results as they finish, with a progress bar.  On Ctrl-C the
+    queued runs are cancelled and the running kernels killed before the
+    ``KeyboardInterrupt`` goes on: nothing keeps running."""
     done = []
-    with tqdm(total=len(futures), desc=desc, unit="run") as bar:
-        for fut in as_completed(futures):
-            done.append(fut.result())
-            bar.update(1)
+    try:
+        with tqdm(total=len(futures), desc=desc, unit="run") as bar:
+            for fut in as_completed(futures):
+                done.append(fut.result())
+                bar.update(1)
+    except KeyboardInterrupt:
+        for fut in futures:
+            fut.cancel()
+        stop_kernels()
+        raise
     return done
 
 
