@@ -91,3 +91,24 @@ def check_multiple(name: str, value: float, of_name: str, of: float) -> int:
         raise ValueError(f"{name} must be a positive integer multiple of {of_name} ({of}), "
                          f"got {value}")
     return int(round(ratio))
+
+
+def check_pair(name: str, value: object, *, positive: bool = False) -> tuple[float, float]:
+    """``value`` as two floats; raise unless it is a sequence of two finite
+    numbers >= 0 (> 0 with ``positive``), naming ``name[i]``."""
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 2:
+        raise ParameterTypeError(f"{name} must be a pair of numbers, got {value!r}")
+    check = check_positive if positive else check_nonnegative
+    for i, v in enumerate(value):
+        check(f"{name}[{i}]", v)
+    return float(value[0]), float(value[1])
+
+
+def check_seed(name: str, value: object) -> int:
+    """Raise unless ``value`` is an integer >= 0 (a random seed); return it."""
+    if not isinstance(value, Integral) or isinstance(value, bool):
+        raise ParameterTypeError(f"{name} must be an integer >= 0, got {value!r} "
+                                 f"({type(value).__name__})")
+    if value < 0:
+        raise ValueError(f"{name} must be an integer >= 0, got {value!r}")
+    return int(value)

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lfc._jit import inline, kernel
-from lfc._validate import check_flag, check_index
+from lfc._validate import ParameterTypeError, check_flag, check_index, check_pair, check_seed
 from lfc.estimation import KalmanFilter, kf_correct, kf_predict, measurement_std
 from lfc.filters import SafetyFilter
 from lfc.filters.base import ACTIVE, ALARM_BITS, MEMORY, OUTSIDE
@@ -346,14 +346,9 @@ def _lowest_bit(bits: int) -> int:
 
 # -- the Python side: scenario tables, a run, the testbed's generator side ---------------
 def check_noise(noise_std: tuple[float, float]) -> bool:
-    """Raise ``ValueError`` unless ``noise_std`` is a pair of finite values >= 0
-    (pu, pu/s); return whether there is any noise."""
-    if len(noise_std) != 2:
-        raise ValueError(f"noise_std must be a pair (dw_meas, rocof_meas), got {noise_std!r}")
-    for i, s in enumerate(noise_std):
-        if not (isinstance(s, (int, float)) and math.isfinite(s) and s >= 0):
-            raise ValueError(f"noise_std[{i}] must be a finite number >= 0, got {s!r}")
-    return any(s > 0 for s in noise_std)
+    """Raise unless ``noise_std`` is a pair (dw_meas, rocof_meas) of finite values
+    >= 0 (pu, pu/s); return whether there is any noise."""
+    return any(s > 0 for s in check_pair("noise_std", noise_std))
 
 
 def make_noise(noise_std: tuple[float, float], n: int, seed: int | tuple[int, ...]
@@ -499,6 +494,8 @@ class Scenarios:
 
     def __init__(self, design: LFCParams | MultiAreaParams, *, duration: float, dt: float,
                  control_period: float, relays: RelaySettings) -> None:
+        if not isinstance(relays, RelaySettings):
+            raise ParameterTypeError(f"relays must be a RelaySettings, got {relays!r}")
         self.design, self.dt, self.relays = design, float(dt), relays
         self.grid = as_grid(design)
         self.ratio = int(round(control_period / dt))
@@ -543,6 +540,7 @@ class Scenarios:
         loads = check_area_keys(loads, n, "loads")
         filters = check_area_keys(filters, n, "filters")
         noisy = check_noise(noise_std)
+        seed = check_seed("seed", seed)
         feedforward = check_flag("load_feedforward", feedforward)
         relay_noise = check_flag("relay_noise", relay_noise)
         if relay_noise and not noisy:

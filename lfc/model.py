@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from lfc._validate import check_nonnegative, check_positive
+from lfc._validate import check_nonnegative, check_positive, check_range
 
 if TYPE_CHECKING:
     import control
@@ -27,9 +27,18 @@ INPUTS = ("dPc", "dPL")
 OUTPUTS = ("dw_meas", "rocof_meas")
 
 
+# Every positive parameter (s, pu, Hz, MVA) lies in this range, D and k_i in
+# [0, 1e9]: far beyond any generator, and narrow enough that a product or a
+# reciprocal of two parameters neither underflows to 0 nor overflows.
+PHYSICAL = (1e-9, 1e9)
+
+
 @dataclass(frozen=True)
 class LFCParams:
     """Parameters of the single-area LFC model (all per unit on ``s_base_mva``).
+
+    Each positive parameter must lie in ``PHYSICAL`` (1e-9 to 1e9), ``D`` and
+    ``k_i`` in [0, 1e9]; anything else is a ``ValueError`` naming it.
 
     The paper gives no LFC data for its 2.5 MVA machine; the defaults are a
     small fast unit (reproduction notes section 4): typical governor and
@@ -73,11 +82,14 @@ class LFCParams:
     s_base_mva: float = 2.5
 
     def __post_init__(self) -> None:
+        low, high = PHYSICAL
         for name in ("tau_g", "tau_t", "M", "droop", "tau_w", "tau_rocof",
                      "f_nominal", "s_base_mva"):
-            check_positive(name, getattr(self, name))
-        check_nonnegative("D", self.D)
-        check_nonnegative("k_i", self.k_i)
+            check_range(name, getattr(self, name), low, high, closed=True)
+        for name in ("D", "k_i"):
+            value = getattr(self, name)
+            check_nonnegative(name, value)
+            check_range(name, value, 0.0, high, closed=True)
 
 
 def lfc_matrices(params: LFCParams, *, printed_droop_sign: bool = False
@@ -162,11 +174,14 @@ def discretize(params: LFCParams, period: float) -> tuple[np.ndarray, np.ndarray
     with np.errstate(over="ignore", invalid="ignore"):   # checked just below
         Ad, Bd = zoh(*lfc_matrices(params), period)
     if not (np.all(np.isfinite(Ad)) and np.all(np.isfinite(Bd))):
-        rates = {"tau_g": 1 / params.tau_g, "tau_t": 1 / params.tau_t, "M": 1 / params.M,
-                 "droop": 1 / (params.droop * params.tau_g), "tau_w": 1 / params.tau_w,
-                 "tau_rocof": 1 / params.tau_rocof, "D": params.D / params.M}
-        name = max(rates, key=rates.get)
-        raise ValueError(f"{name}={getattr(params, name)!r} makes the plant too fast to "
+        with np.errstate(over="ignore", divide="ignore"):
+            rates = {("tau_g",): 1 / params.tau_g, ("tau_t",): 1 / params.tau_t,
+                     ("M",): 1 / params.M, ("droop", "tau_g"): 1 / (params.droop * params.tau_g),
+                     ("tau_w",): 1 / params.tau_w, ("tau_rocof",): 1 / params.tau_rocof,
+                     ("D", "M"): params.D / params.M}
+        names = max(rates, key=rates.get)
+        given = " and ".join(f"{n}={getattr(params, n)!r}" for n in names)
+        raise ValueError(f"{given} make{'s' if len(names) == 1 else ''} the plant too fast to "
                          f"simulate at a {period} s step (its discretization is not finite); "
                          f"use a physical value")
     return Ad, Bd

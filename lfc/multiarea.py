@@ -77,6 +77,9 @@ class MultiAreaParams:
                                  f"got {sorted(values)}")
         n = len(areas)
         ties, pairs = [], set()
+        if isinstance(self.tie, (str, bytes)) or not hasattr(self.tie, "__iter__"):
+            raise ParameterTypeError(f"tie must be a sequence of (i, j, T_ij) lines, got "
+                                     f"{self.tie!r}")
         for k, line in enumerate(self.tie):
             try:
                 i, j, coef = line

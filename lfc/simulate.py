@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lfc._validate import check_multiple, check_positive
+from lfc._validate import ParameterTypeError, check_multiple, check_positive
 from lfc.engine import CTRL_COLUMNS, Scenarios, sample_signal
 from lfc.filters import SafetyFilter, binding_names
 from lfc.filters.base import ACTIVE, ALARM_BITS, INFEASIBLE, INVALID, OUTSIDE, SOLVER_ERROR
@@ -122,14 +122,24 @@ class SimResult:
         return out
 
 
+MAX_STEPS = 10**7   # plant steps in one run (2.8 h at 1 ms): its trace takes about a gigabyte
+
+
 def check_timing(duration: float, dt: float, control_period: float) -> int:
     """Validate a run's timing (s); return plant steps per control period."""
-    check_positive("duration", duration)
-    ratio = check_multiple("control_period", control_period, "dt", dt)
+    for name, value in (("duration", duration), ("dt", dt), ("control_period", control_period)):
+        check_positive(name, value)
+    if duration > MAX_STEPS * dt:
+        raise ValueError(f"duration / dt = {duration / dt:.3g} plant steps is more than one "
+                         f"run holds ({MAX_STEPS:.0e}); lower duration (at most "
+                         f"{MAX_STEPS * dt:g} s at dt = {dt} s) or raise dt")
     if duration < dt * (1 - 1e-9):
         raise ValueError(f"duration must be at least one plant step (dt = {dt} s), "
                          f"got {duration!r}")
-    return ratio
+    if not dt <= control_period <= max(duration, dt):
+        raise ValueError(f"control_period must lie in [dt, duration] = [{dt}, {duration}] s, "
+                         f"got {control_period!r}")
+    return check_multiple("control_period", control_period, "dt", dt)
 
 
 def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | None = None,
@@ -186,6 +196,8 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
     SimResult
     """
     check_timing(duration, dt, control_period)
+    if scc is not None and not isinstance(scc, SafetyFilter):
+        raise ParameterTypeError(f"scc must be a SafetyFilter or None, got {scc!r}")
     relays = relays if relays is not None else RelaySettings()
     sc = Scenarios(params, duration=duration, dt=dt, control_period=control_period,
                    relays=relays)

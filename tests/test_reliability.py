@@ -233,7 +233,7 @@ def test_property_a_scenario_table_is_refused_or_simulated_correctly(rows, bad, 
 
 # -- the core refuses what it cannot simulate --------------------------------------------------
 @pytest.mark.parametrize("call, message", [
-    (lambda: lfc.simulate(lfc.LFCParams(droop=1e-20), duration=1.0), "droop=1e-20"),
+    (lambda: lfc.simulate(lfc.LFCParams(droop=1e-20), duration=1.0), "droop must lie in"),
     (lambda: lfc.simulate(P, duration=1e-4), "duration must be at least one plant step"),
     (lambda: lfc.simulate(P, duration="10"), "duration must be a number, got"),
     (lambda: lfc.simulate(P, duration=True), "duration must be a number, got"),

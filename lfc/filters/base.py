@@ -15,11 +15,14 @@ from __future__ import annotations
 import difflib
 import math
 from dataclasses import MISSING, dataclass, field, fields
-from typing import Any, ClassVar, NamedTuple
+from numbers import Integral, Real
+from types import UnionType
+from typing import Any, ClassVar, NamedTuple, Union, get_args, get_origin, get_type_hints
 
 import numpy as np
 
 from lfc._jit import inline
+from lfc._validate import ParameterTypeError, check_number
 from lfc.model import LFCParams
 from lfc.relays import RelaySettings
 
@@ -121,6 +124,41 @@ def binding_names(flags: int) -> tuple[str, ...]:
     return tuple(name for name, bit in _BINDING if flags & bit)
 
 
+def _conforms(value: Any, hint: Any) -> bool:
+    """Whether ``value`` is of the annotated type ``hint`` (a number is a real
+    that is not a bool; a tuple any sequence of the right length)."""
+    origin, args = get_origin(hint), get_args(hint)
+    if origin in (Union, UnionType):
+        return any(_conforms(value, a) for a in args)
+    if hint is float:
+        return isinstance(value, Real) and not isinstance(value, (bool, np.bool_))
+    if hint is int:
+        return isinstance(value, Integral) and not isinstance(value, (bool, np.bool_))
+    if hint is bool:
+        return isinstance(value, (bool, np.bool_))
+    if hint is str:
+        return isinstance(value, str)
+    if hint is type(None):
+        return value is None
+    if origin is tuple:
+        return (isinstance(value, (tuple, list, np.ndarray)) and np.ndim(value) == 1
+                and len(value) == len(args) and all(_conforms(v, a) for v, a in zip(value, args)))
+    if hint is dict or origin is dict:
+        return isinstance(value, dict)
+    return True
+
+
+def _kind(hint: Any) -> str:
+    """``hint`` in words, for an error message."""
+    origin, args = get_origin(hint), get_args(hint)
+    if origin in (Union, UnionType):
+        return " or ".join(sorted((_kind(a) for a in args), key=lambda k: k != "None"))
+    if origin is tuple:
+        return "a pair of numbers" if len(args) == 2 else f"a {len(args)}-tuple"
+    return {float: "a number", int: "an integer", bool: "True or False", str: "a string",
+            type(None): "None", dict: "a dict"}.get(hint, getattr(hint, "__name__", str(hint)))
+
+
 def option(default: Any, unit: str, valid: str, doc: str) -> Any:
     """A field of an :class:`Options` dataclass: its default, unit (``""`` when
     dimensionless), valid range in words and meaning (shown by
@@ -148,6 +186,11 @@ class Options:
             hint = f"; did you mean {close[0]!r}?" if close else ""
             raise ValueError(f"method {method!r} has no option {unknown[0]!r}{hint} "
                              f"(its options: {', '.join(names)})")
+        hints = get_type_hints(cls)
+        for name, value in given.items():
+            if not _conforms(value, hints[name]):
+                raise ParameterTypeError(f"{name} must be {_kind(hints[name])}, got {value!r} "
+                                         f"({type(value).__name__})")
         return cls(**given)
 
     @classmethod
@@ -231,11 +274,16 @@ def given(value: object) -> bool:
 
 def check_limits(u_min: float, u_max: float) -> None:
     """Raise ``ValueError`` unless ``u_min < u_max`` (actuator limits, pu)."""
+    check_number("u_min", u_min)
+    check_number("u_max", u_max)
     if not (u_min < u_max) or math.isnan(u_min) or math.isnan(u_max):
         raise ValueError(f"u_min must be < u_max, got u_min={u_min!r}, u_max={u_max!r}")
 
 
 def check_choice(name: str, value: str, allowed: tuple[str, ...]) -> None:
     """Raise ``ValueError`` unless ``value`` is one of ``allowed``."""
+    if not isinstance(value, str):
+        raise ParameterTypeError(f"{name} must be one of {allowed}, got {value!r} "
+                                 f"({type(value).__name__})")
     if value not in allowed:
         raise ValueError(f"{name} must be one of {allowed}, got {value!r}")

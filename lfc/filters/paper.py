@@ -165,7 +165,11 @@ class PaperFilter(Backend):
 
     def _pack(self) -> np.ndarray:
         A, B = lfc_matrices(self.params)
-        Ad, Bd = discretize(self.params, self.Ts)
+        try:
+            Ad, Bd = discretize(self.params, self.Ts)
+        except ValueError as err:
+            raise ValueError(f"Ts={self.Ts!r} s: the prediction over the look-ahead cannot "
+                             f"be computed ({err})") from err
         C = output_matrix()
         CAd = C @ Ad
         d = np.zeros(SIZE)
