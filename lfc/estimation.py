@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from lfc._jit import inline
-from lfc._validate import check_nonnegative, check_positive
+from lfc._validate import check_nonnegative, check_pair, check_positive
 from lfc.model import LFCParams, discretize, output_matrix
 
 
@@ -92,10 +92,7 @@ class KalmanFilter:
                  meas_std: tuple[float, float] = DEFAULT_MEAS_STD, process_std: float = 1e-4,
                  estimate_load: bool = True, load_std: float = 0.01) -> None:
         check_positive("period", period)
-        if len(meas_std) != 2:
-            raise ValueError(f"meas_std must be a pair (dw_meas, rocof_meas), got {meas_std!r}")
-        for i, s in enumerate(meas_std):
-            check_positive(f"meas_std[{i}]", s)
+        meas_std = check_pair("meas_std", meas_std, positive=True)
         check_positive("process_std", process_std)
         check_nonnegative("load_std", load_std)
         self.params, self.period, self.estimate_load = params, float(period), estimate_load

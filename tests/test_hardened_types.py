@@ -46,7 +46,7 @@ def test_papermills_raw_false_string_is_refused_for_a_bool_parameter():
     """``papermill -r check_claims False`` injects the string "False" (truthy)."""
     ns = _namespace("check_claims = True\nduration = 10.0\n", "check_claims = \"False\"\n",
                     check_claims="False", duration=10.0)
-    with pytest.raises(TypeError, match="check_claims must be True or False"):
+    with pytest.raises(TypeError, match="'check_claims' must be True or False"):
         check_parameters(ns)
 
 
@@ -58,7 +58,7 @@ def test_a_number_parameter_takes_numbers_only(injected, value, ok):
     if ok:
         check_parameters(ns)
     else:
-        with pytest.raises(TypeError, match="duration must be a number"):
+        with pytest.raises(TypeError, match="'duration' must be a finite number"):
             check_parameters(ns)
 
 

@@ -94,7 +94,7 @@ from scipy.optimize import linprog
 from scipy.stats import chi2, norm
 
 from lfc._jit import inline, maxnum, minnum
-from lfc._validate import check_nonnegative, check_positive, check_range
+from lfc._validate import check_nonnegative, check_pair, check_positive, check_range
 from lfc.estimation import KalmanFilter, measurement_std
 from lfc.filters.base import (ACTIVE, BIND_CERT, BIND_UMAX, BIND_UMIN, INVALID, OUTSIDE,
                               Backend, Options, check_limits, given, option, valid_input)
@@ -248,19 +248,10 @@ class CertifiedOptions(Options):
 
 
 def _check_noise_std(noise_std: object) -> tuple[float, float]:
-    """``noise_std`` as two floats, or ``ValueError``: two finite numbers > 0 (the
+    """``noise_std`` as two floats, or an error: two finite numbers > 0 (the
     Kalman estimate's measurement noise of ``dw_meas`` and ``rocof_meas``; a
     zero would be a noise-free channel that no Kalman filter models)."""
-    try:
-        pair = tuple(noise_std)
-    except TypeError:
-        pair = ()
-    if len(pair) != 2:
-        raise ValueError(f"noise_std must be None or a pair (dw_meas, rocof_meas) of stds "
-                         f"(pu, pu/s), got {noise_std!r}")
-    for i, v in enumerate(pair):
-        check_positive(f"noise_std[{i}]", v)
-    return float(pair[0]), float(pair[1])
+    return check_pair("noise_std", noise_std, positive=True)
 
 
 class CertifiedSet:

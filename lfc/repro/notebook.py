@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import ast
 import json
+import math
 import re
 from pathlib import Path
 
@@ -52,7 +53,8 @@ def check_parameters(namespace: dict) -> None:
     declared = _literals(defaults)
     for name in sorted(_assigned(injected)):
         if name in declared and name in namespace:
-            _check_type(name, namespace[name], declared[name])
+            check_type(name, namespace[name], declared[name],
+                       "; with papermill give it with -p (typed), not -r (raw string)")
 
 
 def _literals(source: str) -> dict[str, object]:
@@ -68,22 +70,36 @@ def _literals(source: str) -> dict[str, object]:
     return values
 
 
-def _check_type(name: str, value: object, default: object) -> None:
-    """``TypeError`` unless an injected ``value`` has its default's kind: a bool for a
-    bool (papermill's ``-r check_claims False`` gives the string "False", which is
-    truthy), a number for a number, a string for a string, a list for a list (None
-    as a default allows anything)."""
-    from numbers import Real
-    kinds = ((bool, "True or False"), (Real, "a number"), (str, "a string"),
-             ((list, tuple), "a list"))
-    for kind, words in kinds:
-        if isinstance(default, kind):
-            ok = isinstance(value, kind) and (kind is bool or not isinstance(value, bool))
-            if not ok:
-                raise TypeError(f"notebook parameter {name} must be {words} like its default "
-                                f"{default!r}, got {value!r} ({type(value).__name__}); with "
-                                f"papermill give it with -p (typed), not -r (raw string)")
-            return
+def check_type(name: str, value: object, default: object, hint: str = "") -> None:
+    """Raise :class:`~lfc._validate.ParameterTypeError` (a ``TypeError`` and a
+    ``ValueError``) unless a notebook parameter's ``value`` has its default's
+    kind: True or False for a bool (papermill's ``-r check_claims False`` gives
+    the string "False", which is truthy), an integer for an int, a finite
+    number for a float, a string for a string, a non-empty list of the first
+    element's kind for a list; None as a default allows anything.  ``hint`` is
+    added to the message."""
+    from lfc._validate import ParameterTypeError
+    if default is None:
+        return
+    if isinstance(default, (list, tuple)):
+        if not (isinstance(value, (list, tuple)) and value):
+            raise ParameterTypeError(f"parameter {name!r} must be a non-empty list, got "
+                                     f"{value!r}{hint}")
+        for v in value if default else ():
+            check_type(name, v, default[0], hint)
+        return
+    number = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if isinstance(default, bool):
+        ok, words = isinstance(value, bool), "True or False"
+    elif isinstance(default, int):
+        ok, words = number and isinstance(value, int), "an integer"
+    elif isinstance(default, float):
+        ok, words = number and math.isfinite(value), "a finite number"
+    else:
+        ok, words = isinstance(value, type(default)), f"a {type(default).__name__}"
+    if not ok:
+        raise ParameterTypeError(f"parameter {name!r} must be {words} like its default "
+                                 f"{default!r}, got {value!r} ({type(value).__name__}){hint}")
 
 
 def notebook_parameters(namespace: dict) -> dict:

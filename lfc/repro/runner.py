@@ -12,7 +12,6 @@ from __future__ import annotations
 import ast
 import itertools
 import json
-import math
 import os
 import re
 import shutil
@@ -32,7 +31,7 @@ from tqdm.auto import tqdm
 
 from lfc.experiments.scenarios import ALL_PLANTS
 from lfc.repro.manifest import CHAPTERS
-from lfc.repro.notebook import check_plant, figure_name
+from lfc.repro.notebook import check_plant, check_type, figure_name
 
 ROOT = Path(__file__).resolve().parents[2]
 NOTEBOOKS_DIR = ROOT / "notebooks"
@@ -264,7 +263,7 @@ def validate_parameters(notebook: Path, parameters: dict[str, list]) -> dict:
             raise ValueError(f"parameter {name!r} lists a value more than once: {values!r}")
         default = parse_value(known[name]["default"])
         for value in values:
-            _check_type(name, value, default)
+            check_type(name, value, default)
             if name in POSITIVE:
                 for v in value if isinstance(value, list) else [value]:
                     if not (isinstance(v, (int, float)) and v > 0):
@@ -272,32 +271,6 @@ def validate_parameters(notebook: Path, parameters: dict[str, list]) -> dict:
             if name == "plant":
                 check_plant(value, ALL_PLANTS)
     return known
-
-
-def _check_type(name: str, value: object, default: object) -> None:
-    """``value`` has ``default``'s type (ints for an int, any finite number for a
-    float, a non-empty list of the default's element type for a list)."""
-    if default is None:
-        return
-    if isinstance(default, list):
-        if not (isinstance(value, list) and value):
-            raise ValueError(f"parameter {name!r} must be a non-empty list, got {value!r}")
-        if default:
-            for v in value:
-                _check_type(name, v, default[0])
-        return
-    if isinstance(default, bool) or isinstance(value, bool):
-        ok = isinstance(value, bool) and isinstance(default, bool)
-    elif isinstance(default, int):
-        ok = isinstance(value, int)
-    elif isinstance(default, float):
-        ok = isinstance(value, (int, float)) and math.isfinite(value)
-    else:
-        ok = isinstance(value, type(default))
-    if not ok:
-        kind = {int: "an integer", float: "a finite number"}.get(type(default),
-                                                                 type(default).__name__)
-        raise ValueError(f"parameter {name!r} must be {kind}, got {value!r}")
 
 
 def run_id(point: dict) -> str:
