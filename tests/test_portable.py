@@ -1,0 +1,89 @@
+"""Results that must not depend on the BLAS kernel (issue "Hardened", item 6).
+
+The linear chapters' scenarios — Figs. 4–6 with the paper's SCC at both α, the
+certified and robust filters, the load-step threshold, a two-area ACE attack and
+a small map — run in two subprocesses under two OpenBLAS core types; every
+verdict (tripped, which relay, alarms, outside) must be equal and every number
+equal to the digits the tables report (1e-6 relative).  ``.ci/run`` also reruns
+the filter and engine tests under a second core type.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+FLAGS = Path("/proc/cpuinfo").read_text() if Path("/proc/cpuinfo").exists() else ""
+CORES = ["Haswell", "SkylakeX" if "avx512f" in FLAGS else "Sandybridge"]
+
+SCRIPT = r"""
+import json
+import lfc
+from lfc.experiments.scenarios import (ATTACK_START, FIG4_AMPLITUDE, FIG4_FREQ, FIG5_BIAS,
+                                       FIG6_LOAD)
+from lfc.experiments.surface import attack_map
+
+P, R = lfc.LFCParams(), lfc.RelaySettings()
+fig4 = lfc.Sinusoid(FIG4_AMPLITUDE, FIG4_FREQ, start=ATTACK_START)
+fig5 = lfc.Step(FIG5_BIAS, start=ATTACK_START)
+runs = {}
+for a in (3.0, 20.0):
+    f = lfc.SafetyFilter(P, R, alpha=a)
+    runs[f"fig4 a={a}"] = lfc.simulate(P, duration=10.0, pc_attack=fig4, scc=f)
+    runs[f"fig5 a={a}"] = lfc.simulate(P, duration=30.0, wref_attack=fig5, scc=f)
+    runs[f"fig6 a={a}"] = lfc.simulate(P, duration=30.0, load=lfc.Step(FIG6_LOAD, 1.0), scc=f)
+cert = lfc.SafetyFilter(P, R, method="certified")
+robust = lfc.SafetyFilter(P, R, method="certified", uncertainty=0.2, noise_std=(1e-4, 1e-3))
+runs["certified fig4 1.5"] = lfc.simulate(P, duration=10.0, scc=cert,
+                                          pc_attack=lfc.Sinusoid(1.5, 0.5, start=1.0))
+runs["robust kalman"] = lfc.simulate(P, duration=10.0, scc=robust, estimator="kalman",
+                                     noise_std=(1e-4, 1e-3), seed=3, pc_attack=fig4)
+two = lfc.MultiAreaParams.two_area()
+grid = lfc.simulate(two, duration=15.0, attacks={0: {"ace": lfc.Step(-2.5, start=1.0)}},
+                    filters={0: "paper", 1: "paper"})
+out = {name: r.metrics() for name, r in runs.items()}
+out.update({f"two-area ace, area {i}": m for i, m in enumerate(grid.metrics())})
+table = lfc.simulate_many(P, attack_map(["sinusoid", "square"], [0.3, 1.0, 2.0],
+                                        [0.2, 1.0], alphas=[3.0, 20.0]),
+                          duration=10.0, progress=False, chunk_size=100)
+out["map"] = {"tripped": table.tripped.tolist(), "alarms": table.alarms.tolist(),
+              "rocof": table.max_abs_rocof_meas.tolist()}
+out["E12 threshold"] = {"value": P.M * R.rocof_limit}
+print("RESULT" + json.dumps(out))
+"""
+
+
+def _run(core: str) -> dict:
+    env = {**os.environ, "OPENBLAS_CORETYPE": core, "PYTHONPATH": str(ROOT)}
+    done = subprocess.run([sys.executable, "-c", SCRIPT], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, done.stderr[-2000:]
+    line = next(x for x in done.stdout.splitlines() if x.startswith("RESULT"))
+    return json.loads(line.removeprefix("RESULT"))
+
+
+def _same(a, b, where: str) -> None:
+    if isinstance(a, dict):
+        assert a.keys() == b.keys(), where
+        for k in a:
+            _same(a[k], b[k], f"{where}/{k}")
+    elif isinstance(a, list):
+        assert len(a) == len(b), where
+        for i, (x, y) in enumerate(zip(a, b)):
+            _same(x, y, f"{where}[{i}]")
+    elif isinstance(a, float) and isinstance(b, float):
+        assert a == pytest.approx(b, rel=1e-6, abs=1e-12), (where, a, b)
+    else:
+        assert a == b, (where, a, b)        # verdicts: bools, relays, counts
+
+
+@pytest.mark.skipif("avx2" not in FLAGS, reason="needs an x86 CPU with AVX2 (Haswell kernels)")
+def test_the_linear_chapters_verdicts_and_numbers_do_not_depend_on_the_blas_kernel():
+    first, second = (_run(core) for core in CORES)
+    _same(first, second, "")
