@@ -1,12 +1,16 @@
-"""Files the package writes and later trusts: atomic writes, and the digest of
-the code that produced them (a file written by other code never matches)."""
+"""Files the package writes and later trusts: atomic writes, a lock for a folder
+two runs may fill at once, and the digest of the code that produced them (a file
+written by other code never matches)."""
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import functools
 import hashlib
 import os
 import uuid
+from collections.abc import Iterator
 from pathlib import Path
 
 
@@ -20,6 +24,20 @@ def write_atomic(path: Path, text: str) -> None:
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)
+
+
+@contextlib.contextmanager
+def folder_lock(folder: Path) -> Iterator[None]:
+    """Hold an exclusive lock on ``folder`` (a ``.lock`` file in it; created if
+    missing) while the block runs: a second run that wants the same folder waits,
+    then finds the first one's results.  Released when the process ends, however."""
+    folder.mkdir(parents=True, exist_ok=True)
+    with open(folder / ".lock", "w") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
 
 
 @functools.lru_cache(maxsize=None)

@@ -1,6 +1,6 @@
-"""Ctrl-C and failed chapters (issue "Hardened", item 4): a real subprocess gets
-SIGINT; everything it started stops within 2 s, no partial file is trusted, and
-a rerun completes.  Processes are found by a marker in their command line (the
+"""Ctrl-C, concurrent runs and failed chapters (issue "Hardened", item 4): a real
+subprocess gets SIGINT; everything it started stops within 2 s, no partial file
+is trusted, and a rerun completes; two sweeps into one folder both finish.  Processes are found by a marker in their command line (the
 test's own folder: the batch's workers are forks of the command, a kernel's
 command line names its connection file, a temporary file that ``TMPDIR`` puts in
 the test's folder)."""
@@ -154,3 +154,22 @@ def test_an_interrupted_or_damaged_executed_notebook_is_not_complete(tmp_path, t
     path = tmp_path / "nb.ipynb"
     path.write_text(text)
     assert not book.complete(path)
+
+
+def test_two_concurrent_sweeps_on_one_folder_both_finish_with_complete_results(tmp_path):
+    """Issue "Hardened": each run folder is locked while a notebook fills it; the
+    second sweep waits, finds the run finished and reuses it."""
+    cmd = [sys.executable, "-m", "lfc", "sweep", "notebooks/02_fig4_rocof_attack.ipynb",
+           "-p", "alpha", "3", "20", "--jobs", "1", "--out", str(tmp_path / "sweep")]
+    procs = [subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                              text=True) for _ in range(2)]
+    for proc in procs:
+        _, err = proc.communicate(timeout=600)
+        assert proc.returncode == 0, err
+    table = pd.read_csv(tmp_path / "sweep" / "sweep.csv")
+    assert sorted(set(table.alpha)) == [3, 20]
+    for run in ("alpha=3", "alpha=20"):
+        folder = tmp_path / "sweep" / run
+        assert book.complete(folder / "02_fig4_rocof_attack.ipynb")
+        json.loads((folder / "metrics.json").read_text())
+        assert not list(folder.glob("*.tmp"))

@@ -8,6 +8,8 @@ their figures inline; scripts and the runner choose their own).
 from __future__ import annotations
 
 import itertools
+import os
+import uuid
 from pathlib import Path
 
 import matplotlib.pyplot as plt
@@ -143,9 +145,20 @@ def save_figure(fig: Figure, directory: str | Path, name: str) -> None:
     (the inline backend draws it at the end of the cell)."""
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out / f"{name}.png", dpi=150, metadata={"Software": None})
-    fig.savefig(out / f"{name}.pdf",
-                metadata={"CreationDate": None, "Creator": None, "Producer": None})
+    _save_atomic(fig, out / f"{name}.png", dpi=150, metadata={"Software": None})
+    _save_atomic(fig, out / f"{name}.pdf",
+                 metadata={"CreationDate": None, "Creator": None, "Producer": None})
+
+
+def _save_atomic(fig: Figure, path: Path, **kwargs) -> None:
+    """``fig.savefig`` through a unique temporary file renamed into place: an
+    interrupted or concurrent run never leaves half a figure."""
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.{uuid.uuid4().hex}.tmp")
+    try:
+        fig.savefig(tmp, format=path.suffix[1:], **kwargs)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 TRIP_COLORS = {"none": "#eeeeee", "OF2": "tab:red", "UF2": "tab:blue", "ROCOF": "tab:orange"}

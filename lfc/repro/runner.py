@@ -29,6 +29,7 @@ import papermill as pm
 from jupyter_client.manager import KernelManager
 from tqdm.auto import tqdm
 
+from lfc._files import folder_lock, write_atomic
 from lfc.experiments.scenarios import ALL_PLANTS
 from lfc.repro.manifest import CHAPTERS
 from lfc.repro.notebook import check_plant, check_type, figure_name
@@ -128,17 +129,21 @@ RESULT_FILES = ("claims.json", "deviations.json", "metrics.json")
 
 
 def _run_one(name: str, notebook: Path, results: Path, parameters: dict) -> RunOutcome:
-    """Execute one notebook; its claims are read only from files this run wrote."""
+    """Execute one notebook; its claims are read only from files this run wrote
+    (under the results folder's lock: a concurrent run of the same notebook into
+    the same folder waits for this one, then runs on its own)."""
     t0 = time.perf_counter()
-    for stale in RESULT_FILES:  # never report a claim an earlier run computed
-        (results / stale).unlink(missing_ok=True)
-    error = ""
-    try:
-        execute(notebook, results / notebook.name, parameters)
-        ok = True
-    except pm.PapermillExecutionError as err:
-        ok, error = False, f"{err.ename}: {err.evalue}"
-    claims, deviations = read_json(results / "claims.json"), read_json(results / "deviations.json")
+    with folder_lock(results):
+        for stale in RESULT_FILES:  # never report a claim an earlier run computed
+            (results / stale).unlink(missing_ok=True)
+        error = ""
+        try:
+            execute(notebook, results / notebook.name, parameters)
+            ok = True
+        except pm.PapermillExecutionError as err:
+            ok, error = False, f"{err.ename}: {err.evalue}"
+        claims = read_json(results / "claims.json")
+        deviations = read_json(results / "deviations.json")
     held = all(v or c in deviations for c, v in claims.items())
     return RunOutcome(name, ok and held, time.perf_counter() - t0, claims, error, deviations)
 
@@ -315,18 +320,23 @@ def sweep(notebook: str | Path, grid: dict[str, list], out: Path | None = None,
     if executor is None:
         pool.shutdown()
     table = collect(out, points)
-    table.to_csv(out / "sweep.csv", index=False)
+    write_atomic(out / "sweep.csv", table.to_csv(index=False))
     if failures:
         raise RuntimeError(f"{len(failures)} run(s) failed: " + "; ".join(failures))
     return table
 
 
 def _sweep_one(notebook: Path, folder: Path, params: dict, point: dict) -> str:
-    try:
-        execute(notebook, folder / notebook.name, params)
-    except pm.PapermillExecutionError as err:
-        return f"{run_id(point)}: {err.ename}: {err.evalue}"
-    (folder / "done.json").write_text(json.dumps(point))
+    """One run of a sweep, under its folder's lock: a concurrent sweep of the same
+    point waits and then finds it finished."""
+    with folder_lock(folder):
+        if _finished(folder):
+            return ""
+        try:
+            execute(notebook, folder / notebook.name, params)
+        except pm.PapermillExecutionError as err:
+            return f"{run_id(point)}: {err.ename}: {err.evalue}"
+        write_atomic(folder / "done.json", json.dumps(point))
     return ""
 
 
