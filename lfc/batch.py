@@ -37,6 +37,7 @@ import pandas as pd
 from tqdm.auto import tqdm
 
 from lfc._files import code_digest, write_atomic
+from lfc._validate import ParameterTypeError
 from lfc.engine import METRICS, Scenarios
 from lfc.filters import (CONFLICT_RULES, METHODS, OUTSIDE_RULES, PREDICTIONS, SafetyFilter,
                          options_of)
@@ -106,6 +107,7 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
             raise ValueError(f"column {col!r} is not a scenario column; did you mean "
                              f"{close[0]!r}? (scenario columns: {', '.join(INPUTS)}; a column "
                              f"not close to one of them is carried through as a label)")
+    _check_numbers(scenarios)
     for col, allowed in (("waveform", WAVEFORMS), ("channel", CHANNELS)):
         bad = ~scenarios[col].isin(allowed)
         if bad.any():
@@ -207,6 +209,24 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
         raise ValueError(f"column 'alpha' must be > 0 or NaN (no SCC); row "
                          f"{scenarios.index[bad][0]!r} has {scenarios['alpha'][bad].iloc[0]!r}")
     _check_unused(scenarios)
+
+
+NUMERIC = ("amplitude", "freq_hz", "start", "alpha", "Ts", "stop", "sample_period", *PLANT,
+           *NOISE, "uncertainty", "margin", "trips_per_hour", "seed")
+
+
+def _check_numbers(scenarios: pd.DataFrame) -> None:
+    """A string or a bool in a numeric column is refused (pandas would coerce
+    "3" to 3 and True to 1: a typed table says what it means)."""
+    for col in NUMERIC:
+        if col not in scenarios.columns or scenarios[col].dtype.kind in "iuf":
+            continue
+        bad = scenarios[col].map(lambda v: isinstance(v, (str, bytes, bool, np.bool_)))
+        if bad.any():
+            value = scenarios[col][bad].iloc[0]
+            raise ParameterTypeError(f"column {col!r} must hold numbers (or NaN); row "
+                                     f"{scenarios.index[bad][0]!r} has {value!r} "
+                                     f"({type(value).__name__})")
 
 
 def _neutral(column: str):

@@ -295,3 +295,13 @@ def test_label_columns_neutral_values_and_nan_readings_pass():
                                           outside_rule=[np.nan, "push", np.nan, "hold"])
     res = simulate_many(P, table, duration=1.0, progress=False)
     assert list(res.label) == ["x"] * 4
+
+
+@pytest.mark.parametrize("column, values", [("alpha", ["3", 20.0, 20.0]),
+                                            ("amplitude", [True, 0.5, 0.5]),
+                                            ("seed", [0, "1", 2])])
+def test_a_string_or_bool_in_a_numeric_column_is_refused_not_coerced(column, values):
+    """pandas would read "3" as 3 and True as 1; a typed table says what it means."""
+    table = random_scenarios(3, 0).assign(**{column: values})
+    with pytest.raises(TypeError, match=f"column '{column}' must hold numbers"):
+        simulate_many(P, table, duration=1.0, progress=False)
