@@ -42,11 +42,19 @@ def running(marker: str) -> list[int]:
     return found
 
 
+def _default_sigint() -> None:
+    """A command started in the background of a shell without job control (as CI
+    may run the suite) inherits SIGINT ignored, and Python then installs no Ctrl-C
+    handler; a terminal's Ctrl-C is what is tested, so restore the default."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def interrupt(cmd: list[str], ready, marker: str, env: dict | None = None) -> float:
     """Start ``cmd``, send SIGINT once ``ready()``; return the seconds until it and
     every process with ``marker`` have ended (the command must exit with 130)."""
     proc = subprocess.Popen(cmd, cwd=ROOT, env={**os.environ, **(env or {})},
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=_default_sigint)
     deadline = time.monotonic() + 300
     while not ready():
         assert proc.poll() is None, proc.communicate()
