@@ -58,14 +58,22 @@ _LIVE: set = set()                 # kernel managers whose kernel is running (st
 _LIVE_LOCK = threading.Lock()
 
 
-def stop_kernels() -> int:
+def stop_kernels(wait: float = 1.0) -> int:
     """Kill every kernel this process started that still runs, with its process
     group (the kernel's own worker processes); return how many.  Ctrl-C calls
-    it: a papermill thread waiting on a dead kernel ends within a second."""
+    it.  A kernel being launched is waited for (up to ``wait`` s) until it has a
+    process to kill: orphaned, it would live on until it noticed its parent gone."""
     with _LIVE_LOCK:
         live = list(_LIVE)
+    deadline = time.monotonic() + wait
     for km in live:
-        group = getattr(km.provisioner, "pgid", None) or getattr(km.provisioner, "pid", None)
+        group = None
+        while True:
+            p = km.provisioner
+            group = (getattr(p, "pgid", None) or getattr(p, "pid", None)) if p else None
+            if group or time.monotonic() > deadline:
+                break
+            time.sleep(0.005)
         if group:
             try:
                 os.killpg(group, signal.SIGKILL)
@@ -103,9 +111,9 @@ class IPCKernelManager(KernelManager):
             await super()._async_interrupt_kernel()
 
     async def _async_launch_kernel(self, kernel_cmd: list[str], **kw) -> None:
-        await super()._async_launch_kernel(kernel_cmd, **kw)
-        with _LIVE_LOCK:
+        with _LIVE_LOCK:                 # before the launch: stop_kernels waits for it
             _LIVE.add(self)
+        await super()._async_launch_kernel(kernel_cmd, **kw)
 
     async def _async_cleanup_resources(self, restart: bool = False) -> None:
         with _LIVE_LOCK:
