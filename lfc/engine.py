@@ -575,8 +575,12 @@ class Scenarios:
         return len(self._rows) - 1
 
     def run(self, *, trace: bool = False, stop_on_trip: bool = False) -> Run:
+        """Run every scenario added; ``trace`` keeps everything (one scenario only).
+
+        Raises ``ValueError`` naming the scenarios whose state became non-finite
+        (a signal that is finite as specified but not where it is evaluated);
+        their metrics would otherwise read as a quiet run."""
         stop_on_trip = check_flag("stop_on_trip", stop_on_trip)
-        """Run every scenario added; ``trace`` keeps everything (one scenario only)."""
         grid, n = self.grid, len(self._rows)
         n_a, n_s = grid.n_areas, grid.n_states
         kinds, params, offsets, st, sv = signal_tables(self._sig, self._st, self._sv, (n, n_a))
@@ -601,6 +605,13 @@ class Scenarios:
              tx, tc, tt, ends, np.zeros(n_s), np.zeros(n_s), np.zeros(n_a), np.zeros(n_a),
              np.zeros(N_AREA_STATES), np.zeros((n_a, MEMORY)), np.zeros((n_a, 1)),
              np.zeros((n_a, 2, N_KF)), np.zeros((n_a, 3)), np.zeros((n_a, 3)))
+        final = metrics[:, :, METRICS.index("final_abs_dw_meas")]
+        bad = np.flatnonzero(~np.all(np.isfinite(final), axis=1))
+        if len(bad):
+            raise ValueError(f"scenario(s) {bad[:5].tolist()} became non-finite: an attack or "
+                             f"load signal (pc_attack, wref_attack, load) gives a non-finite "
+                             f"value where it is evaluated (e.g. Samples times closer than a "
+                             f"float resolves, or a frequency so high its phase overflows)")
         return Run(metrics, ends, tx, tc, tt)
 
 

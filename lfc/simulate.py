@@ -233,7 +233,7 @@ def result(trace: pd.DataFrame, tc: np.ndarray, ctrl: np.ndarray, trips: pd.Data
     controls and the alarm log."""
     t_end = float(trace["t"].iat[-1])
     n = int(np.searchsorted(tc, t_end + 1e-9, side="right"))
-    n = min(n, int(np.sum(~np.isnan(ctrl[:, 0]))))
+    n = min(n, int(np.sum(~np.isnan(ctrl[:, CTRL_COLUMNS.index("flags")]))))  # u_ref may be NaN
     c = pd.DataFrame(ctrl[:n], columns=list(CTRL_COLUMNS))
     flags = c["flags"].to_numpy().astype(np.int64)
     active = (flags & ACTIVE) != 0

@@ -89,3 +89,35 @@ def test_a_wrong_type_is_a_type_error_that_value_error_handlers_still_catch():
         lfc.SafetyFilter(LFCParams(), alpha="20")
     assert issubclass(ParameterTypeError, TypeError) and issubclass(ParameterTypeError,
                                                                     ValueError)
+
+
+def test_a_run_that_becomes_non_finite_is_refused_not_reported_as_quiet():
+    """Found by the second hostile review: Samples times 1e-320 apart interpolate
+    to inf * 0 = NaN; the run went all-NaN and reported no trip, max |Δω| 0."""
+    attack = lfc.Samples([0.0, 1e-320], [0.0, 1.0])
+    for plant, kw in ((LFCParams(), {"pc_attack": attack}),
+                      (TWO, {"attacks": {0: {"pc": attack}}})):
+        with pytest.raises(ValueError, match="became non-finite.*pc_attack"):
+            lfc.simulate(plant, duration=1.0, **kw)
+
+
+def test_a_nan_command_is_held_and_flagged_by_the_filter():
+    """Sinusoid(1, 1e308) is NaN where evaluated: with a filter, every sample is
+    flagged invalid_input and the command held (the result was an IndexError)."""
+    run = lfc.simulate(LFCParams(), duration=1.0, pc_attack=lfc.Sinusoid(1.0, 1e308),
+                       scc=lfc.SafetyFilter(LFCParams()))
+    assert run.alarms.invalid_input.all() and len(run.alarms) == 100
+    assert not run.metrics()["tripped"]
+
+
+def test_largest_load_bound_refuses_a_tolerance_it_cannot_reach():
+    """tol=1e-300 looped for ever (the bisection stuck one ulp above tol)."""
+    from lfc.filters.certified import largest_load_bound
+    with pytest.raises(ValueError, match=r"tol must lie in \[1e-09, 1.0\]"):
+        largest_load_bound(LFCParams(), lfc.RelaySettings(), tol=1e-300)
+
+
+def test_bound_price_refuses_options_that_fix_the_bound_it_varies():
+    from lfc.experiments.load_during_attack import bound_price
+    with pytest.raises(ValueError, match="options must not set \\['load_bound'\\]"):
+        bound_price(LFCParams(), (0.0,), (), options={"load_bound": 0.05})

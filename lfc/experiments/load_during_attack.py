@@ -134,6 +134,10 @@ def bound_price(params: LFCParams, bounds: tuple[float, ...], steps: tuple[float
     keywords such as the estimator), ``alarms <step>`` (control periods with an
     alarm) and whether any run tripped (``tripped``)."""
     relays = relays or RelaySettings()
+    fixed = sorted({"load_bound", "load_kind"} & set(options or {}))
+    if fixed:
+        raise ValueError(f"options must not set {fixed}: bound_price varies load_bound "
+                         f"('steps') itself, one row per entry of bounds")
     rows = []
     for bound in bounds:
         scc = SafetyFilter(params, relays, method="certified", **(options or {}),

@@ -623,8 +623,9 @@ def largest_load_bound(params: LFCParams, relays: RelaySettings, *, tol: float =
     """The largest ``load_bound`` (pu, within ``tol``) for which the certified
     filter with ``options`` can be built: bisection on construction, from 0 (a
     ``ValueError`` if even that cannot be built) up to where the load alone takes a
-    whole limit at some plant."""
-    check_positive("tol", tol)
+    whole limit at some plant.  ``tol`` must lie in [1e-9, 1] pu (finer is below
+    what the construction resolves, and the bisection would not end)."""
+    check_range("tol", tol, 1e-9, 1.0, closed=True)
 
     def builds(bound: float) -> bool:
         try:
@@ -636,7 +637,7 @@ def largest_load_bound(params: LFCParams, relays: RelaySettings, *, tol: float =
     unloaded = CertifiedSet(params, relays, **{**options, "load_bound": 0.0})
     gains = np.max([b.load_gain for b in unloaded.blocks], axis=0)
     lo, hi = 0.0, float(np.min(np.array([relays.F, relays.rocof_limit]) / gains))
-    while hi - lo > tol:
+    while hi - lo > tol and 0.5 * (lo + hi) not in (lo, hi):
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if builds(mid) else (lo, mid)
     return lo
