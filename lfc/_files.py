@@ -10,20 +10,25 @@ import functools
 import hashlib
 import os
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 
-def write_atomic(path: Path, text: str) -> None:
-    """Write ``text`` (UTF-8) to ``path`` through a unique temporary file renamed
-    into place: a reader never sees half a file, and concurrent writers never
-    share a temporary name."""
+def replace_atomic(path: Path, write: Callable[[Path], None]) -> None:
+    """Call ``write`` on a unique temporary file, then rename it onto ``path``: a
+    reader never sees half a file, and concurrent writers never share a
+    temporary name."""
     tmp = path.with_name(f"{path.name}.{os.getpid()}.{uuid.uuid4().hex}.tmp")
     try:
-        tmp.write_text(text, encoding="utf-8")
+        write(tmp)
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)
+
+
+def write_atomic(path: Path, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` atomically (:func:`replace_atomic`)."""
+    replace_atomic(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
 
 
 @contextlib.contextmanager

@@ -216,7 +216,8 @@ class CertifiedOptions(Options):
         if not 0.0 <= self.margin < 1.0:
             raise ValueError(f"margin must be in [0, 1), got {self.margin!r}")
         if self.noise_std is not None:
-            object.__setattr__(self, "noise_std", _check_noise_std(self.noise_std))
+            pair = check_pair("noise_std", self.noise_std, positive=True)
+            object.__setattr__(self, "noise_std", pair)
         if self.trips_per_hour is not None:
             if self.noise_std is None:
                 raise ValueError("trips_per_hour needs noise_std (the relays' measurement "
@@ -245,13 +246,6 @@ class CertifiedOptions(Options):
                 "margin": float(margin) if given(margin) else 0.0,
                 "noise_std": noise if declared else None,
                 "trips_per_hour": float(rate) if given(rate) else None}
-
-
-def _check_noise_std(noise_std: object) -> tuple[float, float]:
-    """``noise_std`` as two floats, or an error: two finite numbers > 0 (the
-    Kalman estimate's measurement noise of ``dw_meas`` and ``rocof_meas``; a
-    zero would be a noise-free channel that no Kalman filter models)."""
-    return check_pair("noise_std", noise_std, positive=True)
 
 
 class CertifiedSet:

@@ -8,8 +8,6 @@ their figures inline; scripts and the runner choose their own).
 from __future__ import annotations
 
 import itertools
-import os
-import uuid
 from pathlib import Path
 
 import matplotlib.pyplot as plt
@@ -18,6 +16,7 @@ from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
+from lfc._files import replace_atomic
 from lfc.experiments.surface import scc_label
 from lfc.relays import RelaySettings
 from lfc.simulate import SimResult
@@ -145,20 +144,11 @@ def save_figure(fig: Figure, directory: str | Path, name: str) -> None:
     (the inline backend draws it at the end of the cell)."""
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
-    _save_atomic(fig, out / f"{name}.png", dpi=150, metadata={"Software": None})
-    _save_atomic(fig, out / f"{name}.pdf",
-                 metadata={"CreationDate": None, "Creator": None, "Producer": None})
-
-
-def _save_atomic(fig: Figure, path: Path, **kwargs) -> None:
-    """``fig.savefig`` through a unique temporary file renamed into place: an
-    interrupted or concurrent run never leaves half a figure."""
-    tmp = path.with_name(f"{path.name}.{os.getpid()}.{uuid.uuid4().hex}.tmp")
-    try:
-        fig.savefig(tmp, format=path.suffix[1:], **kwargs)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    # through a temporary file: an interrupted or concurrent run never leaves half a figure
+    replace_atomic(out / f"{name}.png", lambda tmp: fig.savefig(
+        tmp, format="png", dpi=150, metadata={"Software": None}))
+    replace_atomic(out / f"{name}.pdf", lambda tmp: fig.savefig(
+        tmp, format="pdf", metadata={"CreationDate": None, "Creator": None, "Producer": None}))
 
 
 TRIP_COLORS = {"none": "#eeeeee", "OF2": "tab:red", "UF2": "tab:blue", "ROCOF": "tab:orange"}
