@@ -21,6 +21,14 @@ def _is_number(value: object) -> bool:
     return isinstance(value, Real) and not isinstance(value, bool)
 
 
+def is_sequence(value: object) -> bool:
+    """Whether ``value`` is an ordered sequence of values: a list, a tuple or a 1-D
+    array (not a string, a set or a dict, whose order or meaning differs)."""
+    import numpy as np
+    return isinstance(value, (list, tuple)) or (isinstance(value, np.ndarray)
+                                                and value.ndim == 1)
+
+
 def check_number(name: str, value: object) -> None:
     """Raise :class:`ParameterTypeError` unless ``value`` is a number."""
     if not _is_number(value):
@@ -96,7 +104,7 @@ def check_multiple(name: str, value: float, of_name: str, of: float) -> int:
 def check_pair(name: str, value: object, *, positive: bool = False) -> tuple[float, float]:
     """``value`` as two floats; raise unless it is a sequence of two finite
     numbers >= 0 (> 0 with ``positive``), naming ``name[i]``."""
-    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != 2:
+    if not is_sequence(value) or len(value) != 2:
         raise ParameterTypeError(f"{name} must be a pair of numbers, got {value!r}")
     check = check_positive if positive else check_nonnegative
     for i, v in enumerate(value):
@@ -111,4 +119,49 @@ def check_seed(name: str, value: object) -> int:
                                  f"({type(value).__name__})")
     if value < 0:
         raise ValueError(f"{name} must be an integer >= 0, got {value!r}")
+    return int(value)
+
+
+def check_array(name: str, value: object, *, ndim: int | None = None,
+                shape: tuple[int | None, ...] | None = None):
+    """``value`` as a float ndarray; raise :class:`ParameterTypeError` unless it
+    holds real numbers (not strings, bools, complex or objects), and
+    ``ValueError`` unless it has ``ndim`` dimensions or ``shape`` (``None``: any
+    length on that axis).  Values are not checked: NaN and inf pass."""
+    import numpy as np
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "iuf":
+        raise ParameterTypeError(f"{name} must hold real numbers, got {value!r:.80} "
+                                 f"(dtype {arr.dtype})")
+    if shape is not None and (arr.ndim != len(shape) or any(
+            s is not None and s != n for s, n in zip(shape, arr.shape))):
+        want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + \
+            ("," if len(shape) == 1 else "") + ")"
+        raise ValueError(f"{name} must have shape {want}, got {arr.shape}")
+    if ndim is not None and arr.ndim != ndim:
+        raise ValueError(f"{name} must be {ndim}-dimensional, got shape {arr.shape}")
+    return arr.astype(float)
+
+
+def check_sizes(name: str, value: object, *, nonnegative: bool = False,
+                empty: bool = False) -> tuple[float, ...]:
+    """``value`` as a tuple of floats; raise unless it is a sequence of finite
+    numbers (>= 0 with ``nonnegative``; non-empty unless ``empty``), e.g.
+    ``(0.05, 0.1)`` and not ``0.1``."""
+    if not is_sequence(value) or (len(value) == 0 and not empty):
+        raise ParameterTypeError(f"{name} must be a {'' if empty else 'non-empty '}sequence "
+                                 f"of numbers such as (0.05, 0.1), got {value!r}")
+    check = check_nonnegative if nonnegative else check_finite
+    for i, v in enumerate(value):
+        check(f"{name}[{i}]", v)
+    return tuple(float(v) for v in value)
+
+
+def check_count(name: str, value: object) -> int:
+    """Raise unless ``value`` is an integer >= 1 (not a bool, not 2.0); return it."""
+    if not isinstance(value, Integral) or isinstance(value, bool):
+        raise ParameterTypeError(f"{name} must be an integer >= 1, got {value!r} "
+                                 f"({type(value).__name__})")
+    if value < 1:
+        raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
     return int(value)

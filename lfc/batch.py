@@ -37,7 +37,7 @@ import pandas as pd
 from tqdm.auto import tqdm
 
 from lfc._files import code_digest, write_atomic
-from lfc._validate import ParameterTypeError
+from lfc._validate import ParameterTypeError, check_count, check_flag
 from lfc.engine import METRICS, Scenarios
 from lfc.filters import (CONFLICT_RULES, METHODS, OUTSIDE_RULES, PREDICTIONS, SafetyFilter,
                          options_of)
@@ -189,10 +189,12 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
     for col in FLAGS:
         if col not in scenarios.columns:
             continue
-        bad = ~scenarios[col].isin([True, False, 0, 1])
+        bad = ~scenarios[col].map(lambda v: isinstance(v, (bool, np.bool_)))
         if bad.any():
-            raise ValueError(f"column {col!r} must be True or False; row "
-                             f"{scenarios.index[bad][0]!r} has {scenarios[col][bad].iloc[0]!r}")
+            value = scenarios[col][bad].iloc[0]
+            raise ParameterTypeError(f"column {col!r} must be True or False; row "
+                                     f"{scenarios.index[bad][0]!r} has {value!r} "
+                                     f"({type(value).__name__})")
         bad = scenarios[col].astype(bool).to_numpy() & ~noisy
         if bad.any():
             raise ValueError(f"column {col!r} is True on row {scenarios.index[bad][0]!r}, which "
@@ -393,8 +395,10 @@ def simulate_table(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
     check_timing(duration, dt, control_period)
     if out is not None and (scenarios["waveform"] == "samples").any():
         raise ValueError("out (chunk files) cannot hold 'samples' rows; run them without out")
-    if not (isinstance(chunk_size, int) and chunk_size >= 1):
-        raise ValueError(f"chunk_size must be an integer >= 1, got {chunk_size!r}")
+    check_count("chunk_size", chunk_size)
+    check_flag("progress", progress)
+    if out is not None and (not isinstance(out, (str, Path)) or not str(out).strip()):
+        raise ValueError(f"out must be a folder path (not empty) or None, got {out!r}")
     relays = relays or RelaySettings()
     args = (params, duration, relays, dt, control_period)
     chunks = [scenarios.iloc[i:i + chunk_size] for i in range(0, len(scenarios), chunk_size)]

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from lfc._jit import inline
-from lfc._validate import check_nonnegative, check_pair, check_positive
+from lfc._validate import ParameterTypeError, check_flag, check_pair, check_range
 from lfc.model import LFCParams, discretize, output_matrix
 
 
@@ -41,6 +41,11 @@ def kf_predict(A: np.ndarray, B: np.ndarray, xs: np.ndarray, u: float) -> None:
 
 
 DEFAULT_MEAS_STD = (1e-4, 1e-3)   # pu, pu/s: a Kalman filter's noise model where none is given
+# valid ranges: a noise model's standard deviations (pu, pu/s) and the sample period (s);
+# beyond them the covariances over- or underflow double precision (1e300 squared is
+# inf) or the sampled model loses the dynamics (a period of 10 s: unobservable)
+STD = (1e-9, 1e2)
+PERIOD = (1e-5, 1.0)
 
 
 def measurement_std(noise_std: tuple[float, float]) -> tuple[float, float]:
@@ -58,18 +63,20 @@ class KalmanFilter:
     params : LFCParams
         Design model.
     period : float
-        Sample period (s) = controller period. Default 0.01.
+        Sample period (s) = controller period, in ``PERIOD`` = [1e-5, 1] s.
+        Default 0.01.
     meas_std : tuple of float
         Standard deviations of the ``dw_meas`` (pu) and ``rocof_meas`` (pu/s)
-        measurement noise, > 0. Default ``(1e-4, 1e-3)`` (6 mHz, 0.06 Hz/s).
+        measurement noise, each in ``STD`` = [1e-9, 100]. Default ``(1e-4, 1e-3)``
+        (6 mHz, 0.06 Hz/s).
     process_std : float
         Standard deviation per sample of the process noise on each model state
-        (pu), > 0: how much the filter distrusts the model. Default 1e-4.
+        (pu), in ``STD``: how much the filter distrusts the model. Default 1e-4.
     estimate_load : bool
         Augment the state with ``dPL`` as a random walk (E7). Default True;
         otherwise the filter assumes ``dPL = 0``.
     load_std : float
-        Random-walk intensity of ``dPL`` (pu per sqrt(s)), >= 0. Default 0.01: the
+        Random-walk intensity of ``dPL`` (pu per sqrt(s)), in [0, 100]. Default 0.01: the
         estimate still tracks a 0.1 pu load step to 90 % within 0.15 s at the default
         noise, and its steady-state error is small (std 0.003 pu), which the
         certified filter's estimation bound depends on (``tests/test_estimation.py``).
@@ -85,16 +92,23 @@ class KalmanFilter:
     Raises
     ------
     ValueError
-        On invalid parameters, or if the (augmented) model is not observable.
+        On invalid parameters, if the (augmented) model is not observable, or if
+        the Riccati equation has no finite solution the solver can find (noise
+        models many decades apart; the message names them).
     """
 
     def __init__(self, params: LFCParams, period: float = 0.01, *,
                  meas_std: tuple[float, float] = DEFAULT_MEAS_STD, process_std: float = 1e-4,
                  estimate_load: bool = True, load_std: float = 0.01) -> None:
-        check_positive("period", period)
+        if not isinstance(params, LFCParams):
+            raise ParameterTypeError(f"params must be an LFCParams, got {params!r:.80}")
+        check_range("period", period, *PERIOD, closed=True)
         meas_std = check_pair("meas_std", meas_std, positive=True)
-        check_positive("process_std", process_std)
-        check_nonnegative("load_std", load_std)
+        for i, s in enumerate(meas_std):
+            check_range(f"meas_std[{i}]", s, *STD, closed=True)
+        check_range("process_std", process_std, *STD, closed=True)
+        check_range("load_std", load_std, 0.0, STD[1], closed=True)
+        estimate_load = check_flag("estimate_load", estimate_load)
         self.params, self.period, self.estimate_load = params, float(period), estimate_load
         self.meas_std = (float(meas_std[0]), float(meas_std[1]))
         Ad, Bd = discretize(params, period)
@@ -113,9 +127,18 @@ class KalmanFilter:
         if np.linalg.matrix_rank(ct.obsv(Ad, C)) < self.n:
             raise ValueError("the LFC model is not observable from (dw_meas, rocof_meas)")
         R = np.diag(np.square(self.meas_std))
-        _, P, _ = ct.dlqe(Ad, np.eye(self.n), C, np.diag(q), R)  # P: a-priori covariance
-        self.gain = P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
-        self.posterior_covariance = (np.eye(self.n) - self.gain @ C) @ P
+        try:
+            _, P, _ = ct.dlqe(Ad, np.eye(self.n), C, np.diag(q), R)  # a-priori covariance
+            self.gain = P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
+            self.posterior_covariance = (np.eye(self.n) - self.gain @ C) @ P
+            solved = np.isfinite(self.gain).all() and np.isfinite(self.posterior_covariance).all()
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError, ct.ControlArgument):
+            solved = False
+        if not solved:
+            raise ValueError(f"no steady-state Kalman gain for meas_std={self.meas_std}, "
+                             f"process_std={process_std}, load_std={load_std}, period={period}:"
+                             f" the Riccati solver fails on these noise models (tiny, or many "
+                             f"decades apart); scale them up or bring them closer")
         self.reset()
 
     def __repr__(self) -> str:

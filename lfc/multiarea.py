@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lfc._validate import ParameterTypeError, check_index, check_number
+from lfc._validate import ParameterTypeError, check_index, check_number, is_sequence
 from lfc.model import STATES, LFCParams, discretize, lfc_matrices, zoh
 
 N_AREA_STATES = len(STATES)
@@ -77,7 +77,7 @@ class MultiAreaParams:
                                  f"got {sorted(values)}")
         n = len(areas)
         ties, pairs = [], set()
-        if isinstance(self.tie, (str, bytes)) or not hasattr(self.tie, "__iter__"):
+        if not is_sequence(self.tie):
             raise ParameterTypeError(f"tie must be a sequence of (i, j, T_ij) lines, got "
                                      f"{self.tie!r}")
         for k, line in enumerate(self.tie):
@@ -104,7 +104,7 @@ class MultiAreaParams:
             value = getattr(self, name)
             if value is None:
                 continue
-            if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
+            if not is_sequence(value):
                 raise ParameterTypeError(f"{name} must be a sequence of {n} numbers (one per "
                                          f"area), got {value!r}")
             for k, v in enumerate(value):

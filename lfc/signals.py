@@ -11,13 +11,13 @@ parameters and, for :class:`Samples`, its sample times and values.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
 from lfc._jit import inline, jit
-from lfc._validate import check_finite, check_positive
+from lfc._validate import check_array, check_finite, check_number, check_positive
 
 # waveform codes of Signal.spec() and value_at(); GRID: values given on the engine's grid
 NONE, SINUSOID, SQUARE, STEP, RAMP, CHIRP, SAMPLES, GRID = range(8)
@@ -82,7 +82,8 @@ _EMPTY = np.zeros(1)
 
 def _check_window(start: float, stop: float) -> None:
     check_finite("start", start)
-    if not (isinstance(stop, (int, float)) and stop > start):
+    check_number("stop", stop)
+    if not stop > start:
         raise ValueError(f"stop must be > start ({start}), got {stop!r}")
 
 
@@ -227,11 +228,12 @@ class Chirp(Signal):
                               self.f1_hz), _EMPTY, _EMPTY
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Samples(Signal):
     """Replay of a recorded signal: linear interpolation between samples.
 
-    Zero before the first sample time, the last value after the last one.
+    Zero before the first sample time, the last value after the last one.  Two
+    replays are equal when their sample times and values are.
 
     Parameters
     ----------
@@ -241,12 +243,12 @@ class Samples(Signal):
         Values (pu), same length as ``t``, finite.
     """
 
-    t: np.ndarray = field(compare=False)
-    values: np.ndarray = field(compare=False)
+    t: np.ndarray
+    values: np.ndarray
 
     def __post_init__(self) -> None:
-        t = np.asarray(self.t, dtype=float).ravel()
-        v = np.asarray(self.values, dtype=float).ravel()
+        t = check_array("t", self.t, ndim=1)
+        v = check_array("values", self.values, ndim=1)
         if t.size == 0 or t.size != v.size:
             raise ValueError(f"t and values must be non-empty and of equal length, "
                              f"got {t.size} and {v.size}")
@@ -256,6 +258,14 @@ class Samples(Signal):
             raise ValueError("t must be strictly increasing")
         object.__setattr__(self, "t", t)
         object.__setattr__(self, "values", v)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Samples):
+            return NotImplemented
+        return bool(np.array_equal(self.t, other.t) and np.array_equal(self.values, other.values))
+
+    def __hash__(self) -> int:
+        return hash((self.t.tobytes(), self.values.tobytes()))
 
     def spec(self):
         return SAMPLES, _params(0.0, 0.0, float(self.t[0]), math.inf), self.t, self.values

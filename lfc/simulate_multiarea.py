@@ -60,6 +60,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from lfc._validate import check_count
 from lfc.batch import metrics_frame
 from lfc.engine import METRICS, Scenarios, check_area_keys, sample_signal
 from lfc.filters import SafetyFilter
@@ -297,8 +298,7 @@ def simulate_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
         ``simulate(...).metrics()[area]``, with the same values).
     """
     check_timing(duration, dt, control_period)
-    if not (isinstance(jobs, int) and jobs >= 1):
-        raise ValueError(f"jobs must be an integer >= 1, got {jobs!r}")
+    check_count("jobs", jobs)
     if not isinstance(scenarios, (list, tuple)) or not scenarios:
         raise ValueError(f"scenarios must be a non-empty list of dicts, got {scenarios!r}")
     keys = {"attacks", "loads", "filters", "estimator", "noise_std", "seed", "feedforward",

@@ -3,6 +3,7 @@ bool or a number belongs is a TypeError naming the parameter."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 import lfc
@@ -121,3 +122,128 @@ def test_bound_price_refuses_options_that_fix_the_bound_it_varies():
     from lfc.experiments.load_during_attack import bound_price
     with pytest.raises(ValueError, match="options must not set \\['load_bound'\\]"):
         bound_price(LFCParams(), (0.0,), (), options={"load_bound": 0.05})
+
+
+# -- the second hostile review's coercions and crashes, each now a clear error --
+
+P = LFCParams()
+
+
+def _fam(**kw):
+    from lfc.experiments import redteam
+    args = dict(maxiter=1, popsize=2, duration=2.0)
+    args.update(kw)
+    family = args.pop("family", "sinusoid on P_c")
+    return redteam.family_search(P, redteam.Defender("d"), family, **args)
+
+
+def _row(**kw):
+    import pandas as pd
+    row = dict(waveform="sinusoid", channel="pc", amplitude=0.5, freq_hz=1.0, start=1.0,
+               alpha=20.0, Ts=0.25)
+    return pd.DataFrame([{**row, **kw}])
+
+
+REFUSED = [  # (call, exception, words of the message)
+    (lambda: lfc.Step(1.0, stop=True), TypeError, "stop must be a number, got True"),
+    (lambda: lfc.Samples(["0", "1"], [1, 2]), TypeError, "t must hold real numbers"),
+    (lambda: lfc.Samples([0, 1], [True, False]), TypeError, "values must hold real numbers"),
+    (lambda: lfc.Samples([[0, 1], [2, 3]], [1, 2, 3, 4]), ValueError, "t must be 1-dim"),
+    (lambda: lfc.SafetyFilter(P).filter([0.0] * 5, "0.5"), TypeError, "u_ref must be a number"),
+    (lambda: lfc.SafetyFilter(P).filter([0.0] * 5, True), TypeError, "u_ref must be a number"),
+    (lambda: lfc.SafetyFilter(P).filter([0.0] * 5, 1 + 0j), TypeError, "u_ref must be a number"),
+    (lambda: lfc.SafetyFilter(P).filter([0.0] * 5, 0.1, "0"), TypeError, "p_load must be"),
+    (lambda: lfc.SafetyFilter(P).filter([[0.0]] * 5, 0.1), ValueError, r"x must have shape \(5,\)"),
+    (lambda: lfc.SafetyFilter(P).filter(["0"] * 5, 0.1), TypeError, "x must hold real numbers"),
+    (lambda: lfc.SafetyFilter(P).filter_batch([[0.0] * 5] * 2, ["1", "2"]), TypeError,
+     "u_ref must hold real numbers"),
+    (lambda: lfc.SafetyFilter(P).filter_batch([[0.0] * 5] * 2, [[0.0], [0.0]]), ValueError,
+     r"u_ref must have shape \(N,\)"),
+    (lambda: lfc.SafetyFilter(P).filter_batch([[False] * 5] * 2, [0.0, 0.0]), TypeError,
+     "x must hold real numbers"),
+    (lambda: lfc.SafetyFilter(None), TypeError, "params must be an LFCParams"),
+    (lambda: lfc.SafetyFilter(P, relays="x"), TypeError, "relays must be a RelaySettings"),
+    (lambda: lfc.SafetyFilter(P, method=["paper"]), ValueError, "method must be one of"),
+    (lambda: lfc.SafetyFilter(P, method="certified", uncertainty={"M": ("0.8", "1.2")}),
+     ValueError, r"uncertainty\['M'\] must be factors"),
+    (lambda: lfc.SafetyFilter(P, method="certified", uncertainty={"M": (0.8, 1.2), 3: (1, 1)}),
+     ValueError, "unknown parameter.*3"),
+    (lambda: lfc.KalmanFilter(P, estimate_load="False"), TypeError, "estimate_load must be"),
+    (lambda: lfc.KalmanFilter(P, meas_std=(1e300, 1e300)), ValueError, r"meas_std\[0\] must lie"),
+    (lambda: lfc.KalmanFilter(P, process_std=1e300), ValueError, "process_std must lie in"),
+    (lambda: lfc.KalmanFilter(P, period=1e-300), ValueError, "period must lie in"),
+    (lambda: lfc.simulate_many(P, _row(), duration=1.0, progress="no"), TypeError,
+     "progress must be True or False"),
+    (lambda: lfc.simulate_many(P, _row(noise_w=1e-4, relay_noise=1.0), duration=1.0),
+     TypeError, "column 'relay_noise' must be True or False"),
+    (lambda: lfc.simulate_many(P, _row(), duration=1.0, out=""), ValueError, "out must be a "
+     "folder"),
+    (lambda: MultiAreaParams((P, P), tie=((0, 1, 2.0),), bias={1.0, 2.0}), TypeError,
+     "bias must be a sequence"),
+    (lambda: _fam(maxiter=0), ValueError, "maxiter must be an integer >= 1"),
+    (lambda: _fam(popsize=-1), ValueError, "popsize must be an integer >= 1"),
+    (lambda: _fam(duration=0.5), ValueError, "duration must be > ATTACK_START"),
+    (lambda: _fam(family="sinus"), ValueError, "family must be one of"),
+]
+
+
+@pytest.mark.parametrize("call, error, words", REFUSED, ids=[w for *_, w in REFUSED])
+def test_the_second_reviews_inputs_are_refused_naming_the_parameter(call, error, words):
+    with pytest.raises(error, match=words):
+        call()
+
+
+def test_red_team_arguments_are_checked():
+    from lfc.experiments import redteam
+    with pytest.raises(ValueError, match="method must be one of"):
+        redteam.Defender("x", method="nope")
+    with pytest.raises(TypeError, match="n_seeds must be an integer"):
+        redteam.Search(n_seeds="2")
+    for found, words in (({}, "a dict with 'search'"),
+                         ({"search": "sinusoid on P_c", "theta": (1.0,)},
+                          r"found\['theta'\] must have shape \(2,\)"),
+                         ({"search": "free-form on P_c"}, "a dict with 'values'")):
+        with pytest.raises(ValueError, match=words):
+            redteam.replay(found, 10.0)
+
+
+def test_load_battery_arguments_are_checked():
+    from lfc.experiments import load_during_attack as lda
+    with pytest.raises(ValueError, match=r"instants must be times \(s\) in \[0, duration"):
+        lda.battery(P, None, (0.1,), instants=[20.0], duration=2.0)
+    with pytest.raises(TypeError, match="steps must be a non-empty sequence"):
+        lda.battery(P, None, 0.1, instants=[1.5], duration=2.0)
+    with pytest.raises(TypeError, match="bounds must be a non-empty sequence"):
+        lda.bound_price(P, 0.1, (0.1,))
+
+
+def test_samples_compare_by_their_values():
+    """Every Samples compared equal (its fields were excluded from ==)."""
+    a = lfc.Samples([0.0, 1.0], [1.0, 2.0])
+    assert a == lfc.Samples([0.0, 1.0], [1.0, 2.0]) and hash(a) == hash(lfc.Samples([0, 1], [1, 2]))
+    assert a != lfc.Samples([0.0, 1.0], [3.0, 4.0])
+
+
+def test_a_step_stop_of_a_numpy_integer_is_a_number():
+    assert lfc.Step(1.0, start=1.0, stop=np.int64(5))(4.0) == 1.0
+
+
+def test_a_kalman_filter_exists_at_every_corner_or_says_why():
+    """Every corner of the valid ranges (noise std 1e-9 and 100, period 1e-5 and
+    1 s, load_std 0 and 100, both estimate_load) gives a finite gain or a
+    ValueError that names the noise models: never a solver's exception."""
+    import itertools
+
+    from lfc.estimation import PERIOD, STD
+    solved = 0
+    for m0, m1, q, ls, per, est in itertools.product(STD, STD, STD, (0.0, STD[1]), PERIOD,
+                                                     (True, False)):
+        try:
+            k = lfc.KalmanFilter(P, meas_std=(m0, m1), process_std=q, load_std=ls,
+                                 period=per, estimate_load=est)
+        except ValueError as e:
+            assert "no steady-state Kalman gain" in str(e) or "not observable" in str(e)
+        else:
+            assert np.isfinite(k.gain).all()
+            solved += 1
+    assert solved > 0

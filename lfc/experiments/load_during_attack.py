@@ -20,6 +20,8 @@ import itertools
 import numpy as np
 import pandas as pd
 
+from lfc._validate import (ParameterTypeError, check_array, check_finite, check_nonnegative,
+                           check_positive, check_sizes)
 from lfc.experiments.redteam import severity
 from lfc.filters import SafetyFilter
 from lfc.model import LFCParams
@@ -37,6 +39,18 @@ ATTACKS = {            # name: simulate keywords; each runs until the end
 RESTORED = 1e-3        # pu: |Δω_meas| below which the frequency counts as restored (Fig. 6)
 
 
+def _check_filter(name: str, scc: object) -> None:
+    if scc is not None and not isinstance(scc, SafetyFilter):
+        raise ParameterTypeError(f"{name} must be a SafetyFilter or None (no filter), got "
+                                 f"{scc!r:.80} ({type(scc).__name__})")
+
+
+def _check_attacks(attacks: object) -> None:
+    if not isinstance(attacks, dict) or not all(isinstance(a, dict) for a in attacks.values()):
+        raise ParameterTypeError(f"attacks must be a dict {{name: simulate keywords}}, got "
+                                 f"{attacks!r:.80}")
+
+
 def battery(params: LFCParams, scc: SafetyFilter | None, steps: tuple[float, ...], *,
             instants: np.ndarray | None = None, duration: float = 12.0,
             relays: RelaySettings | None = None, attacks: dict | None = None,
@@ -47,9 +61,17 @@ def battery(params: LFCParams, scc: SafetyFilter | None, steps: tuple[float, ...
     estimator, noise, ``load_feedforward``).  One row per run: ``attack``,
     ``step`` (pu, signed), ``t_step`` (s), ``tripped``, ``outside`` (samples
     flagged), ``severity`` (largest of the peaks over the relay settings)."""
-    relays = relays or (scc.relays if scc is not None else RelaySettings())
-    instants = np.linspace(1.5, 10.5, 20) if instants is None else np.asarray(instants, float)
+    _check_filter("scc", scc)
+    steps = check_sizes("steps", steps, nonnegative=True)
+    check_positive("duration", duration)
+    instants = np.linspace(1.5, 10.5, 20) if instants is None else \
+        check_array("instants", instants, shape=(None,))
+    if not (len(instants) and np.all((instants >= 0) & (instants < duration))):
+        raise ValueError(f"instants must be times (s) in [0, duration = {duration}) at which "
+                         f"a step lands, got {instants!r:.80}")
     attacks = ATTACKS if attacks is None else attacks
+    _check_attacks(attacks)
+    relays = relays or (scc.relays if scc is not None else RelaySettings())
     rows = []
     for (name, attack), size, sign, t in itertools.product(attacks.items(), steps, (1, -1),
                                                            instants):
@@ -68,6 +90,10 @@ def recovery(params: LFCParams, scc: SafetyFilter | None, step: float, *,
     step until ``|Δω_meas|`` stays below ``RESTORED``; NaN if never),
     ``max_modification`` (pu, the largest change the filter made to the AGC's
     command), ``tripped``."""
+    _check_filter("scc", scc)
+    check_finite("step", step)
+    if not duration > 1.0:
+        raise ValueError(f"duration must be > 1 s (the step lands at 1 s), got {duration!r}")
     relays = relays or (scc.relays if scc is not None else RelaySettings())
     res = simulate(params, duration=duration, load=Step(step, start=1.0), scc=scc,
                    relays=relays)
@@ -94,8 +120,16 @@ def tradeoff(params: LFCParams, filters: dict[str, SafetyFilter | None], bounds:
     legitimate step of the bound (or 0.1 pu), ``max_modification`` (pu) and
     ``recovery_s`` against ``recovery_s_no_filter``.  ``attacks``: as in
     :func:`battery`."""
-    relays = relays or RelaySettings()
+    if not isinstance(filters, dict) or not isinstance(bounds, dict):
+        raise ParameterTypeError("filters and bounds must be dicts keyed by the filter's name")
+    for name, scc in filters.items():
+        _check_filter(f"filters[{name!r}]", scc)
+        if name not in bounds:
+            raise ValueError(f"bounds has no load_bound for filter {name!r} (give 0 for none)")
+        check_nonnegative(f"bounds[{name!r}]", bounds[name])
     attacks = ATTACKS if attacks is None else attacks
+    _check_attacks(attacks)
+    relays = relays or RelaySettings()
     rows = []
     bare = {name: simulate(params, duration=12.0, relays=relays, **a).metrics()["tripped"]
             for name, a in attacks.items()}
@@ -133,6 +167,11 @@ def bound_price(params: LFCParams, bounds: tuple[float, ...], steps: tuple[float
     step in ``steps`` (pu, alone, at 1 s, 41 s run; ``run``: :func:`lfc.simulate`
     keywords such as the estimator), ``alarms <step>`` (control periods with an
     alarm) and whether any run tripped (``tripped``)."""
+    bounds = check_sizes("bounds", bounds, nonnegative=True)
+    steps = check_sizes("steps", steps, empty=True)
+    if options is not None and not isinstance(options, dict):
+        raise ParameterTypeError(f"options must be a dict of certified-filter options, got "
+                                 f"{options!r:.80}")
     relays = relays or RelaySettings()
     fixed = sorted({"load_bound", "load_kind"} & set(options or {}))
     if fixed:

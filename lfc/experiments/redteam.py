@@ -32,8 +32,12 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import differential_evolution
 
+from lfc._validate import (ParameterTypeError, check_array, check_count, check_flag,
+                           check_multiple,
+                           check_number, check_pair, check_positive, check_seed)
 from lfc.batch import scenario_signal
 from lfc.experiments.scenarios import ATTACK_START
+from lfc.filters.base import check_choice
 from lfc.filters.certified import BOX
 from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams
@@ -67,6 +71,17 @@ class Defender:
     uncertainty: float = 0.0
     declare_noise: bool = False
 
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str):
+            raise ParameterTypeError(f"name must be a string, got {self.name!r}")
+        check_choice("method", self.method, ("none", "paper", "certified"))
+        check_positive("alpha", self.alpha)
+        check_positive("Ts", self.Ts)
+        check_number("uncertainty", self.uncertainty)
+        if not 0.0 <= self.uncertainty < 1.0:
+            raise ValueError(f"uncertainty must lie in [0, 1), got {self.uncertainty!r}")
+        check_flag("declare_noise", self.declare_noise)
+
     def columns(self) -> dict:
         """The scenario-table columns that select this filter."""
         if self.method == "none":
@@ -88,10 +103,11 @@ class Search:
     n_seeds: int = 1
 
     def __post_init__(self) -> None:
+        check_number("box", self.box)
         if not 0.0 <= self.box < 1.0:
             raise ValueError(f"box must be in [0, 1), got {self.box!r}")
-        if self.n_seeds < 1:
-            raise ValueError(f"n_seeds must be >= 1, got {self.n_seeds!r}")
+        object.__setattr__(self, "noise_std", check_pair("noise_std", self.noise_std))
+        check_count("n_seeds", self.n_seeds)
 
     @property
     def noisy(self) -> bool:
@@ -139,10 +155,30 @@ def _family_table(family: str, theta: np.ndarray, defender: Defender) -> pd.Data
                          "freq_hz": freq, "start": ATTACK_START, **defender.columns()})
 
 
+def check_search(*, duration: float, seed: int, maxiter: int, popsize: int,
+                 relays: RelaySettings | None = None, search: Search | None = None) -> None:
+    """Raise ``ValueError``/``TypeError`` naming the first invalid argument of a
+    search: ``duration`` (s) must end after the attacks start (``ATTACK_START``),
+    ``seed`` an integer >= 0, ``maxiter`` and ``popsize`` integers >= 1."""
+    check_positive("duration", duration)
+    if duration <= ATTACK_START:
+        raise ValueError(f"duration must be > ATTACK_START ({ATTACK_START} s, when every "
+                         f"attack starts), got {duration!r}: no attack would run")
+    check_seed("seed", seed)
+    check_count("maxiter", maxiter)
+    check_count("popsize", popsize)
+    if relays is not None and not isinstance(relays, RelaySettings):
+        raise ParameterTypeError(f"relays must be a RelaySettings or None, got {relays!r:.80}")
+    if search is not None and not isinstance(search, Search):
+        raise ParameterTypeError(f"search must be a Search, got {search!r:.80}")
+
+
 def _search(table_of, n_attack, bounds, params, relays, duration, seed, maxiter, popsize,
             search: Search):
     """Differential evolution maximizing severity over the attack's ``n_attack``
     variables and ``search``'s extra ones; returns (best theta, severity, row)."""
+    check_search(duration=duration, seed=seed, maxiter=maxiter, popsize=popsize,
+                 relays=relays, search=search)
     extra = search.bounds()
     integrality = [False] * (n_attack + len(extra))
     if search.noisy and search.n_seeds > 1:
@@ -171,6 +207,9 @@ def family_search(params: LFCParams, defender: Defender, family: str, *,
                   search: Search = Search()) -> dict:
     """Worst attack of one family against ``defender`` (see module docstring),
     over the plants and noise seeds ``search`` allows."""
+    if not isinstance(defender, Defender):
+        raise ParameterTypeError(f"defender must be a Defender, got {defender!r:.80}")
+    check_choice("family", family, tuple(FAMILIES))
     relays = relays or RelaySettings()
     bounds = FAMILIES[family][2]
     theta, sev, row = _search(lambda th: _family_table(family, th, defender), len(bounds),
@@ -188,17 +227,26 @@ def replay(found, duration: float) -> dict:
     :func:`freeform_search` (its ``values`` and ``sample_period``), as a
     ``pc_attack`` or ``wref_attack`` signal starting at ``ATTACK_START``;
     ``duration`` (s) ends a chirp, as in the search's runs."""
-    if found["search"] in FAMILIES:
-        row = _family_table(found["search"], np.asarray(found["theta"], float)[:, None],
-                            Defender("replay")).iloc[0]
+    def entry(key: str):
+        if not isinstance(found, dict) or key not in found:
+            raise ValueError(f"found must be a result of family_search or freeform_search "
+                             f"(a dict with {key!r}), got {found!r:.80}")
+        return found[key]
+    kind = entry("search")
+    if isinstance(kind, str) and kind in FAMILIES:
+        theta = check_array("found['theta']", entry("theta"),
+                            shape=(len(FAMILIES[kind][2]),))
+        row = _family_table(kind, theta[:, None], Defender("replay")).iloc[0]
         channel = row["channel"]
-    elif found["search"].startswith("free-form"):
-        row = _samples_table(np.asarray(found["values"], float)[:, None],
-                             found["sample_period"], Defender("replay")).iloc[0]
+    elif isinstance(kind, str) and kind.startswith("free-form"):
+        values = check_array("found['values']", entry("values"), shape=(None,))
+        check_positive("found['sample_period']", entry("sample_period"))
+        row = _samples_table(values[:, None], entry("sample_period"),
+                             Defender("replay")).iloc[0]
         channel = "pc"
     else:
         raise ValueError(f"found['search'] must be one of {list(FAMILIES)} or a free-form "
-                         f"search, got {found['search']!r}")
+                         f"search, got {kind!r}")
     return {f"{channel}_attack": scenario_signal(row, duration)}
 
 
@@ -218,8 +266,11 @@ def freeform_search(params: LFCParams, defender: Defender, *, amplitude: float =
     period for ``attack_duration`` s (then held), run for ``duration`` s, over
     the plants and noise seeds ``search`` allows; the result's ``values`` (pu,
     one per control period from ``ATTACK_START``) replay it on its ``plant``."""
+    if not isinstance(defender, Defender):
+        raise ParameterTypeError(f"defender must be a Defender, got {defender!r:.80}")
+    check_positive("amplitude", amplitude)
+    n = check_multiple("attack_duration", attack_duration, "control_period", control_period)
     relays = relays or RelaySettings()
-    n = int(round(attack_duration / control_period))
     theta, sev, row = _search(lambda v: _samples_table(v, control_period, defender), n,
                               [(-amplitude, amplitude)] * n, params, relays, duration, seed,
                               maxiter, popsize, search)
@@ -245,8 +296,8 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
     ``control_period`` (s).  Returns the family, the worst severity, the area it
     is reached in, whether any area tripped and the attack per area.
     """
-    if family not in MULTI_FAMILIES:
-        raise ValueError(f"family must be one of {list(MULTI_FAMILIES)}, got {family!r}")
+    check_choice("family", family, tuple(MULTI_FAMILIES))
+    check_search(duration=duration, seed=seed, maxiter=maxiter, popsize=popsize, relays=relays)
     relays = relays or RelaySettings()
     channel, waveform, bounds = MULTI_FAMILIES[family]
     k, n = len(bounds), params.n_areas

@@ -22,13 +22,14 @@ from dataclasses import fields
 
 import numpy as np
 
+from lfc._validate import ParameterTypeError, check_array, check_number
 from lfc.filters.base import (ALARM_BITS, ALARM_FLAGS, MEMORY, Backend, FilterInfo, Options,
                               binding_names, flag)
 from lfc.filters.certified import CertifiedFilter, CertifiedOptions
 from lfc.filters.dispatch import PYTHON, decide, decide_many, register_python
 from lfc.filters.paper import (CONFLICT_RULES, DEFAULT_READING, OUTSIDE_RULES, PREDICTIONS,
                                PaperFilter, PaperOptions)
-from lfc.model import STATES, LFCParams
+from lfc.model import LFCParams
 from lfc.relays import RelaySettings
 
 __all__ = ["ALARM_BITS", "ALARM_FLAGS", "CONFLICT_RULES", "DEFAULT_READING", "METHODS",
@@ -60,7 +61,7 @@ def available() -> tuple[str, ...]:
 
 
 def _backend(method: str) -> type[Backend]:
-    if method not in REGISTRY:
+    if not isinstance(method, str) or method not in REGISTRY:
         raise ValueError(f"method must be one of {available()}, got {method!r}")
     return REGISTRY[method]
 
@@ -114,6 +115,12 @@ class SafetyFilter:
 
     def __init__(self, params: LFCParams, relays: RelaySettings | None = None, *,
                  method: str = "paper", **options) -> None:
+        if not isinstance(params, LFCParams):
+            raise ParameterTypeError(f"params must be an LFCParams (the design model), got "
+                                     f"{params!r:.80} ({type(params).__name__})")
+        if relays is not None and not isinstance(relays, RelaySettings):
+            raise ParameterTypeError(f"relays must be a RelaySettings or None, got "
+                                     f"{relays!r:.80} ({type(relays).__name__})")
         backend = _backend(method)
         for name in options:
             owners = [m for m in available() if m != method and name in
@@ -185,11 +192,14 @@ class SafetyFilter:
         Raises
         ------
         ValueError
-            If ``x`` does not have 5 entries (a programming error, not numeric trouble).
+            If ``x`` does not have shape (5,) (a programming error, not numeric trouble).
+        TypeError
+            If ``x``, ``u_ref`` or ``p_load`` is not made of real numbers (a string,
+            a bool, a complex number).
         """
-        x = np.asarray(x, float).ravel()
-        if x.shape != (5,):
-            raise ValueError(f"x must have 5 entries {STATES}, got {x.size}")
+        x = check_array("x", x, shape=(5,))
+        check_number("u_ref", u_ref)
+        check_number("p_load", p_load)
         u_ref = float(u_ref)
         out = decide(self.method_id, self.data, x, u_ref, float(p_load), self._memory)
         return out[0], self.backend.info(u_ref, out)
@@ -220,17 +230,18 @@ class SafetyFilter:
         Raises
         ------
         ValueError
-            If ``x`` is not (N, 5) or the lengths of ``x``, ``u_ref`` and
-            ``p_load`` differ (a programming error, not numeric trouble).
+            If ``x`` is not (N, 5), ``u_ref`` or ``p_load`` not (N,) or their
+            lengths differ (a programming error, not numeric trouble).
+        TypeError
+            If an array does not hold real numbers.
         """
-        x = np.asarray(x, float)
+        x = check_array("x", x)
         if x.shape == (5,):
             x = x[None]
-        if x.ndim != 2 or x.shape[1] != 5:
-            raise ValueError(f"x must have shape (N, 5) {STATES}, got {x.shape}")
-        x = np.ascontiguousarray(x)
-        u_ref = np.asarray(u_ref, float).reshape(-1)
-        p = np.zeros(len(u_ref)) if p_load is None else np.asarray(p_load, float).reshape(-1)
+        x = np.ascontiguousarray(check_array("x", x, shape=(None, 5)))
+        u_ref = check_array("u_ref", u_ref, shape=(None,))
+        p = np.zeros(len(u_ref)) if p_load is None else check_array("p_load", p_load,
+                                                                     shape=(None,))
         if not len(x) == len(u_ref) == len(p):
             raise ValueError(f"x, u_ref and p_load must have the same length N, got "
                              f"{len(x)}, {len(u_ref)} and {len(p)}")

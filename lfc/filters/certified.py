@@ -86,6 +86,7 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass, replace
+from numbers import Real
 from typing import ClassVar
 
 import numpy as np
@@ -94,7 +95,8 @@ from scipy.optimize import linprog
 from scipy.stats import chi2, norm
 
 from lfc._jit import inline, maxnum, minnum
-from lfc._validate import check_nonnegative, check_pair, check_positive, check_range
+from lfc._validate import (check_nonnegative, check_pair, check_positive, check_range,
+                           is_sequence)
 from lfc.estimation import KalmanFilter, measurement_std
 from lfc.filters.base import (ACTIVE, BIND_CERT, BIND_UMAX, BIND_UMIN, INVALID, OUTSIDE,
                               Backend, Options, check_limits, given, option, valid_input)
@@ -125,16 +127,14 @@ def box_plants(params: LFCParams, uncertainty: float | dict) -> list[LFCParams]:
     ±20 %), or a dict naming some of them with ``(low, high)`` factors.
     """
     if isinstance(uncertainty, dict):
-        unknown = set(uncertainty) - set(BOX)
+        unknown = [k for k in uncertainty if k not in BOX]
         if unknown:
-            raise ValueError(f"uncertainty names unknown parameter(s) {sorted(unknown)}; "
-                             f"choose from {BOX}")
+            raise ValueError(f"uncertainty names unknown parameter(s) "
+                             f"{', '.join(map(repr, unknown))}; choose from {BOX}")
         factors = {}
         for name, pair in uncertainty.items():
-            try:
-                low, high = (float(v) for v in pair)
-            except (TypeError, ValueError):
-                low = high = math.nan
+            numbers = (is_sequence(pair) and len(pair) == 2 and all(_is_real(v) for v in pair))
+            low, high = (float(pair[0]), float(pair[1])) if numbers else (math.nan, math.nan)
             if not (0 < low <= 1 <= high < math.inf):
                 raise ValueError(f"uncertainty[{name!r}] must be factors (low, high) with "
                                  f"0 < low <= 1 <= high, got {pair!r}")
@@ -150,9 +150,12 @@ def box_plants(params: LFCParams, uncertainty: float | dict) -> list[LFCParams]:
     return [params] + [c for c in corners if c != params]
 
 
+def _is_real(value: object) -> bool:
+    return isinstance(value, Real) and not isinstance(value, (bool, np.bool_))
+
+
 def _is_box_width(value: object) -> bool:
-    return (isinstance(value, (int, float)) and not isinstance(value, bool)
-            and 0.0 <= value < 1.0)
+    return _is_real(value) and 0.0 <= value < 1.0
 
 
 def grid(horizon: float) -> np.ndarray:

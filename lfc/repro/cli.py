@@ -21,15 +21,28 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"error: {message} (python -m lfc --help)\n")
 
 
-def _jobs(text: str) -> int:
-    """``--jobs``: an integer >= 1."""
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"--jobs must be an integer >= 1, got {text!r}")
-    return value
+def _count(flag: str):
+    """The argument type of ``flag``: an integer >= 1."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = 0
+        if value < 1:
+            raise argparse.ArgumentTypeError(f"{flag} must be an integer >= 1, got {text!r}")
+        return value
+    return parse
+
+
+def _folder(text: str) -> Path:
+    """``--out`` and the other folders: a non-empty path (``''`` would mean the
+    current directory)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("a folder must be a non-empty path, got ''")
+    return Path(text)
+
+
+_jobs = _count("--jobs")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -41,8 +54,8 @@ def _parser() -> argparse.ArgumentParser:
     rep.add_argument("--plant", default="all", choices=(*ALL_PLANTS, "all"),
                      help="'all' (default): every plant each figure supports")
     rep.add_argument("--jobs", type=_jobs, default=2, help="notebooks run in parallel")
-    rep.add_argument("--figures-dir", type=Path, default=runner.ROOT / "figures")
-    rep.add_argument("--build-dir", type=Path, default=runner.ROOT / "build")
+    rep.add_argument("--figures-dir", type=_folder, default=runner.ROOT / "figures")
+    rep.add_argument("--build-dir", type=_folder, default=runner.ROOT / "build")
     sw = sub.add_parser("sweep", help="run a notebook over a parameter grid")
     sw.add_argument("notebook", type=Path)
     sw.add_argument("-p", "--param", nargs="+", action="append", default=[],
@@ -50,22 +63,23 @@ def _parser() -> argparse.ArgumentParser:
                     help="a parameter and its values (repeating a name adds values)")
     sw.add_argument("--jobs", type=_jobs, default=None,
                     help="worker processes (default: cores)")
-    sw.add_argument("--out", type=Path, default=None,
+    sw.add_argument("--out", type=_folder, default=None,
                     help="default build/sweeps/<notebook name>")
     sw.add_argument("--dask", metavar="ADDRESS", help="run on a Dask scheduler at ADDRESS")
     bt = sub.add_parser("batch", help="simulate a scenario table (CSV) with simulate_many")
     bt.add_argument("scenarios", type=Path, help="CSV, one row per scenario (see lfc.batch)")
     bt.add_argument("--duration", type=float, required=True, help="simulated time (s)")
-    bt.add_argument("--out", type=Path, required=True,
+    bt.add_argument("--out", type=_folder, required=True,
                     help="folder: per-chunk files (resume) and results.csv")
-    bt.add_argument("--chunk-size", type=_jobs, default=500, help="scenarios per chunk (>= 1)")
+    bt.add_argument("--chunk-size", type=_count("--chunk-size"), default=500,
+                    help="scenarios per chunk (>= 1)")
     bt.add_argument("--dask", metavar="ADDRESS", help="run on a Dask scheduler at ADDRESS")
     bk = sub.add_parser("book", help="render the last reproduce's notebooks as HTML in "
                         "build/book/ (executing any that are missing)")
     bk.add_argument("--only", nargs="+", choices=list(runner.FIGURES), metavar="NAME",
                     help=f"a subset of {list(runner.FIGURES)}")
-    bk.add_argument("--figures-dir", type=Path, default=runner.ROOT / "figures")
-    bk.add_argument("--build-dir", type=Path, default=runner.ROOT / "build")
+    bk.add_argument("--figures-dir", type=_folder, default=runner.ROOT / "figures")
+    bk.add_argument("--build-dir", type=_folder, default=runner.ROOT / "build")
     rd = sub.add_parser("readme", help="copy figures/<name>.md into the README's "
                         "<!-- name:start --> sections (reproduce never edits the README)")
     rd.add_argument("--check", action="store_true",

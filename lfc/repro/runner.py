@@ -29,6 +29,7 @@ import papermill as pm
 from jupyter_client.manager import KernelManager
 from tqdm.auto import tqdm
 
+from lfc._validate import check_count
 from lfc._files import folder_lock, write_atomic
 from lfc.experiments.scenarios import ALL_PLANTS
 from lfc.repro.manifest import CHAPTERS
@@ -195,8 +196,7 @@ def reproduce(only: list[str] | None = None, plant: str = "all", jobs: int = 2,
         raise ValueError(f"unknown figure(s) {unknown}; choose from {list(FIGURES)}")
     if plant != "all":
         check_plant(plant, ALL_PLANTS)
-    if not (isinstance(jobs, int) and jobs >= 1):
-        raise ValueError(f"jobs must be an integer >= 1, got {jobs!r}")
+    check_count("jobs", jobs)
     runs = [(n, p) for n in names for p in FIGURE_PLANTS[n] if plant in ("all", p)]
     if not runs:
         raise ValueError(f"none of {names} runs on plant {plant!r} (see FIGURE_PLANTS)")
@@ -308,8 +308,8 @@ def sweep(notebook: str | Path, grid: dict[str, list], out: Path | None = None,
     notebook = Path(notebook).resolve()
     if not notebook.is_file():
         raise ValueError(f"notebook not found: {notebook}")
-    if jobs is not None and not (isinstance(jobs, int) and jobs >= 1):
-        raise ValueError(f"jobs must be an integer >= 1, got {jobs!r}")
+    if jobs is not None:
+        check_count("jobs", jobs)
     known = validate_parameters(notebook, grid)
     if "testbed" in grid.get("plant", []) or known.get("plant", {}).get("default") == '"testbed"':
         _prepare_testbed()

@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lfc._validate import check_multiple, check_positive
+from lfc._validate import check_count, check_flag, check_multiple, check_positive
 from lfc.engine import GeneratorSide, check_area_keys, check_attacks, sample_signal
 from lfc.multiarea import MultiAreaParams
 from lfc.relays import RelaySettings
@@ -243,8 +243,8 @@ def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
 
     from tqdm.auto import tqdm
 
-    if not (isinstance(jobs, int) and jobs >= 1):
-        raise ValueError(f"jobs must be an integer >= 1, got {jobs!r}")
+    check_count("jobs", jobs)
+    check_flag("progress", progress)
     if not isinstance(scenarios, (list, tuple)) or not all(isinstance(s, dict)
                                                            for s in scenarios):
         raise ValueError(f"scenarios must be a list of dicts, got {scenarios!r}")
