@@ -10,6 +10,10 @@ from __future__ import annotations
 
 import math
 from numbers import Integral, Real
+from types import UnionType
+from typing import Any, Union, get_args, get_origin
+
+import numpy as np
 
 
 class ParameterTypeError(TypeError, ValueError):
@@ -24,7 +28,6 @@ def _is_number(value: object) -> bool:
 def is_sequence(value: object) -> bool:
     """Whether ``value`` is an ordered sequence of values: a list, a tuple or a 1-D
     array (not a string, a set or a dict, whose order or meaning differs)."""
-    import numpy as np
     return isinstance(value, (list, tuple)) or (isinstance(value, np.ndarray)
                                                 and value.ndim == 1)
 
@@ -82,7 +85,6 @@ def check_range(name: str, value: float, low: float, high: float, *,
 def check_flag(name: str, value: object) -> bool:
     """Raise ``TypeError`` unless ``value`` is a bool (Python's or numpy's): a string
     such as ``"no"`` or ``"False"`` is truthy and would silently mean yes."""
-    import numpy as np
     if not isinstance(value, (bool, np.bool_)):
         raise ParameterTypeError(f"{name} must be True or False, got {value!r} "
                         f"({type(value).__name__})")
@@ -128,7 +130,6 @@ def check_array(name: str, value: object, *, ndim: int | None = None,
     holds real numbers (not strings, bools, complex or objects), and
     ``ValueError`` unless it has ``ndim`` dimensions or ``shape`` (``None``: any
     length on that axis).  Values are not checked: NaN and inf pass."""
-    import numpy as np
     arr = np.asarray(value)
     if arr.dtype.kind not in "iuf":
         raise ParameterTypeError(f"{name} must hold real numbers, got {value!r:.80} "
@@ -165,3 +166,39 @@ def check_count(name: str, value: object) -> int:
     if value < 1:
         raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
     return int(value)
+
+
+def conforms(value: Any, hint: Any) -> bool:
+    """Whether ``value`` is of the annotated type ``hint`` (a number is a real
+    that is not a bool, Python's or numpy's; a tuple any 1-D sequence of the
+    right length; a union any of its members)."""
+    origin, args = get_origin(hint), get_args(hint)
+    if origin in (Union, UnionType):
+        return any(conforms(value, a) for a in args)
+    if hint is float:
+        return isinstance(value, Real) and not isinstance(value, (bool, np.bool_))
+    if hint is int:
+        return isinstance(value, Integral) and not isinstance(value, (bool, np.bool_))
+    if hint is bool:
+        return isinstance(value, (bool, np.bool_))
+    if hint is str:
+        return isinstance(value, str)
+    if hint is type(None):
+        return value is None
+    if origin is tuple:
+        return (isinstance(value, (tuple, list, np.ndarray)) and np.ndim(value) == 1
+                and len(value) == len(args) and all(conforms(v, a) for v, a in zip(value, args)))
+    if hint is dict or origin is dict:
+        return isinstance(value, dict)
+    return isinstance(value, hint) if isinstance(hint, type) else True
+
+
+def kind(hint: Any) -> str:
+    """``hint`` in words, for an error message."""
+    origin, args = get_origin(hint), get_args(hint)
+    if origin in (Union, UnionType):
+        return " or ".join(sorted((kind(a) for a in args), key=lambda k: k != "None"))
+    if origin is tuple:
+        return "a pair of numbers" if len(args) == 2 else f"a {len(args)}-tuple"
+    return {float: "a number", int: "an integer", bool: "True or False", str: "a string",
+            type(None): "None", dict: "a dict"}.get(hint, getattr(hint, "__name__", str(hint)))

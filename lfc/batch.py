@@ -213,6 +213,9 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
     _check_unused(scenarios)
 
 
+# the value of a filter column that asks for nothing: its option's default (else False,
+# e.g. declare_noise)
+NEUTRAL = {f.name: f.default for m in reversed(METHODS) for f in fields(options_of(m))}
 NUMERIC = ("amplitude", "freq_hz", "start", "alpha", "Ts", "stop", "sample_period", *PLANT,
            *NOISE, "uncertainty", "margin", "trips_per_hour", "seed")
 
@@ -231,16 +234,6 @@ def _check_numbers(scenarios: pd.DataFrame) -> None:
                                      f"({type(value).__name__})")
 
 
-def _neutral(column: str):
-    """The value of a filter column that asks for nothing (its option's default;
-    ``declare_noise``: False)."""
-    for method in METHODS:
-        found = {f.name: f.default for f in fields(options_of(method))}
-        if column in found:
-            return found[column]
-    return False
-
-
 def _check_unused(scenarios: pd.DataFrame) -> None:
     """A filter column set (not NaN, not its neutral value) on a row whose filter
     does not read it — a row without SCC, or of another method — is refused: it
@@ -252,7 +245,7 @@ def _check_unused(scenarios: pd.DataFrame) -> None:
         if col in ("method", "alpha", "Ts", *NOISE) or col not in scenarios.columns:
             continue
         users = [m for m in METHODS if col in options_of(m).COLUMNS]
-        neutral = _neutral(col)
+        neutral = NEUTRAL.get(col, False)
         values = scenarios[col]
         set_ = values.notna() & (values != neutral if neutral is not None else True)
         bad = set_ & ~(has_scc & method.isin(users))

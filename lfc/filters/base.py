@@ -15,14 +15,12 @@ from __future__ import annotations
 import difflib
 import math
 from dataclasses import MISSING, dataclass, field, fields
-from numbers import Integral, Real
-from types import UnionType
-from typing import Any, ClassVar, NamedTuple, Union, get_args, get_origin, get_type_hints
+from typing import Any, ClassVar, NamedTuple, get_type_hints
 
 import numpy as np
 
 from lfc._jit import inline
-from lfc._validate import ParameterTypeError, check_number
+from lfc._validate import ParameterTypeError, check_number, conforms, kind
 from lfc.model import LFCParams
 from lfc.relays import RelaySettings
 
@@ -124,41 +122,6 @@ def binding_names(flags: int) -> tuple[str, ...]:
     return tuple(name for name, bit in _BINDING if flags & bit)
 
 
-def _conforms(value: Any, hint: Any) -> bool:
-    """Whether ``value`` is of the annotated type ``hint`` (a number is a real
-    that is not a bool; a tuple any sequence of the right length)."""
-    origin, args = get_origin(hint), get_args(hint)
-    if origin in (Union, UnionType):
-        return any(_conforms(value, a) for a in args)
-    if hint is float:
-        return isinstance(value, Real) and not isinstance(value, (bool, np.bool_))
-    if hint is int:
-        return isinstance(value, Integral) and not isinstance(value, (bool, np.bool_))
-    if hint is bool:
-        return isinstance(value, (bool, np.bool_))
-    if hint is str:
-        return isinstance(value, str)
-    if hint is type(None):
-        return value is None
-    if origin is tuple:
-        return (isinstance(value, (tuple, list, np.ndarray)) and np.ndim(value) == 1
-                and len(value) == len(args) and all(_conforms(v, a) for v, a in zip(value, args)))
-    if hint is dict or origin is dict:
-        return isinstance(value, dict)
-    return True
-
-
-def _kind(hint: Any) -> str:
-    """``hint`` in words, for an error message."""
-    origin, args = get_origin(hint), get_args(hint)
-    if origin in (Union, UnionType):
-        return " or ".join(sorted((_kind(a) for a in args), key=lambda k: k != "None"))
-    if origin is tuple:
-        return "a pair of numbers" if len(args) == 2 else f"a {len(args)}-tuple"
-    return {float: "a number", int: "an integer", bool: "True or False", str: "a string",
-            type(None): "None", dict: "a dict"}.get(hint, getattr(hint, "__name__", str(hint)))
-
-
 def option(default: Any, unit: str, valid: str, doc: str) -> Any:
     """A field of an :class:`Options` dataclass: its default, unit (``""`` when
     dimensionless), valid range in words and meaning (shown by
@@ -188,8 +151,8 @@ class Options:
                              f"(its options: {', '.join(names)})")
         hints = get_type_hints(cls)
         for name, value in given.items():
-            if not _conforms(value, hints[name]):
-                raise ParameterTypeError(f"{name} must be {_kind(hints[name])}, got {value!r} "
+            if not conforms(value, hints[name]):
+                raise ParameterTypeError(f"{name} must be {kind(hints[name])}, got {value!r} "
                                          f"({type(value).__name__})")
         return cls(**given)
 

@@ -78,7 +78,7 @@ def check_type(name: str, value: object, default: object, hint: str = "") -> Non
     number for a float, a string for a string, a non-empty list of the first
     element's kind for a list; None as a default allows anything.  ``hint`` is
     added to the message."""
-    from lfc._validate import ParameterTypeError
+    from lfc._validate import ParameterTypeError, conforms, kind
     if default is None:
         return
     if isinstance(default, (list, tuple)):
@@ -88,15 +88,9 @@ def check_type(name: str, value: object, default: object, hint: str = "") -> Non
         for v in value if default else ():
             check_type(name, v, default[0], hint)
         return
-    number = isinstance(value, (int, float)) and not isinstance(value, bool)
-    if isinstance(default, bool):
-        ok, words = isinstance(value, bool), "True or False"
-    elif isinstance(default, int):
-        ok, words = number and isinstance(value, int), "an integer"
-    elif isinstance(default, float):
-        ok, words = number and math.isfinite(value), "a finite number"
-    else:
-        ok, words = isinstance(value, type(default)), f"a {type(default).__name__}"
+    expected = type(default)
+    ok = conforms(value, expected) and (expected is not float or math.isfinite(value))
+    words = "a finite number" if expected is float else kind(expected)
     if not ok:
         raise ParameterTypeError(f"parameter {name!r} must be {words} like its default "
                                  f"{default!r}, got {value!r} ({type(value).__name__}){hint}")
