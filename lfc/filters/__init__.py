@@ -29,7 +29,7 @@ from lfc.filters.certified import CertifiedFilter, CertifiedOptions
 from lfc.filters.dispatch import PYTHON, decide, decide_many, register_python
 from lfc.filters.paper import (CONFLICT_RULES, DEFAULT_READING, OUTSIDE_RULES, PREDICTIONS,
                                PaperFilter, PaperOptions)
-from lfc.model import LFCParams
+from lfc.model import STATES, LFCParams
 from lfc.relays import RelaySettings
 
 __all__ = ["ALARM_BITS", "ALARM_FLAGS", "CONFLICT_RULES", "DEFAULT_READING", "METHODS",
@@ -197,7 +197,9 @@ class SafetyFilter:
             If ``x``, ``u_ref`` or ``p_load`` is not made of real numbers (a string,
             a bool, a complex number).
         """
-        x = check_array("x", x, shape=(5,))
+        x = check_array("x", x)
+        if x.shape != (5,):
+            raise ValueError(f"x must have 5 entries {STATES}, got shape {x.shape}")
         check_number("u_ref", u_ref)
         check_number("p_load", p_load)
         u_ref = float(u_ref)

@@ -56,6 +56,10 @@ def _parser() -> argparse.ArgumentParser:
     rep.add_argument("--jobs", type=_jobs, default=2, help="notebooks run in parallel")
     rep.add_argument("--figures-dir", type=_folder, default=runner.ROOT / "figures")
     rep.add_argument("--build-dir", type=_folder, default=runner.ROOT / "build")
+    rep.add_argument("--compare-blas", metavar="CORE",
+                     help="then run the same notebooks again with OPENBLAS_CORETYPE=CORE "
+                          "(e.g. Haswell) into BUILD_DIR/blas-CORE and list every claim "
+                          "and table cell that differs (exit 1 if any)")
     sw = sub.add_parser("sweep", help="run a notebook over a parameter grid")
     sw.add_argument("notebook", type=Path)
     sw.add_argument("-p", "--param", nargs="+", action="append", default=[],
@@ -154,7 +158,18 @@ def main(argv: list[str] | None = None) -> int:
             if notes:
                 print("\nDocumented deviations (README, 'Where the testbed differs'):")
                 print("\n".join(f"- {n}" for n in notes))
-            return 0 if all(o.ok for o in outcomes) else 1
+            ok = all(o.ok for o in outcomes)
+            if args.compare_blas:
+                again, tables = runner.rerun_with_blas(args.compare_blas, args.only,
+                                                       args.plant, args.jobs, args.build_dir)
+                diff = runner.differences(outcomes, again, args.figures_dir, tables,
+                                          ("this machine's kernel", args.compare_blas))
+                print(f"\nUnder OPENBLAS_CORETYPE={args.compare_blas}: "
+                      + ("every claim and table cell agrees" if not diff else
+                         f"{len(diff)} difference(s)"))
+                print("\n".join(f"- {d}" for d in diff))
+                ok = ok and not diff
+            return 0 if ok else 1
         if args.command == "batch":
             return _batch(args)
         if args.command == "readme":

@@ -218,6 +218,59 @@ def reproduce(only: list[str] | None = None, plant: str = "all", jobs: int = 2,
     return sorted(outcomes, key=lambda o: labels.index(o.name))
 
 
+def differences(a: list[RunOutcome], b: list[RunOutcome], tables_a: Path, tables_b: Path,
+                labels: tuple[str, str] = ("A", "B")) -> list[str]:
+    """What differs between two reproduce runs of the same notebooks: each claim
+    whose verdict differs, each notebook that ran in one only, and each generated
+    table (``*.md`` of ``tables_b``) whose text differs from ``tables_a``'s (the
+    first differing row).  Empty when every verdict and every table cell agree."""
+    out = []
+    by_name = {o.name: o for o in a}
+    for o in b:
+        other = by_name.get(o.name)
+        if other is None or bool(other.ok) != bool(o.ok):
+            out.append(f"{o.name}: ran {'ok' if other and other.ok else 'not ok'} on "
+                       f"{labels[0]}, {'ok' if o.ok else 'not ok'} on {labels[1]}")
+            continue
+        for claim in sorted(set(o.claims) | set(other.claims)):
+            va, vb = other.claims.get(claim), o.claims.get(claim)
+            if va != vb:
+                out.append(f"{o.name}: claim {claim!r}: {va} on {labels[0]}, {vb} on {labels[1]}")
+    for table in sorted(Path(tables_b).glob("*.md")):
+        mine = Path(tables_a) / table.name
+        rows_b = table.read_text().splitlines()
+        rows_a = mine.read_text().splitlines() if mine.exists() else []
+        if rows_a != rows_b:
+            k = next((i for i, (x, y) in enumerate(zip(rows_a, rows_b)) if x != y),
+                     min(len(rows_a), len(rows_b)))
+            row_a = rows_a[k] if k < len(rows_a) else "(none)"
+            row_b = rows_b[k] if k < len(rows_b) else "(none)"
+            out.append(f"table {table.name}, line {k + 1}: {row_a!r} on {labels[0]}, "
+                       f"{row_b!r} on {labels[1]}")
+    return out
+
+
+def rerun_with_blas(core: str, only: list[str] | None, plant: str, jobs: int,
+                    build_dir: Path) -> tuple[list[RunOutcome], Path]:
+    """The same notebooks again with the BLAS kernel ``OPENBLAS_CORETYPE=core``
+    (e.g. ``"Haswell"``, ``"SkylakeX"``, ``"Zen"``; the kernels inherit it), into
+    ``build_dir/blas-<core>/``: their outcomes and figures folder, for
+    :func:`differences` against the first run."""
+    if not (isinstance(core, str) and re.fullmatch(r"[A-Za-z0-9]+", core)):
+        raise ValueError(f"core must be an OpenBLAS core type such as 'Haswell', got {core!r}")
+    folder = Path(build_dir) / f"blas-{core}"
+    before = os.environ.get("OPENBLAS_CORETYPE")
+    os.environ["OPENBLAS_CORETYPE"] = core
+    try:
+        outcomes = reproduce(only, plant, jobs, folder / "figures", folder)
+    finally:
+        if before is None:
+            os.environ.pop("OPENBLAS_CORETYPE", None)
+        else:
+            os.environ["OPENBLAS_CORETYPE"] = before
+    return outcomes, folder / "figures"
+
+
 def _prepare_testbed() -> None:
     """Generate ANDES' code once in this process, not in parallel kernels."""
     from lfc.testbed import prepare_andes
