@@ -87,3 +87,30 @@ def _same(a, b, where: str) -> None:
 def test_the_linear_chapters_verdicts_and_numbers_do_not_depend_on_the_blas_kernel():
     first, second = (_run(core) for core in CORES)
     _same(first, second, "")
+
+
+def test_compare_blas_lists_each_claim_and_table_cell_that_differs(tmp_path):
+    """``reproduce --compare-blas``'s comparison: a flipped claim, a notebook
+    that failed on one kernel only and a changed table row are each reported;
+    identical runs give nothing."""
+    from lfc.repro.runner import RunOutcome, differences
+    a_dir, b_dir = tmp_path / "a", tmp_path / "b"
+    a_dir.mkdir(), b_dir.mkdir()
+    table = "| attack | severity |\n|---|---|\n| single | 1.032 |\n"
+    (a_dir / "t.md").write_text(table)
+    (b_dir / "t.md").write_text(table)
+    a = [RunOutcome("fig4", True, 1.0, {"trips": True}), RunOutcome("fig5", True, 1.0, {})]
+    assert differences(a, a, a_dir, b_dir) == []
+    (b_dir / "t.md").write_text(table.replace("1.032", "1.22"))
+    b = [RunOutcome("fig4", True, 1.0, {"trips": False}), RunOutcome("fig5", False, 1.0, {})]
+    diff = differences(a, b, a_dir, b_dir, ("here", "Haswell"))
+    assert diff == ["fig4: claim 'trips': True on here, False on Haswell",
+                    "fig5: ran ok on here, not ok on Haswell",
+                    "table t.md, line 3: '| single | 1.032 |' on here, '| single | 1.22 |' "
+                    "on Haswell"]
+
+
+def test_compare_blas_refuses_a_core_name_before_running_anything(capsys):
+    from lfc.repro.cli import main
+    assert main(["reproduce", "--compare-blas", "Has well"]) == 2
+    assert "--compare-blas must be an OpenBLAS core type" in capsys.readouterr().err

@@ -6,6 +6,7 @@ into the README)."""
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import time
 from pathlib import Path
@@ -42,6 +43,14 @@ def _folder(text: str) -> Path:
     return Path(text)
 
 
+def _core(text: str) -> str:
+    """``--compare-blas``: an OpenBLAS core type name (letters and digits)."""
+    if not re.fullmatch(r"[A-Za-z0-9]+", text):
+        raise argparse.ArgumentTypeError(f"--compare-blas must be an OpenBLAS core type such "
+                                         f"as Haswell, got {text!r}")
+    return text
+
+
 _jobs = _count("--jobs")
 
 
@@ -56,7 +65,7 @@ def _parser() -> argparse.ArgumentParser:
     rep.add_argument("--jobs", type=_jobs, default=2, help="notebooks run in parallel")
     rep.add_argument("--figures-dir", type=_folder, default=runner.ROOT / "figures")
     rep.add_argument("--build-dir", type=_folder, default=runner.ROOT / "build")
-    rep.add_argument("--compare-blas", metavar="CORE",
+    rep.add_argument("--compare-blas", metavar="CORE", type=_core,
                      help="then run the same notebooks again with OPENBLAS_CORETYPE=CORE "
                           "(e.g. Haswell) into BUILD_DIR/blas-CORE and list every claim "
                           "and table cell that differs (exit 1 if any)")
