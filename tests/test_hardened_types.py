@@ -205,6 +205,10 @@ def test_red_team_arguments_are_checked():
                          ({"search": "free-form on P_c"}, "a dict with 'values'")):
         with pytest.raises(ValueError, match=words):
             redteam.replay(found, 10.0)
+    # a row of a table of results replays (notebook 08 passes one)
+    import pandas as pd
+    row = pd.DataFrame([{"search": "sinusoid on P_c", "theta": (0.5, 1.0)}]).iloc[0]
+    assert redteam.replay(row, 10.0)["pc_attack"] == lfc.Sinusoid(0.5, 1.0, start=1.0)
 
 
 def test_load_battery_arguments_are_checked():

@@ -222,13 +222,14 @@ def family_search(params: LFCParams, defender: Defender, family: str, *,
 
 
 def replay(found, duration: float) -> dict:
-    """The :func:`lfc.simulate` keywords that replay a found attack: a result of
+    """The :func:`lfc.simulate` keywords that replay a found attack: a result (a
+    dict, or a row of a table of them) of
     :func:`family_search` (its ``search`` family and ``theta``) or of
     :func:`freeform_search` (its ``values`` and ``sample_period``), as a
     ``pc_attack`` or ``wref_attack`` signal starting at ``ATTACK_START``;
     ``duration`` (s) ends a chirp, as in the search's runs."""
     def entry(key: str):
-        if not isinstance(found, dict) or key not in found:
+        if not isinstance(found, (dict, pd.Series)) or key not in found.keys():
             raise ValueError(f"found must be a result of family_search or freeform_search "
                              f"(a dict with {key!r}), got {found!r:.80}")
         return found[key]
