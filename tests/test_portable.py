@@ -114,3 +114,22 @@ def test_compare_blas_refuses_a_core_name_before_running_anything(capsys):
     from lfc.repro.cli import main
     assert main(["reproduce", "--compare-blas", "Has well"]) == 2
     assert "--compare-blas must be an OpenBLAS core type" in capsys.readouterr().err
+
+
+def test_tables_print_the_stable_digits_and_never_round_up_to_a_setting():
+    from lfc._format import number
+    assert [number(v) for v in (3.042, 3.044, 0.3118, 0.3121)] == ["3.04", "3.04", "0.312",
+                                                                   "0.312"]
+    assert number(0.9996) == "0.9996" and number(-0.99996) == "-0.99996"
+    assert number(1234.5) == "1234" and number(float("nan")) == "—"
+
+
+def test_a_trip_count_near_a_setting_is_reported_at_the_edge_with_its_margin():
+    """The IEEE 39-bus row that flipped between two BLAS kernels (one area tripped
+    or two) reads "at the edge" on both, naming the severities it rests on."""
+    from lfc.experiments.redteam import trip_verdict
+    assert trip_verdict({0: False, 1: True}, {0: 0.951, 1: 1.032}) == \
+        "1, at the edge: area 0 at 0.951, area 1 at 1.03"
+    assert trip_verdict({0: True, 1: True}, {0: 1.22, 1: 1.033}) == \
+        "2, at the edge: area 1 at 1.03"
+    assert trip_verdict({0: True, 1: False}, {0: 2.5, 1: 0.5}) == "1"

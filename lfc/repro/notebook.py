@@ -9,6 +9,7 @@ import math
 import re
 from pathlib import Path
 
+from lfc._format import STABLE_DIGITS, number
 from lfc.experiments.deviations import DEVIATIONS
 from lfc.experiments.scenarios import ALL_PLANTS, PLANTS, check_plant, design_params
 from lfc.model import LFCParams
@@ -173,13 +174,12 @@ def record_claims(results_dir: str | Path, claims: dict[str, bool], check: bool,
                              "and the README: " + "; ".join(stale))
 
 
-def markdown_table(table, digits: int = 4) -> str:
+def markdown_table(table, digits: int = STABLE_DIGITS) -> str:
     """A pandas DataFrame as a GitHub markdown table; floats to ``digits``
-    significant digits (enough that a value below a threshold never prints as it)."""
+    significant digits (:func:`lfc._format.number`: the digits that are stable
+    across BLAS kernels, and a value below 1 never printed as 1)."""
     def cell(v) -> str:
-        if isinstance(v, float):
-            return "—" if v != v else f"{v:.{digits}g}"
-        return str(v)
+        return number(v, digits) if isinstance(v, float) else str(v)
     lines = ["| " + " | ".join(map(str, table.columns)) + " |",
              "|" + "---|" * len(table.columns)]
     lines += ["| " + " | ".join(cell(v) for v in row) + " |"

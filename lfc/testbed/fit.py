@@ -31,6 +31,7 @@ import control as ct
 import numpy as np
 from scipy.optimize import least_squares
 
+from lfc._format import number
 from lfc.model import LFCParams, lfc_model
 from lfc.signals import Step
 from lfc.testbed.case import MicrogridCase
@@ -65,10 +66,11 @@ class FitReport:
     initial_error: dict
 
     def table(self) -> str:
-        """Markdown table: parameters (initial, fitted) and errors."""
+        """Markdown table: parameters (initial, fitted; to the stable digits,
+        :mod:`lfc._format`) and errors."""
         lines = ["| parameter | from case data | fitted |", "|---|---|---|"]
-        lines += [f"| {n} ({UNITS[n]}) | {getattr(self.initial, n):.4g} | "
-                  f"{getattr(self.params, n):.4g} |" for n in FITTED]
+        lines += [f"| {n} ({UNITS[n]}) | {number(getattr(self.initial, n))} | "
+                  f"{number(getattr(self.params, n))} |" for n in FITTED]
         lines += ["", "| output | error, case data | error, fitted |", "|---|---|---|"]
         lines += [f"| {n} | {100 * self.initial_error[n]:.2f} % | {100 * self.error[n]:.2f} % |"
                   for n in OUTPUTS]

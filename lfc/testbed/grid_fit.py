@@ -27,6 +27,7 @@ from functools import lru_cache
 import numpy as np
 from scipy.integrate import cumulative_trapezoid
 
+from lfc._format import number
 from lfc.multiarea import MultiAreaParams
 from lfc.signals import Step
 from lfc.testbed.fit import (OUTPUTS, FitReport, cached_fit, check_report, decode_report,
@@ -69,7 +70,7 @@ class GridFit:
     def table(self) -> str:
         """Markdown: each area's fit table, then the tie-line's."""
         parts = [f"**Area {i}**\n\n{r.table()}" for i, r in enumerate(self.areas)]
-        parts.append(f"**Tie-line**: T = {self.T:.4g} pu, error {100 * self.tie_error:.2f} %")
+        parts.append(f"**Tie-line**: T = {number(self.T)} pu, error {100 * self.tie_error:.2f} %")
         return "\n\n".join(parts)
 
 
