@@ -39,6 +39,7 @@ from tqdm.auto import tqdm
 from lfc._files import code_digest, write_atomic
 from lfc._validate import ParameterTypeError, check_count, check_flag
 from lfc.engine import METRICS, Scenarios
+from lfc.estimation import STD
 from lfc.filters import (CONFLICT_RULES, METHODS, OUTSIDE_RULES, PREDICTIONS, SafetyFilter,
                          options_of)
 from lfc.model import LFCParams
@@ -165,6 +166,15 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
         if bad.any():
             raise ValueError(f"column {col!r} must be finite and {what} (or NaN); row "
                              f"{scenarios.index[bad][0]!r} has {scenarios[col][bad].iloc[0]!r}")
+    for col in NOISE:
+        if col not in scenarios.columns:
+            continue
+        values = pd.to_numeric(scenarios[col], errors="coerce")
+        bad = (values > 0) & ~((values >= STD[0]) & (values <= STD[1]))
+        if bad.any():
+            raise ValueError(f"column {col!r} must be 0 (no noise) or lie in [{STD[0]}, "
+                             f"{STD[1]}]; row {scenarios.index[bad][0]!r} has "
+                             f"{scenarios[col][bad].iloc[0]!r}")
     for col in ("uncertainty", "margin"):
         if col not in scenarios.columns:
             continue

@@ -30,8 +30,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from lfc._jit import inline, kernel
-from lfc._validate import ParameterTypeError, check_flag, check_index, check_pair, check_seed
-from lfc.estimation import KalmanFilter, kf_correct, kf_predict, measurement_std
+from lfc._validate import ParameterTypeError, check_flag, check_index, check_seed
+from lfc.estimation import (KalmanFilter, check_noise_std, kf_correct, kf_predict,
+                            measurement_std)
 from lfc.filters import SafetyFilter
 from lfc.filters.base import ACTIVE, ALARM_BITS, MEMORY, OUTSIDE
 from lfc.filters.dispatch import decide
@@ -346,9 +347,9 @@ def _lowest_bit(bits: int) -> int:
 
 # -- the Python side: scenario tables, a run, the testbed's generator side ---------------
 def check_noise(noise_std: tuple[float, float]) -> bool:
-    """Raise unless ``noise_std`` is a pair (dw_meas, rocof_meas) of finite values
-    >= 0 (pu, pu/s); return whether there is any noise."""
-    return any(s > 0 for s in check_pair("noise_std", noise_std))
+    """Raise unless ``noise_std`` is a pair (dw_meas, rocof_meas) of values 0 or
+    in :data:`lfc.estimation.STD` (pu, pu/s); return whether there is any noise."""
+    return any(s > 0 for s in check_noise_std("noise_std", noise_std))
 
 
 def make_noise(noise_std: tuple[float, float], n: int, seed: int | tuple[int, ...]

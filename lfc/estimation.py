@@ -48,6 +48,18 @@ STD = (1e-9, 1e2)
 PERIOD = (1e-5, 1.0)
 
 
+def check_noise_std(name: str, value: object) -> tuple[float, float]:
+    """``value`` as a pair of measurement-noise standard deviations (pu, pu/s);
+    raise unless each is 0 (no noise) or in ``STD`` (the range a Kalman filter
+    is built for), naming ``name[i]``."""
+    pair = check_pair(name, value)
+    for i, s in enumerate(pair):
+        if s != 0 and not STD[0] <= s <= STD[1]:
+            raise ValueError(f"{name}[{i}] must be 0 (no noise) or lie in [{STD[0]}, {STD[1]}], "
+                             f"got {s!r}")
+    return pair
+
+
 def measurement_std(noise_std: tuple[float, float]) -> tuple[float, float]:
     """The Kalman filter's measurement-noise model for measurement noise
     ``noise_std`` (pu, pu/s): each entry, or ``DEFAULT_MEAS_STD``'s where it is 0

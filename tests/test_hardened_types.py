@@ -251,3 +251,28 @@ def test_a_kalman_filter_exists_at_every_corner_or_says_why():
             assert np.isfinite(k.gain).all()
             solved += 1
     assert solved > 0
+
+
+def test_noise_beyond_the_kalman_filters_range_is_refused_naming_the_noise():
+    """noise_w=101 reached the Kalman filter and was refused as meas_std[0]: the
+    user never wrote meas_std (found by the fuzz suite)."""
+    with pytest.raises(ValueError, match=r"noise_std\[0\] must be 0 \(no noise\) or lie in"):
+        lfc.simulate(P, duration=1.0, noise_std=(101.0, 0.0))
+    with pytest.raises(ValueError, match="column 'noise_w' must be 0"):
+        lfc.simulate_many(P, _row(noise_w=1e-12), duration=1.0)
+    with pytest.raises(ValueError, match=r"noise_std\[1\] must be 0"):
+        lfc.SafetyFilter(P, method="certified", noise_std=(1e-4, 1e3))
+
+
+def test_a_fit_cache_is_kept_per_blas_kernel(monkeypatch, tmp_path):
+    """A fit computed under OPENBLAS_CORETYPE=Haswell was read by a run under the
+    default kernel (one cache file), which then differed from the regression
+    record by 1e-11: each kernel keeps its own file."""
+    pytest.importorskip("andes")
+    from lfc.testbed.case import MicrogridCase
+    from lfc.testbed.fit import _cache_path
+    monkeypatch.setenv("LFC_CACHE_DIR", str(tmp_path))
+    monkeypatch.delenv("OPENBLAS_CORETYPE", raising=False)
+    default = _cache_path(MicrogridCase())
+    monkeypatch.setenv("OPENBLAS_CORETYPE", "Haswell")
+    assert _cache_path(MicrogridCase()) != default

@@ -97,7 +97,7 @@ from scipy.stats import chi2, norm
 from lfc._jit import inline, maxnum, minnum
 from lfc._validate import (check_nonnegative, check_pair, check_positive, check_range,
                            is_sequence)
-from lfc.estimation import KalmanFilter, measurement_std
+from lfc.estimation import KalmanFilter, check_noise_std, measurement_std
 from lfc.filters.base import (ACTIVE, BIND_CERT, BIND_UMAX, BIND_UMIN, INVALID, OUTSIDE,
                               Backend, Options, check_limits, given, option, valid_input)
 from lfc.model import LFCParams, lfc_matrices, output_matrix
@@ -220,6 +220,7 @@ class CertifiedOptions(Options):
             raise ValueError(f"margin must be in [0, 1), got {self.margin!r}")
         if self.noise_std is not None:
             pair = check_pair("noise_std", self.noise_std, positive=True)
+            check_noise_std("noise_std", pair)
             object.__setattr__(self, "noise_std", pair)
         if self.trips_per_hour is not None:
             if self.noise_std is None:

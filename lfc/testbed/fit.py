@@ -10,8 +10,10 @@ RMS of those scaled residuals per output.
 
 The fit takes about 4 s (two ANDES runs), so :func:`fit_report` keeps it on
 disk: ``$LFC_CACHE_DIR`` (default ``~/.cache/lfc-scc``), one JSON file per
-case, named by a hash of the case, the ANDES version and the package's source
-(a stale file never matches) and holding a SHA-256 of its contents (a damaged
+case, named by a hash of the case, the ANDES version, the package's source
+(a stale file never matches) and ``$OPENBLAS_CORETYPE`` (a fit computed under
+another BLAS kernel differs in its last bits: runs under two kernels, as
+``reproduce --compare-blas`` makes, keep their own), and holding a SHA-256 of its contents (a damaged
 file is recomputed with a ``RuntimeWarning`` that names it).
 """
 
@@ -171,7 +173,9 @@ def _cache_path(case: object, kind: str = "testbed-fit") -> Path:
     import andes
 
     from lfc._files import code_digest
-    key = hashlib.sha256((repr(case) + andes.__version__ + code_digest("testbed")).encode())
+    # a fit computed under another BLAS kernel differs in its last bits: not shared
+    blas = os.environ.get("OPENBLAS_CORETYPE", "")
+    key = hashlib.sha256((repr(case) + andes.__version__ + code_digest("testbed") + blas).encode())
     folder = Path(os.environ.get("LFC_CACHE_DIR") or Path.home() / ".cache" / "lfc-scc")
     return folder / f"{kind}-{key.hexdigest()[:16]}.json"
 
