@@ -81,7 +81,42 @@ def stop_kernels(wait: float = 1.0) -> int:
             except OSError:
                 pass
         shutil.rmtree(km._socket_dir, ignore_errors=True)
+    for pid in _kernel_children():      # launched, but not yet known to its manager
+        group = os.getpgid(pid) if pid_exists(pid) else None
+        try:
+            if group and group != os.getpgrp():
+                os.killpg(group, signal.SIGKILL)
+            else:
+                os.kill(pid, signal.SIGKILL)
+        except OSError:
+            pass
     return len(live)
+
+
+def pid_exists(pid: int) -> bool:
+    """Whether a process ``pid`` exists."""
+    try:
+        os.kill(pid, 0)
+    except OSError:
+        return False
+    return True
+
+
+def _kernel_children() -> list[int]:
+    """This process's child processes that are Jupyter kernels (Linux ``/proc``;
+    elsewhere none): a kernel whose launch a Ctrl-C interrupted has a process
+    before its manager knows it, and orphaned it would live on for seconds."""
+    me, found = str(os.getpid()), []
+    for proc in Path("/proc").glob("[0-9]*"):
+        try:
+            status = (proc / "status").read_text()
+            parent = next(line.split()[1] for line in status.splitlines()
+                          if line.startswith("PPid:"))
+            if parent == me and b"ipykernel" in (proc / "cmdline").read_bytes():
+                found.append(int(proc.name))
+        except (OSError, StopIteration, IndexError):
+            continue
+    return found
 
 
 class IPCKernelManager(KernelManager):
