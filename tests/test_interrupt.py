@@ -49,9 +49,10 @@ def _default_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
-def interrupt(cmd: list[str], ready, marker: str, env: dict | None = None) -> float:
-    """Start ``cmd``, send SIGINT once ``ready()``; return the seconds until it and
-    every process with ``marker`` have ended (the command must exit with 130)."""
+def interrupt(cmd: list[str], ready, marker: str, env: dict | None = None,
+              sig: int = signal.SIGINT) -> float:
+    """Start ``cmd``, send ``sig`` (SIGINT) once ``ready()``; return the seconds until
+    it and every process with ``marker`` have ended (the command must exit with 130)."""
     proc = subprocess.Popen(cmd, cwd=ROOT, env={**os.environ, **(env or {})},
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             preexec_fn=_default_sigint)
@@ -61,7 +62,7 @@ def interrupt(cmd: list[str], ready, marker: str, env: dict | None = None) -> fl
         assert time.monotonic() < deadline, "never got ready"
         time.sleep(0.1)
     t0 = time.monotonic()
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(sig)
     _, err = proc.communicate(timeout=60)
     while running(marker) and time.monotonic() - t0 < 30:
         time.sleep(0.05)
@@ -106,8 +107,10 @@ NOTEBOOK_COMMANDS = {
 
 
 @pytest.mark.skipif(not Path("/proc").exists(), reason="needs /proc")
-@pytest.mark.parametrize("command", list(NOTEBOOK_COMMANDS))
-def test_ctrl_c_on_notebook_commands_stops_their_kernels_and_queued_runs(tmp_path, command):
+@pytest.mark.parametrize("command, sig", [(c, signal.SIGINT) for c in NOTEBOOK_COMMANDS]
+                         + [("reproduce", signal.SIGTERM)])
+def test_ctrl_c_on_notebook_commands_stops_their_kernels_and_queued_runs(tmp_path, command,
+                                                                         sig):
     temp = tmp_path / "tmp"            # the kernels' connection files: their marker
     temp.mkdir()
     cmd = [sys.executable, "-m", "lfc",
@@ -116,7 +119,7 @@ def test_ctrl_c_on_notebook_commands_stops_their_kernels_and_queued_runs(tmp_pat
     def a_kernel_runs() -> bool:
         return bool(running(str(temp))) and bool(list((tmp_path / "build").rglob("*.ipynb")))
 
-    elapsed = interrupt(cmd, a_kernel_runs, str(tmp_path), {"TMPDIR": str(temp)})
+    elapsed = interrupt(cmd, a_kernel_runs, str(tmp_path), {"TMPDIR": str(temp)}, sig)
     assert elapsed < STOP_WITHIN
     executed = list((tmp_path / "build").rglob("*.ipynb"))
     assert len(executed) == 1                       # the queued notebooks never started
