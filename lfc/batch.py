@@ -43,7 +43,7 @@ from lfc.estimation import STD
 from lfc.filters import (CONFLICT_RULES, METHODS, OUTSIDE_RULES, PREDICTIONS, SafetyFilter,
                          options_of)
 from lfc.model import LFCParams
-from lfc.relays import RELAY_NAMES, RelaySettings
+from lfc.relays import RELAY_NAMES, RelaySettings, relays_or_default
 from lfc.signals import Chirp, Ramp, Samples, Signal, Sinusoid, Square, Step
 from lfc.simulate import METRIC_KEYS, check_timing
 
@@ -402,7 +402,7 @@ def simulate_table(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
     check_flag("progress", progress)
     if out is not None and (not isinstance(out, (str, Path)) or not str(out).strip()):
         raise ValueError(f"out must be a folder path (not empty) or None, got {out!r}")
-    relays = relays or RelaySettings()
+    relays = relays_or_default(relays)
     args = (params, duration, relays, dt, control_period)
     chunks = [scenarios.iloc[i:i + chunk_size] for i in range(0, len(scenarios), chunk_size)]
     folder = Path(out) if out is not None else None

@@ -553,6 +553,11 @@ class Scenarios:
             scc = filters.get(a)
             if scc is not None and not isinstance(scc, SafetyFilter):
                 raise ValueError(f"filters[{a}] must be a SafetyFilter or None, got {scc!r}")
+            if scc is not None and not np.array_equal(scc.relays.arrays()[0],
+                                                      self.relays.arrays()[0]):
+                raise ValueError(f"the filter of area {a} keeps the safe set of {scc.relays} "
+                                 f"but the simulation's relays are {self.relays}: a trip "
+                                 f"would go unflagged; build it with the same thresholds")
             if scc is not None:
                 scc.check_period(self.period)
             kf = make_estimator(estimator, area, self.period, noise_std)

@@ -15,10 +15,23 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lfc._jit import inline, jit
-from lfc._validate import check_nonnegative, check_positive, check_range
+from lfc._validate import ParameterTypeError, check_number, check_range
 
 RELAY_NAMES = ("OF2", "UF2", "ROCOF")
 TIME_TOL = 1e-9  # s, tolerance when comparing elapsed pickup time to a delay
+MAX_ROCOF_LIMIT = 10.0   # pu/s: the largest ROCOF setting (RelaySettings)
+MAX_DELAY = 1e4          # s: the longest clearing time
+
+
+def relays_or_default(relays: object) -> "RelaySettings":
+    """``relays``, or the default ``RelaySettings()`` for None; anything else
+    (``0``, ``"x"``) is a :class:`~lfc._validate.ParameterTypeError`, not the default."""
+    if relays is None:
+        return RelaySettings()
+    if not isinstance(relays, RelaySettings):
+        raise ParameterTypeError(f"relays must be a RelaySettings or None, got {relays!r:.80} "
+                                 f"({type(relays).__name__})")
+    return relays
 
 
 @dataclass(frozen=True)
@@ -28,15 +41,17 @@ class RelaySettings:
     Parameters
     ----------
     of2 : float
-        Over-frequency threshold (pu of nominal), > 1. Default 1.03.
+        Over-frequency threshold (pu of nominal), in (1, 2]. Default 1.03.
     uf2 : float
         Under-frequency threshold (pu), in (0, 1). Default 0.942.
     of2_delay, uf2_delay : float
-        Clearing times (s), >= 0. Default 0.16.
+        Clearing times (s), in [0, 1e4]. Default 0.16.
     rocof_limit : float
-        ROCOF threshold (pu/s), > 0. Default 0.05 (3 Hz/s at 60 Hz).
+        ROCOF threshold (pu/s), in (0, ``MAX_ROCOF_LIMIT`` = 10] (600 Hz/s at 60 Hz:
+        beyond any relay; a larger one overflows the filters' barrier arithmetic, so
+        "ROCOF off" is 10). Default 0.05 (3 Hz/s at 60 Hz).
     rocof_delay : float
-        ROCOF clearing time (s), >= 0. Default 0.
+        ROCOF clearing time (s), in [0, 1e4]. Default 0.
     """
 
     of2: float = 1.03
@@ -47,11 +62,14 @@ class RelaySettings:
     rocof_delay: float = 0.0
 
     def __post_init__(self) -> None:
-        check_range("of2", self.of2, 1.0, np.inf)
+        for name, low, high in (("of2", 1.0, 2.0), ("rocof_limit", 0.0, MAX_ROCOF_LIMIT)):
+            value = getattr(self, name)
+            check_number(name, value)
+            if not low < value <= high:
+                raise ValueError(f"{name} must lie in ({low}, {high}], got {value!r}")
         check_range("uf2", self.uf2, 0.0, 1.0)
-        check_positive("rocof_limit", self.rocof_limit)
         for name in ("of2_delay", "uf2_delay", "rocof_delay"):
-            check_nonnegative(name, getattr(self, name))
+            check_range(name, getattr(self, name), 0.0, MAX_DELAY, closed=True)
 
     @property
     def F(self) -> float:

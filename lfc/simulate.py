@@ -23,7 +23,7 @@ from lfc.engine import CTRL_COLUMNS, Scenarios, sample_signal
 from lfc.filters import SafetyFilter, binding_names
 from lfc.filters.base import ACTIVE, ALARM_BITS, INFEASIBLE, INVALID, OUTSIDE, SOLVER_ERROR
 from lfc.model import STATES, LFCParams
-from lfc.relays import RELAY_NAMES, RelaySettings
+from lfc.relays import RELAY_NAMES, RelaySettings, relays_or_default
 from lfc.signals import Signal
 
 __all__ = ["ALARM_COLUMNS", "METRIC_KEYS", "SimResult", "check_timing", "simulate_area"]
@@ -198,7 +198,7 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
     check_timing(duration, dt, control_period)
     if scc is not None and not isinstance(scc, SafetyFilter):
         raise ParameterTypeError(f"scc must be a SafetyFilter or None, got {scc!r}")
-    relays = relays if relays is not None else RelaySettings()
+    relays = relays_or_default(relays)
     sc = Scenarios(params, duration=duration, dt=dt, control_period=control_period,
                    relays=relays)
     sc.add(attacks={0: {"pc": pc_attack, "wref": wref_attack}}, loads={0: load},

@@ -66,7 +66,7 @@ from lfc.engine import METRICS, Scenarios, check_area_keys, sample_signal
 from lfc.filters import SafetyFilter
 from lfc.model import STATES
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams
-from lfc.relays import RELAY_NAMES, RelaySettings
+from lfc.relays import RELAY_NAMES, RelaySettings, relays_or_default
 from lfc.simulate import SimResult, check_timing, result
 
 __all__ = ["MultiAreaResult", "area_filter", "multiarea_result", "simulate_grid_linear",
@@ -216,7 +216,7 @@ def simulate_grid_linear(params: MultiAreaParams, *, duration: float,
     check_timing(duration, dt, control_period)
     if not isinstance(params, MultiAreaParams):
         raise ValueError(f"params must be a MultiAreaParams, got {type(params).__name__}")
-    relays = relays if relays is not None else RelaySettings()
+    relays = relays_or_default(relays)
     filters = check_area_keys(filters, params.n_areas, "filters")
     built = {a: area_filter(params, a, f, relays, control_period) for a, f in filters.items()}
     sc = Scenarios(params, duration=duration, dt=dt, control_period=control_period,
@@ -303,7 +303,7 @@ def simulate_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
         raise ValueError(f"scenarios must be a non-empty list of dicts, got {scenarios!r}")
     keys = {"attacks", "loads", "filters", "estimator", "noise_std", "seed", "feedforward",
             "relay_noise"}
-    relays = relays if relays is not None else RelaySettings()
+    relays = relays_or_default(relays)
     cache: dict = {}
     rows = []
     for k, s in enumerate(scenarios):

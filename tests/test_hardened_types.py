@@ -276,3 +276,39 @@ def test_a_fit_cache_is_kept_per_blas_kernel(monkeypatch, tmp_path):
     default = _cache_path(MicrogridCase())
     monkeypatch.setenv("OPENBLAS_CORETYPE", "Haswell")
     assert _cache_path(MicrogridCase()) != default
+
+
+# -- the third hostile review --
+
+def test_relay_settings_have_ranges_the_filters_can_compute_with():
+    """rocof_limit=1e155 made the paper filter divide by zero, 1e60 flagged every
+    valid call invalid_input; 10 pu/s (600 Hz/s) is "ROCOF off"."""
+    for kw, words in ((dict(rocof_limit=1e155), r"rocof_limit must lie in \(0.0, 10.0\]"),
+                      (dict(rocof_limit=0.0), "rocof_limit must lie in"),
+                      (dict(of2=1.0), r"of2 must lie in \(1.0, 2.0\]"),
+                      (dict(of2_delay=1e5), r"of2_delay must lie in \[0.0, 10000.0\]")):
+        with pytest.raises(ValueError, match=words):
+            lfc.RelaySettings(**kw)
+    off = lfc.RelaySettings(rocof_limit=10.0, of2=2.0)
+    for method in ("paper", "certified"):
+        u, info = lfc.SafetyFilter(P, off, method=method).filter(np.zeros(5), 0.5)
+        assert u == 0.5 and not info.alarm
+
+
+def test_relays_of_a_falsy_value_are_refused_not_defaulted():
+    from lfc.experiments.load_during_attack import battery
+    with pytest.raises(TypeError, match="relays must be a RelaySettings or None, got 0"):
+        lfc.simulate_many(P, _row(), duration=1.0, relays=0)
+    with pytest.raises(TypeError, match="relays must be a RelaySettings or None"):
+        battery(P, None, (0.1,), relays=0)
+
+
+def test_a_filter_keeping_other_relay_thresholds_than_the_simulation_is_refused():
+    """A certified filter built for 0.05 pu/s in a run whose ROCOF relay is set at
+    0.02 tripped with no flag at all: its guarantee is for another safe set."""
+    for plant, kw in ((P, {"scc": lfc.SafetyFilter(P, method="certified")}),
+                      (TWO, {"filters": {0: lfc.SafetyFilter(TWO.areas[0])}})):
+        with pytest.raises(ValueError, match="a trip would go unflagged"):
+            lfc.simulate(plant, duration=1.0, relays=lfc.RelaySettings(rocof_limit=0.02), **kw)
+    slow = lfc.RelaySettings(of2_delay=0.5)       # other delays, same thresholds: fine
+    lfc.simulate(P, duration=1.0, relays=slow, scc=lfc.SafetyFilter(P))

@@ -11,7 +11,7 @@ from lfc.experiments.redteam import severity
 from lfc.experiments.scenarios import ATTACK_START
 from lfc.filters import SafetyFilter
 from lfc.model import LFCParams
-from lfc.relays import RelaySettings
+from lfc.relays import RelaySettings, relays_or_default
 from lfc.signals import Step
 from lfc.run import simulate
 
@@ -36,7 +36,7 @@ def load_step_cost(params: LFCParams, filters: dict[str, FilterFactory], steps: 
     alarm), the frequency nadir (pu), the time to recover within 10 % of F
     (s after the step) and ``final_abs_dw_hat``, the frequency deviation the
     generator side sees at the end (pu; the estimate with ``estimator``)."""
-    relays = relays or RelaySettings()
+    relays = relays_or_default(relays)
     rows = []
     for fname, make in filters.items():
         filt = make(params)

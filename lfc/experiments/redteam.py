@@ -42,7 +42,7 @@ from lfc.filters.base import check_choice
 from lfc.filters.certified import BOX
 from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams
-from lfc.relays import RelaySettings
+from lfc.relays import RelaySettings, relays_or_default
 from lfc.run import simulate_many
 from lfc.simulate_multiarea import area_filter
 
@@ -232,7 +232,7 @@ def family_search(params: LFCParams, defender: Defender, family: str, *,
     if not isinstance(defender, Defender):
         raise ParameterTypeError(f"defender must be a Defender, got {defender!r:.80}")
     check_choice("family", family, tuple(FAMILIES))
-    relays = relays or RelaySettings()
+    relays = relays_or_default(relays)
     bounds = FAMILIES[family][2]
     theta, sev, row = _search(lambda th: _family_table(family, th, defender), len(bounds),
                               bounds, params, relays, duration, seed, maxiter, popsize, search)
@@ -293,7 +293,7 @@ def freeform_search(params: LFCParams, defender: Defender, *, amplitude: float =
         raise ParameterTypeError(f"defender must be a Defender, got {defender!r:.80}")
     check_positive("amplitude", amplitude)
     n = check_multiple("attack_duration", attack_duration, "control_period", control_period)
-    relays = relays or RelaySettings()
+    relays = relays_or_default(relays)
     theta, sev, row = _search(lambda v: _samples_table(v, control_period, defender), n,
                               [(-amplitude, amplitude)] * n, params, relays, duration, seed,
                               maxiter, popsize, search)
@@ -321,7 +321,7 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
     """
     check_choice("family", family, tuple(MULTI_FAMILIES))
     check_search(duration=duration, seed=seed, maxiter=maxiter, popsize=popsize, relays=relays)
-    relays = relays or RelaySettings()
+    relays = relays_or_default(relays)
     channel, waveform, bounds = MULTI_FAMILIES[family]
     k, n = len(bounds), params.n_areas
     filters = {a: area_filter(params, a, f, relays, control_period)     # built once, not

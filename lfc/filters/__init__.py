@@ -30,7 +30,7 @@ from lfc.filters.dispatch import PYTHON, decide, decide_many, register_python
 from lfc.filters.paper import (CONFLICT_RULES, DEFAULT_READING, OUTSIDE_RULES, PREDICTIONS,
                                PaperFilter, PaperOptions)
 from lfc.model import STATES, LFCParams
-from lfc.relays import RelaySettings
+from lfc.relays import RelaySettings, relays_or_default
 
 __all__ = ["ALARM_BITS", "ALARM_FLAGS", "CONFLICT_RULES", "DEFAULT_READING", "METHODS",
            "OUTSIDE_RULES", "PREDICTIONS", "CertifiedOptions", "FilterInfo", "PaperOptions",
@@ -118,9 +118,6 @@ class SafetyFilter:
         if not isinstance(params, LFCParams):
             raise ParameterTypeError(f"params must be an LFCParams (the design model), got "
                                      f"{params!r:.80} ({type(params).__name__})")
-        if relays is not None and not isinstance(relays, RelaySettings):
-            raise ParameterTypeError(f"relays must be a RelaySettings or None, got "
-                                     f"{relays!r:.80} ({type(relays).__name__})")
         backend = _backend(method)
         for name in options:
             owners = [m for m in available() if m != method and name in
@@ -130,7 +127,7 @@ class SafetyFilter:
                                  f"{method!r} (give method={owners[0]!r}; {method!r} takes "
                                  f"{', '.join(f.name for f in fields(backend.Options))})")
         self.params = params
-        self.relays = relays if relays is not None else RelaySettings()
+        self.relays = relays_or_default(relays)
         self.backend = backend(params, self.relays, backend.Options.build(method, options))
         self.method = method
         if self.backend.jit:

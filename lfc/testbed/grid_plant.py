@@ -46,7 +46,7 @@ import numpy as np
 from lfc._validate import check_count, check_flag, check_multiple, check_positive
 from lfc.engine import GeneratorSide, check_area_keys, check_attacks, sample_signal
 from lfc.multiarea import MultiAreaParams
-from lfc.relays import RelaySettings
+from lfc.relays import RelaySettings, relays_or_default
 from lfc.simulate_multiarea import MultiAreaResult, area_filter, multiarea_result
 from lfc.testbed.grid import GridCase, build_grid
 from lfc.testbed.loop import AndesLoop, AndesPlant, TestbedError
@@ -108,7 +108,7 @@ def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
                              f"the case's base")
     check_positive("duration", duration)
     check_multiple("control_period", control_period, "step", step)
-    relays = relays if relays is not None else RelaySettings()
+    relays = relays_or_default(relays)
     n_a = plant.n_areas
     attacks = check_attacks(attacks, n_a)
     loads = check_area_keys(loads, n_a, "loads")

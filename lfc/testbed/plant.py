@@ -32,7 +32,7 @@ from lfc.engine import GeneratorSide, sample_signal
 from lfc.estimation import KalmanFilter
 from lfc.filters import SafetyFilter
 from lfc.model import STATES, LFCParams
-from lfc.relays import RelaySettings
+from lfc.relays import RelaySettings, relays_or_default
 from lfc.signals import SignalLike
 from lfc.simulate import SimResult, result
 from lfc.testbed.case import MicrogridCase, build_system, check_bus
@@ -116,7 +116,7 @@ def simulate_microgrid(params: LFCParams, *, duration: float,
     """
     case = case or MicrogridCase()
     n_ctrl = _check_scenario(case, duration, step, control_period, fault, load)
-    relays = relays if relays is not None else RelaySettings()
+    relays = relays_or_default(relays)
     oc = overcurrent or OvercurrentSettings()
     tc = np.arange(n_ctrl) * control_period
 
