@@ -312,3 +312,50 @@ def test_a_filter_keeping_other_relay_thresholds_than_the_simulation_is_refused(
             lfc.simulate(plant, duration=1.0, relays=lfc.RelaySettings(rocof_limit=0.02), **kw)
     slow = lfc.RelaySettings(of2_delay=0.5)       # other delays, same thresholds: fine
     lfc.simulate(P, duration=1.0, relays=slow, scc=lfc.SafetyFilter(P))
+
+
+def test_red_team_searches_check_their_plant_filters_and_noise_before_searching():
+    """scipy's vectorized search turned any error in the objective into "The
+    map-like callable must be of the form f(func, iterable)"."""
+    from lfc.experiments import redteam
+    d = redteam.Defender("p")
+    with pytest.raises(TypeError, match="params must be an LFCParams"):
+        redteam.family_search(TWO, d, "sinusoid on P_c", duration=2.0, maxiter=1, popsize=2)
+    with pytest.raises(ValueError, match=r"noise_std\[0\] must be 0"):
+        redteam.Search(noise_std=(1e-12, 0.0))
+    for params, filters, kw, error, words in (
+            (P, {}, {}, TypeError, "params must be a MultiAreaParams"),
+            (TWO, ["paper"], {}, ValueError, "filters must be a dict"),
+            (TWO, {5: "paper"}, {}, ValueError, "a key of filters"),
+            (TWO, {"0": "paper"}, {}, TypeError, "a key of filters"),
+            (TWO, {}, {"jobs": 0}, ValueError, "jobs must be an integer >= 1")):
+        with pytest.raises(error, match=words):
+            redteam.coordinated_search(params, filters, "bias on ACE", duration=2.0,
+                                       maxiter=1, popsize=2, **kw)
+
+
+def test_a_freeform_attack_runs_at_its_own_period_and_within_the_run():
+    """control_period was not passed to the runs (20 ms values interpolated at 10
+    ms), and a 5 s attack in a 2 s run reported 500 values."""
+    from lfc.experiments import redteam
+    with pytest.raises(ValueError, match="attack_duration .* must end within the run"):
+        redteam.freeform_search(P, redteam.Defender("p"), attack_duration=5.0, duration=2.0,
+                                maxiter=1, popsize=2)
+    found = redteam.freeform_search(P, redteam.Defender("p"), attack_duration=0.1,
+                                    control_period=0.02, duration=2.0, maxiter=1, popsize=2)
+    replayed = lfc.simulate(P, duration=2.0, control_period=0.02,
+                            scc=lfc.SafetyFilter(P), **redteam.replay(found, 2.0))
+    assert found["severity"] == pytest.approx(float(redteam.severity(replayed.metrics(),
+                                                                     lfc.RelaySettings())))
+
+
+def test_no_scc_threshold_refuses_what_it_cannot_compute():
+    from lfc.experiments.load_limits import governor_ride_through, no_scc_threshold
+    with pytest.raises(ValueError, match=r"tol must lie in \[1e-09, 1.0\]"):
+        no_scc_threshold(P, lfc.RelaySettings(), tol=1e-300)        # looped for ever
+    with pytest.raises(ValueError, match="duration must be > 1 s"):
+        no_scc_threshold(P, lfc.RelaySettings(), duration=0.5)      # "0.4 pu trips"
+    with pytest.raises(ValueError, match="horizon must be a positive integer multiple"):
+        governor_ride_through(P, lfc.RelaySettings(), 0.1, u_bound=1.0, horizon=0.005)
+    with pytest.raises(ValueError, match="delay_periods must be an integer >= 0"):
+        governor_ride_through(P, lfc.RelaySettings(), 0.1, u_bound=1.0, delay_periods=-3)

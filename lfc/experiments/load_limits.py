@@ -22,9 +22,10 @@ import numpy as np
 from scipy import sparse
 from scipy.optimize import linprog
 
-from lfc._validate import check_multiple, check_positive
+from lfc._validate import (ParameterTypeError, check_finite, check_multiple, check_nonnegative,
+                           check_positive, check_range, check_seed)
 from lfc.model import LFCParams, discretize
-from lfc.relays import RelaySettings
+from lfc.relays import RelaySettings, relays_or_default
 from lfc.signals import Step
 from lfc.run import simulate
 
@@ -33,10 +34,17 @@ def no_scc_threshold(params: LFCParams, relays: RelaySettings, *, tol: float = 1
                      duration: float = 5.0) -> float:
     """Smallest load step (pu, within ``tol``) that trips a relay without SCC.
 
-    Bisection on :func:`lfc.simulate` (a step at 1 s, ``duration`` s), between
-    0 and ``2 M × rocof_limit`` (a step that large always trips).
+    Bisection on :func:`lfc.simulate` (a step at 1 s, ``duration`` > 1 s), between
+    0 and ``2 M × rocof_limit`` (a step that large always trips); ``tol`` in
+    [1e-9, 1] pu.
     """
-    check_positive("tol", tol)
+    if not isinstance(params, LFCParams):
+        raise ParameterTypeError(f"params must be an LFCParams, got {params!r:.80}")
+    relays = relays_or_default(relays)
+    check_range("tol", tol, 1e-9, 1.0, closed=True)
+    check_positive("duration", duration)
+    if duration <= 1.0:
+        raise ValueError(f"duration must be > 1 s (the step lands at 1 s), got {duration!r}")
     lo, hi = 0.0, 2 * params.M * relays.rocof_limit
     while hi - lo > tol:
         mid = 0.5 * (lo + hi)
@@ -95,11 +103,20 @@ def governor_ride_through(params: LFCParams, relays: RelaySettings, step: float,
     -------
     RideThrough
     """
+    if not isinstance(params, LFCParams):
+        raise ParameterTypeError(f"params must be an LFCParams, got {params!r:.80}")
+    relays = relays_or_default(relays)
+    check_finite("step", step)
     check_positive("u_bound", u_bound)
-    check_positive("horizon", horizon)
     ratio = check_multiple("control_period", control_period, "dt", dt)
+    periods = check_multiple("horizon", horizon, "control_period", control_period)
+    check_nonnegative("settle", settle)
+    check_seed("delay_periods", delay_periods)
+    if settle >= horizon or delay_periods >= periods:
+        raise ValueError(f"settle ({settle} s) and delay_periods ({delay_periods}) must leave "
+                         f"free commands within horizon ({horizon} s, {periods} periods)")
     Ad, Bd = discretize(params, dt)
-    n, periods = Ad.shape[0], int(round(horizon / control_period))
+    n = Ad.shape[0]
     steps = periods * ratio
     nu, nx = periods, steps * n
     # equalities x[k+1] - Ad x[k] - Bd_u u[k // ratio] = Bd_L step, x[0] = 0

@@ -34,9 +34,10 @@ from scipy.optimize import differential_evolution
 
 from lfc._format import number
 from lfc._validate import (ParameterTypeError, check_array, check_count, check_flag,
-                           check_multiple,
-                           check_number, check_pair, check_positive, check_seed)
+                           check_multiple, check_number, check_positive, check_seed)
 from lfc.batch import scenario_signal
+from lfc.engine import check_area_keys
+from lfc.estimation import check_noise_std
 from lfc.experiments.scenarios import ATTACK_START
 from lfc.filters.base import check_choice
 from lfc.filters.certified import BOX
@@ -107,7 +108,7 @@ class Search:
         check_number("box", self.box)
         if not 0.0 <= self.box < 1.0:
             raise ValueError(f"box must be in [0, 1), got {self.box!r}")
-        object.__setattr__(self, "noise_std", check_pair("noise_std", self.noise_std))
+        object.__setattr__(self, "noise_std", check_noise_std("noise_std", self.noise_std))
         check_count("n_seeds", self.n_seeds)
 
     @property
@@ -196,9 +197,13 @@ def check_search(*, duration: float, seed: int, maxiter: int, popsize: int,
 
 
 def _search(table_of, n_attack, bounds, params, relays, duration, seed, maxiter, popsize,
-            search: Search):
+            search: Search, control_period: float = 0.01):
     """Differential evolution maximizing severity over the attack's ``n_attack``
-    variables and ``search``'s extra ones; returns (best theta, severity, row)."""
+    variables and ``search``'s extra ones (runs at ``control_period``, s);
+    returns (best theta, severity, row)."""
+    if not isinstance(params, LFCParams):
+        raise ParameterTypeError(f"params must be an LFCParams (one area; a grid: "
+                                 f"coordinated_search), got {type(params).__name__}")
     check_search(duration=duration, seed=seed, maxiter=maxiter, popsize=popsize,
                  relays=relays, search=search)
     extra = search.bounds()
@@ -212,14 +217,15 @@ def _search(table_of, n_attack, bounds, params, relays, duration, seed, maxiter,
 
     def objective(theta: np.ndarray) -> np.ndarray:
         res = simulate_many(params, table(theta), duration=duration, relays=relays,
-                             chunk_size=max(1, -(-theta.shape[1] // 2)), progress=False)
+                             chunk_size=max(1, -(-theta.shape[1] // 2)), progress=False,
+                             control_period=control_period)
         return -severity(res, relays)
 
     sol = differential_evolution(objective, list(bounds) + extra, seed=seed, maxiter=maxiter,
                                  popsize=popsize, vectorized=True, updating="deferred",
                                  polish=False, tol=0, integrality=integrality)
     best = simulate_many(params, table(sol.x[:, None]), duration=duration, relays=relays,
-                          progress=False)
+                          progress=False, control_period=control_period)
     return sol.x, float(severity(best, relays)[0]), best.iloc[0]
 
 
@@ -293,10 +299,14 @@ def freeform_search(params: LFCParams, defender: Defender, *, amplitude: float =
         raise ParameterTypeError(f"defender must be a Defender, got {defender!r:.80}")
     check_positive("amplitude", amplitude)
     n = check_multiple("attack_duration", attack_duration, "control_period", control_period)
+    check_number("duration", duration)
+    if attack_duration > duration - ATTACK_START + 1e-9:
+        raise ValueError(f"attack_duration ({attack_duration} s) must end within the run: "
+                         f"the attack starts at {ATTACK_START} s and duration is {duration} s")
     relays = relays_or_default(relays)
     theta, sev, row = _search(lambda v: _samples_table(v, control_period, defender), n,
                               [(-amplitude, amplitude)] * n, params, relays, duration, seed,
-                              maxiter, popsize, search)
+                              maxiter, popsize, search, control_period)
     values = theta[:n]
     return {"defender": defender.name, "search": f"free-form on P_c (±{amplitude:g} pu)",
             "severity": sev, "tripped": bool(row.tripped), "first_trip": row.first_trip_relay,
@@ -319,8 +329,13 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
     ``control_period`` (s).  Returns the family, the worst severity, the area it
     is reached in, whether any area tripped and the attack per area.
     """
+    if not isinstance(params, MultiAreaParams):
+        raise ParameterTypeError(f"params must be a MultiAreaParams (a grid; one area: "
+                                 f"family_search), got {type(params).__name__}")
+    filters = check_area_keys(filters, params.n_areas, "filters")
     check_choice("family", family, tuple(MULTI_FAMILIES))
     check_search(duration=duration, seed=seed, maxiter=maxiter, popsize=popsize, relays=relays)
+    check_count("jobs", jobs)
     relays = relays_or_default(relays)
     channel, waveform, bounds = MULTI_FAMILIES[family]
     k, n = len(bounds), params.n_areas
