@@ -37,7 +37,7 @@ import pandas as pd
 from tqdm.auto import tqdm
 
 from lfc._files import code_digest, write_atomic
-from lfc._validate import ParameterTypeError, check_count, check_flag
+from lfc._validate import ParameterTypeError, check_count, check_flag, is_sequence
 from lfc.engine import METRICS, Scenarios
 from lfc.estimation import STD
 from lfc.filters import (CONFLICT_RULES, METHODS, OUTSIDE_RULES, PREDICTIONS, SafetyFilter,
@@ -54,6 +54,7 @@ READINGS = {"outside_rule": OUTSIDE_RULES, "conflict": CONFLICT_RULES,
             "prediction": PREDICTIONS}  # optional columns: the paper filter's readings
 CHIRP_F0 = 0.1  # Hz, where every chirp starts
 PLANT = ("M", "D", "tau_g", "tau_t", "droop")   # optional columns: the row's own plant
+UNREAD_PARAMS = tuple(f.name for f in fields(LFCParams) if f.name not in PLANT)  # refused
 NOISE = ("noise_w", "noise_rocof")             # optional: measurement noise std (pu, pu/s)
 FLAGS = ("declare_noise", "relay_noise")       # optional booleans
 FILTER_COLUMNS = ("method", *dict.fromkeys(c for m in METHODS for c in options_of(m).COLUMNS))
@@ -102,8 +103,13 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
     if missing:
         raise ValueError(f"scenarios is missing column(s) {missing}; required: {list(REQUIRED)}")
     for col in scenarios.columns:
+        if col in UNREAD_PARAMS:
+            raise ValueError(f"column {col!r} is an LFCParams field that a scenario table "
+                             f"does not set per row (it reads {', '.join(PLANT)}); give it "
+                             f"in params")
         close = ([] if col in KNOWN or not isinstance(col, str) else
-                 difflib.get_close_matches(col, KNOWN, n=1, cutoff=TYPO_CUTOFF))
+                 [k for k in KNOWN if k.lower() == col.lower()]
+                 or difflib.get_close_matches(col, KNOWN, n=1, cutoff=TYPO_CUTOFF))
         if close:
             raise ValueError(f"column {col!r} is not a scenario column; did you mean "
                              f"{close[0]!r}? (scenario columns: {', '.join(INPUTS)}; a column "
@@ -142,6 +148,13 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
         missing = [c for c in ("values", "sample_period") if c not in scenarios.columns]
         if missing:
             raise ValueError(f"'samples' rows need the column(s) {missing}")
+        bad = ~rows["values"].map(lambda v: is_sequence(v) and len(v) > 0 and np.asarray(
+            v).dtype.kind in "iuf")
+        if bad.any():
+            raise ParameterTypeError(
+                f"column 'values' must hold a non-empty sequence of numbers (pu) on "
+                f"'samples' rows; row {rows.index[bad][0]!r} has {rows['values'][bad].iloc[0]!r:.60}"
+                f" (a CSV holds text: build such rows in Python)")
         period = pd.to_numeric(rows["sample_period"], errors="coerce")
         bad = ~(np.isfinite(period) & (period > 0))
         if bad.any():
@@ -157,7 +170,8 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
         if bad.any():
             raise ValueError(f"column {col!r} must be one of {allowed}; row "
                              f"{scenarios.index[bad][0]!r} has {scenarios[col][bad].iloc[0]!r}")
-    for col, low, what in [(c, 0.0, "> 0") for c in PLANT] + [(c, -1.0, ">= 0") for c in NOISE]:
+    for col, low, what in ([(c, 0.0, "> 0") for c in PLANT if c != "D"] + [("D", -1.0, ">= 0")]
+                           + [(c, -1.0, ">= 0") for c in NOISE]):
         if col not in scenarios.columns:
             continue
         values = pd.to_numeric(scenarios[col], errors="coerce")
@@ -210,7 +224,7 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
             raise ValueError(f"column {col!r} is True on row {scenarios.index[bad][0]!r}, which "
                              f"has no measurement noise ({', '.join(NOISE)} all 0)")
     if "seed" in scenarios.columns:
-        seeds = pd.to_numeric(scenarios["seed"], errors="coerce")
+        seeds = pd.to_numeric(scenarios["seed"], errors="coerce").astype(float)  # NA: NaN
         bad = ~(np.isfinite(seeds) & (seeds == np.round(seeds)) & (seeds >= 0))
         if bad.any():
             raise ValueError(f"column 'seed' must be integers >= 0; row "
@@ -390,16 +404,28 @@ def simulate_table(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
     Returns
     -------
     DataFrame
-        ``scenarios`` with the columns ``METRIC_KEYS`` added (the SCC
+        ``scenarios`` with the columns ``METRIC_KEYS`` added (a table that
+        already has them, a result fed back, gets them recomputed; the SCC
         metrics are 0 without SCC; ``first_trip_relay`` None and
         ``first_trip_t`` NaN without a trip).
     """
     check_scenarios(scenarios)
     check_timing(duration, dt, control_period)
+    if executor is not None and not isinstance(executor, Executor):
+        raise ParameterTypeError(f"executor must be a concurrent.futures.Executor or None, "
+                                 f"got {executor!r:.80}")
+    scenarios = scenarios.drop(columns=[c for c in METRIC_KEYS if c in scenarios.columns])
     if out is not None and (scenarios["waveform"] == "samples").any():
         raise ValueError("out (chunk files) cannot hold 'samples' rows; run them without out")
     check_count("chunk_size", chunk_size)
     check_flag("progress", progress)
+    late = (scenarios["waveform"] != "none") & (pd.to_numeric(scenarios["start"]) >= duration)
+    if late.any():
+        warnings.warn(f"{int(late.sum())} row(s) start their signal at or after the run's end "
+                      f"(duration {duration} s) and run without it: row "
+                      f"{scenarios.index[late][0]!r}, column 'start' = "
+                      f"{float(scenarios['start'][late].iloc[0])} s", RuntimeWarning,
+                      stacklevel=3)
     if out is not None and (not isinstance(out, (str, Path)) or not str(out).strip()):
         raise ValueError(f"out must be a folder path (not empty) or None, got {out!r}")
     relays = relays_or_default(relays)

@@ -139,7 +139,7 @@ def _fam(**kw):
 
 def _row(**kw):
     import pandas as pd
-    row = dict(waveform="sinusoid", channel="pc", amplitude=0.5, freq_hz=1.0, start=1.0,
+    row = dict(waveform="sinusoid", channel="pc", amplitude=0.5, freq_hz=1.0, start=0.5,
                alpha=20.0, Ts=0.25)
     return pd.DataFrame([{**row, **kw}])
 
@@ -359,3 +359,36 @@ def test_no_scc_threshold_refuses_what_it_cannot_compute():
         governor_ride_through(P, lfc.RelaySettings(), 0.1, u_bound=1.0, horizon=0.005)
     with pytest.raises(ValueError, match="delay_periods must be an integer >= 0"):
         governor_ride_through(P, lfc.RelaySettings(), 0.1, u_bound=1.0, delay_periods=-3)
+
+
+def test_scenario_tables_refuse_what_they_would_silently_ignore():
+    import pandas as pd
+    for kw, error, words in (
+            (dict(k_i=0.0), ValueError, "'k_i' is an LFCParams field"),
+            (dict(tau_w=0.1), ValueError, "'tau_w' is an LFCParams field"),
+            (dict(m=0.5), ValueError, "did you mean 'M'"),
+            (dict(Stop=0.6), ValueError, "did you mean 'stop'"),
+            (dict(Alpha=3.0), ValueError, "did you mean 'alpha'"),
+            (dict(waveform="samples", values="[0.1, 0.2]", sample_period=0.01), TypeError,
+             "column 'values' must hold a non-empty sequence of numbers"),
+            (dict(waveform="samples", values=0.5, sample_period=0.01), TypeError,
+             "column 'values' must hold")):
+        with pytest.raises(error, match=words):
+            lfc.simulate_many(P, _row(**kw), duration=1.0, progress=False)
+    seeds = _row(noise_w=1e-4).loc[[0, 0]].reset_index(drop=True)
+    seeds["seed"] = pd.array([pd.NA, 1], dtype="Int64")
+    with pytest.raises(ValueError, match="column 'seed' must be integers >= 0"):
+        lfc.simulate_many(P, seeds, duration=1.0, progress=False)
+    with pytest.raises(TypeError, match="executor must be a concurrent.futures.Executor"):
+        lfc.simulate_many(P, _row(), duration=1.0, executor="threads")
+    with pytest.warns(RuntimeWarning, match="1 row.* start their signal at or after the run's"):
+        lfc.simulate_many(P, _row(start=1.5), duration=1.0, progress=False)
+    # D = 0 is a valid plant (LFCParams allows it), so is a row with D = 0
+    assert len(lfc.simulate_many(P, _row(D=0.0), duration=1.0, progress=False)) == 1
+
+
+def test_a_results_table_fed_back_gets_its_metrics_recomputed_not_duplicated():
+    once = lfc.simulate_many(P, _row(), duration=1.0, progress=False)
+    twice = lfc.simulate_many(P, once, duration=1.0, progress=False)
+    assert list(twice.columns) == list(once.columns)
+    assert twice.equals(once)

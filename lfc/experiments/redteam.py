@@ -261,6 +261,10 @@ def replay(found, duration: float) -> dict:
             raise ValueError(f"found must be a result of family_search or freeform_search "
                              f"(a dict with {key!r}), got {found!r:.80}")
         return found[key]
+    check_number("duration", duration)
+    if not duration > ATTACK_START:
+        raise ValueError(f"duration must be > ATTACK_START ({ATTACK_START} s, when the attack "
+                         f"starts), got {duration!r}")
     kind = entry("search")
     if isinstance(kind, str) and kind in FAMILIES:
         theta = check_array("found['theta']", entry("theta"),
