@@ -202,3 +202,17 @@ def kind(hint: Any) -> str:
         return "a pair of numbers" if len(args) == 2 else f"a {len(args)}-tuple"
     return {float: "a number", int: "an integer", bool: "True or False", str: "a string",
             type(None): "None", dict: "a dict"}.get(hint, getattr(hint, "__name__", str(hint)))
+
+
+def check_folder(name: str, value: object):
+    """``value`` as a ``Path``; raise unless it is a non-empty path (a string or
+    ``os.PathLike``): ``""`` would mean the current directory."""
+    import os
+    from pathlib import Path
+    if not isinstance(value, (str, os.PathLike)):
+        raise ParameterTypeError(f"{name} must be a folder path, got {value!r:.80} "
+                                 f"({type(value).__name__})")
+    if not str(value).strip():
+        raise ValueError(f"{name} must be a folder path, not empty (that would be the "
+                         f"current directory), got {value!r}")
+    return Path(value)

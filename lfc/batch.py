@@ -37,7 +37,7 @@ import pandas as pd
 from tqdm.auto import tqdm
 
 from lfc._files import code_digest, write_atomic
-from lfc._validate import ParameterTypeError, check_count, check_flag, is_sequence
+from lfc._validate import ParameterTypeError, check_count, check_flag, check_folder, is_sequence
 from lfc.engine import METRICS, Scenarios
 from lfc.estimation import STD
 from lfc.filters import (CONFLICT_RULES, METHODS, OUTSIDE_RULES, PREDICTIONS, SafetyFilter,
@@ -426,8 +426,8 @@ def simulate_table(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
                       f"{scenarios.index[late][0]!r}, column 'start' = "
                       f"{float(scenarios['start'][late].iloc[0])} s", RuntimeWarning,
                       stacklevel=3)
-    if out is not None and (not isinstance(out, (str, Path)) or not str(out).strip()):
-        raise ValueError(f"out must be a folder path (not empty) or None, got {out!r}")
+    if out is not None:
+        check_folder("out", out)
     relays = relays_or_default(relays)
     args = (params, duration, relays, dt, control_period)
     chunks = [scenarios.iloc[i:i + chunk_size] for i in range(0, len(scenarios), chunk_size)]

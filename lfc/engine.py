@@ -389,7 +389,14 @@ def sample_signal(signal, t: np.ndarray, name: str) -> np.ndarray:
         return np.zeros_like(t)
     if not callable(signal):
         raise ValueError(f"{name} must be a callable of time (see lfc.signals), got {signal!r}")
-    values = np.broadcast_to(np.asarray(signal(t), float), t.shape).copy()
+    raw = np.asarray(signal(t))
+    if raw.dtype.kind not in "iuf":
+        raise ParameterTypeError(f"{name} must return real numbers (pu), got dtype {raw.dtype}")
+    try:
+        values = np.broadcast_to(raw.astype(float), t.shape).copy()
+    except ValueError:
+        raise ValueError(f"{name} must return one value per time (shape {t.shape}), got shape "
+                         f"{raw.shape}") from None
     if not np.all(np.isfinite(values)):
         raise ValueError(f"{name} returned non-finite values")
     return values
@@ -542,7 +549,7 @@ class Scenarios:
         filters = check_area_keys(filters, n, "filters")
         noisy = check_noise(noise_std)
         seed = check_seed("seed", seed)
-        feedforward = check_flag("load_feedforward", feedforward)
+        feedforward = check_flag("feedforward", feedforward)
         relay_noise = check_flag("relay_noise", relay_noise)
         if relay_noise and not noisy:
             raise ValueError("relay_noise=True needs noise_std > 0 (the relays' measurement "
@@ -617,7 +624,9 @@ class Scenarios:
             raise ValueError(f"scenario(s) {bad[:5].tolist()} became non-finite: an attack or "
                              f"load signal (pc_attack, wref_attack, load) gives a non-finite "
                              f"value where it is evaluated (e.g. Samples times closer than a "
-                             f"float resolves, or a frequency so high its phase overflows)")
+                             f"float resolves, or a frequency so high its phase overflows), "
+                             f"or the plant itself diverges (gains such as k_agc or the bias "
+                             f"so far apart that the discretized loop is unstable)")
         return Run(metrics, ends, tx, tc, tt)
 
 

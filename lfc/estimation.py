@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 
 from lfc._jit import inline
-from lfc._validate import ParameterTypeError, check_flag, check_pair, check_range
+from lfc._validate import (ParameterTypeError, check_array, check_finite, check_flag, check_pair,
+                           check_range)
 from lfc.model import LFCParams, discretize, output_matrix
 
 
@@ -121,7 +122,8 @@ class KalmanFilter:
         check_range("process_std", process_std, *STD, closed=True)
         check_range("load_std", load_std, 0.0, STD[1], closed=True)
         estimate_load = check_flag("estimate_load", estimate_load)
-        self.params, self.period, self.estimate_load = params, float(period), estimate_load
+        period = float(period)        # a numpy float32 is not a timebase python-control takes
+        self.params, self.period, self.estimate_load = params, period, estimate_load
         self.meas_std = (float(meas_std[0]), float(meas_std[1]))
         Ad, Bd = discretize(params, period)
         C = output_matrix()
@@ -171,11 +173,15 @@ class KalmanFilter:
         p_load_hat : float
             Estimated load change (pu); 0 when ``estimate_load`` is False.
         """
-        y = np.asarray(y, float)
+        y = check_array("y", y, shape=(2,))
+        if not np.all(np.isfinite(y)):
+            raise ValueError(f"y must be finite (a NaN would poison every later estimate), "
+                             f"got {y}")
         kf_correct(self.gain, self.C, self._xs, float(y[0]), float(y[1]))
         pl = float(self._xs[1, 5]) if self.estimate_load else 0.0
         return self._xs[1, :5].copy(), pl
 
     def predict(self, u: float) -> None:
         """Propagate the last corrected estimate over one period with command ``u`` (pu)."""
+        check_finite("u", u)
         kf_predict(self.A, self.B, self._xs, float(u))

@@ -12,12 +12,12 @@ The governor row uses the standard droop sign (Kundur 1994, ch. 11; Saadat
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from lfc._validate import check_nonnegative, check_positive, check_range
+from lfc._validate import check_flag, check_nonnegative, check_positive, check_range
 
 if TYPE_CHECKING:
     import control
@@ -90,6 +90,8 @@ class LFCParams:
             value = getattr(self, name)
             check_nonnegative(name, value)
             check_range(name, value, 0.0, high, closed=True)
+        for f in fields(self):        # every parameter a float (a Fraction broke numpy)
+            object.__setattr__(self, f.name, float(getattr(self, f.name)))
 
 
 def lfc_matrices(params: LFCParams, *, printed_droop_sign: bool = False
@@ -111,7 +113,7 @@ def lfc_matrices(params: LFCParams, *, printed_droop_sign: bool = False
         Columns: ``dPc``, ``dPL``.
     """
     p = params
-    sign = 1.0 if printed_droop_sign else -1.0
+    sign = 1.0 if check_flag("printed_droop_sign", printed_droop_sign) else -1.0
     A = np.array([
         [-1 / p.tau_g, 0, sign / (p.droop * p.tau_g), 0, 0],
         [1 / p.tau_t, -1 / p.tau_t, 0, 0, 0],

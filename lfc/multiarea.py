@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lfc._validate import ParameterTypeError, check_index, check_number, is_sequence
-from lfc.model import STATES, LFCParams, discretize, lfc_matrices, zoh
+from lfc.model import PHYSICAL, STATES, LFCParams, discretize, lfc_matrices, zoh
 
 N_AREA_STATES = len(STATES)
 SAADAT_T = 2.0   # pu: Saadat (1999), Examples 12.5-12.7, "synchronizing power coefficient"
@@ -54,9 +54,9 @@ class MultiAreaParams:
         pair of areas.
     bias : tuple of float, optional
         Frequency bias ``B_i`` of each area's ACE (pu power per pu frequency),
-        > 0.  Default ``D_i + 1/R_i``.
+        in ``PHYSICAL`` (1e-9 to 1e9).  Default ``D_i + 1/R_i``.
     k_agc : tuple of float, optional
-        AGC integral gain on ACE of each area (1/s), >= 0.  Default
+        AGC integral gain on ACE of each area (1/s), in [0, 1e9].  Default
         ``k_i / B_i``: one area is then exactly :func:`lfc.simulate`'s loop.
     """
 
@@ -110,11 +110,11 @@ class MultiAreaParams:
             for k, v in enumerate(value):
                 check_number(f"{name}[{k}]", v)
             value = tuple(float(v) for v in value)
-            if len(value) != n or not all(math.isfinite(v) and (v > low if strict else v >= low)
-                                          for v in value):
-                raise ValueError(f"{name} must be {n} finite numbers "
-                                 f"{'> 0' if strict else '>= 0'} (one per area), got "
-                                 f"{getattr(self, name)!r}")
+            if len(value) != n or not all((PHYSICAL[0] <= v if strict else 0 <= v)
+                                          and v <= PHYSICAL[1] for v in value):
+                raise ValueError(f"{name} must be {n} numbers in "
+                                 f"{'[' + str(PHYSICAL[0]) if strict else '[0'}, {PHYSICAL[1]}]"
+                                 f" (one per area), got {getattr(self, name)!r}")
             object.__setattr__(self, name, value)
 
     @property

@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lfc._validate import ParameterTypeError, check_multiple, check_positive
+from lfc._validate import (ParameterTypeError, check_flag, check_folder, check_multiple,
+                           check_positive)
 from lfc.engine import CTRL_COLUMNS, Scenarios, sample_signal
 from lfc.filters import SafetyFilter, binding_names
 from lfc.filters.base import ACTIVE, ALARM_BITS, INFEASIBLE, INVALID, OUTSIDE, SOLVER_ERROR
@@ -113,7 +114,7 @@ class SimResult:
         """Write ``trace.csv``, ``controls.csv``, ``trips.csv``, ``alarms.csv``,
         ``line_trips.csv``, ``metrics.json`` and ``settings.json`` into
         ``directory`` (created)."""
-        out = Path(directory)
+        out = check_folder("directory", directory)
         out.mkdir(parents=True, exist_ok=True)
         for name in ("trace", "controls", "trips", "alarms", "line_trips"):
             getattr(self, name).to_csv(out / f"{name}.csv", index=False)
@@ -126,7 +127,8 @@ MAX_STEPS = 10**7   # plant steps in one run (2.8 h at 1 ms): its trace takes ab
 
 
 def check_timing(duration: float, dt: float, control_period: float) -> int:
-    """Validate a run's timing (s); return plant steps per control period."""
+    """Validate a run's timing (s): ``duration`` and ``control_period`` whole
+    multiples of ``dt``; return plant steps per control period."""
     for name, value in (("duration", duration), ("dt", dt), ("control_period", control_period)):
         check_positive(name, value)
     if duration > MAX_STEPS * dt:
@@ -139,7 +141,9 @@ def check_timing(duration: float, dt: float, control_period: float) -> int:
     if not dt <= control_period <= max(duration, dt):
         raise ValueError(f"control_period must lie in [dt, duration] = [{dt}, {duration}] s, "
                          f"got {control_period!r}")
-    return check_multiple("control_period", control_period, "dt", dt)
+    ratio = check_multiple("control_period", control_period, "dt", dt)
+    check_multiple("duration", duration, "dt", dt)     # else the run ends off the asked time
+    return ratio
 
 
 def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | None = None,
@@ -199,6 +203,7 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
     if scc is not None and not isinstance(scc, SafetyFilter):
         raise ParameterTypeError(f"scc must be a SafetyFilter or None, got {scc!r}")
     relays = relays_or_default(relays)
+    check_flag("load_feedforward", load_feedforward)   # the engine calls it feedforward
     sc = Scenarios(params, duration=duration, dt=dt, control_period=control_period,
                    relays=relays)
     sc.add(attacks={0: {"pc": pc_attack, "wref": wref_attack}}, loads={0: load},

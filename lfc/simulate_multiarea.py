@@ -60,7 +60,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lfc._validate import check_count
+from lfc._validate import check_count, check_index
 from lfc.batch import metrics_frame
 from lfc.engine import METRICS, Scenarios, check_area_keys, sample_signal
 from lfc.filters import SafetyFilter
@@ -148,6 +148,7 @@ class MultiAreaResult:
         step up to the next sample (pu).  Assumption (c) of the certified
         filters' guarantee (module docstring) held on this run where it is at
         most the filter's ``load_bound``."""
+        area = check_index("area", area, len(self.areas))
         t = self.trace["t"].to_numpy()
         w = self.trace[f"p_net_{area}"].to_numpy()
         period = np.floor(t / self.settings["control_period"] + 1e-9).astype(int)

@@ -392,3 +392,49 @@ def test_a_results_table_fed_back_gets_its_metrics_recomputed_not_duplicated():
     twice = lfc.simulate_many(P, once, duration=1.0, progress=False)
     assert list(twice.columns) == list(once.columns)
     assert twice.equals(once)
+
+
+def test_more_of_the_third_reviews_inputs_are_refused():
+    from fractions import Fraction
+
+    from lfc.filters import CertifiedOptions
+    run = lfc.simulate(TWO, duration=1.0)
+    cases = [
+        (lambda: MultiAreaParams((P, P), tie=((0, 1, 2.0),), bias=(1e-300, 21.0)), ValueError,
+         r"bias must be 2 numbers in \[1e-09"),
+        (lambda: MultiAreaParams((P, P), tie=((0, 1, 2.0),), k_agc=(1e300, 0.1)), ValueError,
+         r"k_agc must be 2 numbers in \[0"),
+        (lambda: lfc.simulate(TWO, duration=1.0, feedforward="yes"), TypeError,
+         r"^feedforward must be True or False"),
+        (lambda: run.disturbance_step(5), ValueError, r"area must be an integer index in \[0, 1\]"),
+        (lambda: run.disturbance_step(1.0), TypeError, "area must be an integer index"),
+        (lambda: lfc.lfc_matrices(P, printed_droop_sign="no"), TypeError,
+         "printed_droop_sign must be True or False"),
+        (lambda: lfc.KalmanFilter(P).correct([1.0]), ValueError, r"y must have shape \(2,\)"),
+        (lambda: lfc.KalmanFilter(P).correct([1.0, 2.0, 3.0]), ValueError, "y must have shape"),
+        (lambda: lfc.KalmanFilter(P).correct([np.nan, 0.0]), ValueError, "y must be finite"),
+        (lambda: lfc.KalmanFilter(P).predict([1, 2]), TypeError, "u must be a number"),
+        (lambda: lfc.simulate(P, duration=1.0, pc_attack=lambda t: t * 1j), TypeError,
+         "pc_attack must return real numbers"),
+        (lambda: lfc.simulate(P, duration=1.0, pc_attack=lambda t: t > 0), TypeError,
+         "pc_attack must return real numbers"),
+        (lambda: lfc.simulate(P, duration=1.0, pc_attack=lambda t: t[:3]), ValueError,
+         "pc_attack must return one value per time"),
+        (lambda: lfc.simulate(P, duration=1.0007), ValueError,
+         "duration must be a positive integer multiple of dt"),
+        (lambda: lfc.simulate(P, duration=1.0).save(""), ValueError, "directory must be a "
+         "folder path, not empty"),
+        (lambda: lfc.simulate(P, duration=1.0).save(None), TypeError, "directory must be a "
+         "folder path"),
+        (lambda: CertifiedOptions(margin="0.1"), TypeError, "margin must be a number"),
+        (lambda: CertifiedOptions(uncertainty="x"), TypeError, "uncertainty must be a number "
+         "or a dict"),
+    ]
+    for call, error, words in cases:
+        with pytest.raises(error, match=words):
+            call()
+    assert np.isfinite(lfc.KalmanFilter(P, np.float32(0.01)).gain).all()
+    assert isinstance(LFCParams(M=Fraction(4, 1)).M, float)
+    u, _ = lfc.SafetyFilter(LFCParams(M=Fraction(4, 1)), method="certified").filter(
+        np.zeros(5), 0.0)
+    assert u == 0.0

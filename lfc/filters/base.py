@@ -149,12 +149,18 @@ class Options:
             hint = f"; did you mean {close[0]!r}?" if close else ""
             raise ValueError(f"method {method!r} has no option {unknown[0]!r}{hint} "
                              f"(its options: {', '.join(names)})")
-        hints = get_type_hints(cls)
-        for name, value in given.items():
-            if not conforms(value, hints[name]):
-                raise ParameterTypeError(f"{name} must be {kind(hints[name])}, got {value!r} "
-                                         f"({type(value).__name__})")
         return cls(**given)
+
+    def __post_init__(self) -> None:
+        """Every option of the type it is annotated with (a string where a number
+        belongs is a :class:`~lfc._validate.ParameterTypeError`), however the
+        options are built; subclasses check ranges after calling this."""
+        hints = get_type_hints(type(self))
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if not conforms(value, hints[f.name]):
+                raise ParameterTypeError(f"{f.name} must be {kind(hints[f.name])}, got "
+                                         f"{value!r} ({type(value).__name__})")
 
     @classmethod
     def from_columns(cls, row: dict) -> dict:  # pragma: no cover - abstract

@@ -206,6 +206,7 @@ class CertifiedOptions(Options):
                                           "trips_per_hour", "noise_w", "noise_rocof")
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         check_range("horizon", self.horizon, 0.2, 20.0, closed=True)
         check_range("tightening", self.tightening, 1e-4, 0.1, closed=True)
         check_nonnegative("load_bound", self.load_bound)

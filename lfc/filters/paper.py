@@ -118,6 +118,7 @@ class PaperOptions(Options):
     COLUMNS: ClassVar[tuple[str, ...]] = ("alpha", "Ts", *READING_NAMES)
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         check_positive("alpha", self.alpha)
         check_positive("Ts", self.Ts)
         check_positive("slack_weight", self.slack_weight)

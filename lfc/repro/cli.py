@@ -11,6 +11,7 @@ import sys
 import time
 from pathlib import Path
 
+from lfc._validate import check_folder
 from lfc.repro import runner
 from lfc.experiments.scenarios import ALL_PLANTS
 
@@ -38,9 +39,10 @@ def _count(flag: str):
 def _folder(text: str) -> Path:
     """``--out`` and the other folders: a non-empty path (``''`` would mean the
     current directory)."""
-    if not text.strip():
-        raise argparse.ArgumentTypeError("a folder must be a non-empty path, got ''")
-    return Path(text)
+    try:
+        return check_folder("a folder", text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
 
 
 def _core(text: str) -> str:
