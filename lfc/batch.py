@@ -237,6 +237,9 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
     _check_unused(scenarios)
 
 
+# the metric columns' dtypes where not float, for an empty table (as a full one has them)
+EMPTY_DTYPES = {"tripped": bool, "first_trip_relay": object, "alarms": "int64",
+                "outside": "int64"}
 # the value of a filter column that asks for nothing: its option's default (else False,
 # e.g. declare_noise)
 NEUTRAL = {f.name: f.default for m in reversed(METHODS) for f in fields(options_of(m))}
@@ -448,7 +451,8 @@ def simulate_table(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
             results[i] = metrics
             bar.update(len(metrics))
     if not chunks:
-        return scenarios.assign(**{c: pd.Series(dtype=float) for c in METRIC_KEYS})
+        return scenarios.assign(**{c: pd.Series(dtype=EMPTY_DTYPES.get(c, float))
+                                   for c in METRIC_KEYS})
     metrics = pd.concat([results[i] for i in range(len(chunks))])
     metrics["first_trip_relay"] = metrics["first_trip_relay"].astype(object).where(
         metrics["tripped"].astype(bool), None)

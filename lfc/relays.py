@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lfc._jit import inline, jit
-from lfc._validate import ParameterTypeError, check_number, check_range
+from lfc._validate import ParameterTypeError, check_array, check_count, check_number, check_range
 
 RELAY_NAMES = ("OF2", "UF2", "ROCOF")
 TIME_TOL = 1e-9  # s, tolerance when comparing elapsed pickup time to a delay
@@ -155,8 +155,13 @@ class RelayBank:
     _due: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.settings, RelaySettings):
+            raise ParameterTypeError(f"settings must be a RelaySettings, got "
+                                     f"{self.settings!r:.80}")
+        check_count("n", self.n)
         self._start = np.full((self.n, 3), np.nan)
         self._due = np.zeros((self.n, 3))
+        self._last = -np.inf
 
     def update(self, t: np.ndarray, dw_meas: np.ndarray, rocof_meas: np.ndarray
                ) -> list[tuple[str, int, int]]:
@@ -174,9 +179,19 @@ class RelayBank:
         list of (relay, sample index in block, scenario index)
             One entry per trip, in time order (relays in ``RELAY_NAMES`` order).
         """
-        t = np.asarray(t, float)
-        dw = np.asarray(dw_meas, float).reshape(len(t), self.n)
-        rc = np.asarray(rocof_meas, float).reshape(len(t), self.n)
+        t = check_array("t", t, shape=(None,))
+        if np.any(np.diff(t) <= 0) or (len(t) and not t[0] > self._last):
+            raise ValueError("t must be increasing, continuing the previous block (after "
+                             f"{self._last} s)")
+        want = (len(t), self.n) if self.n > 1 else None
+        dw = check_array("dw_meas", dw_meas)
+        rc = check_array("rocof_meas", rocof_meas)
+        for name, arr in (("dw_meas", dw), ("rocof_meas", rc)):
+            if arr.size != len(t) * self.n:
+                raise ValueError(f"{name} must have shape {want or (len(t),)}, got {arr.shape}")
+        dw, rc = dw.reshape(len(t), self.n), rc.reshape(len(t), self.n)
+        if len(t):
+            self._last = float(t[-1])
         limits, delays = self.settings.arrays()
         bits = _relay_block(t, dw, rc, limits, delays, self._start, self._due)
         return [(name, int(k), int(j)) for k, j in zip(*np.nonzero(bits))

@@ -438,3 +438,39 @@ def test_more_of_the_third_reviews_inputs_are_refused():
     u, _ = lfc.SafetyFilter(LFCParams(M=Fraction(4, 1)), method="certified").filter(
         np.zeros(5), 0.0)
     assert u == 0.0
+
+
+def test_relay_bank_surface_builders_and_cost_check_their_inputs():
+    from lfc.experiments import surface
+    from lfc.experiments.assess import load_step_cost
+    bank = lfc.RelayBank(lfc.RelaySettings())
+    cases = [
+        (lambda: lfc.RelayBank(lfc.RelaySettings(), n=-1), ValueError, "n must be an integer"),
+        (lambda: lfc.RelayBank(lfc.RelaySettings(), n=True), TypeError, "n must be an integer"),
+        (lambda: lfc.RelayBank(None), TypeError, "settings must be a RelaySettings"),
+        (lambda: bank.update([0.0, 0.2, 0.1, 0.3], [0.0] * 4, [0.0] * 4), ValueError,
+         "t must be increasing"),
+        (lambda: bank.update([0.0, 0.1], [0.0] * 3, [0.0] * 2), ValueError,
+         "dw_meas must have shape"),
+        (lambda: surface.attack_map([], [0.5], [1.0], [3.0]), TypeError, "waveforms must be"),
+        (lambda: surface.attack_map("sinusoid", [0.5], [1.0], [3.0]), TypeError,
+         "waveforms must be a non-empty list"),
+        (lambda: surface.attack_map(["sinusoid"], [], [1.0], [3.0]), TypeError,
+         "amplitudes must be a non-empty sequence"),
+        (lambda: surface.bias_map(0.1, [3.0]), TypeError, "biases must be"),
+        (lambda: load_step_cost(P, {"none": lambda q: None}, [0.1], duration=0.5), ValueError,
+         "duration must be > ATTACK_START"),
+        (lambda: lfc.filters.alarm_mask({}), ValueError, "flags must hold at least one"),
+    ]
+    for call, error, words in cases:
+        with pytest.raises(error, match=words):
+            call()
+    assert len(surface.attack_map(["sinusoid"], [0.5], [1.0], [])) == 1    # no SCC only
+
+
+def test_an_empty_table_has_the_metric_dtypes_of_a_full_one():
+    import pandas as pd
+    empty = lfc.simulate_many(P, _row().iloc[:0], duration=1.0, progress=False)
+    full = lfc.simulate_many(P, _row(), duration=1.0, progress=False)
+    assert (empty.dtypes == full.dtypes).all()
+    assert isinstance(empty, pd.DataFrame) and len(empty) == 0

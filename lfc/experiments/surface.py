@@ -12,6 +12,7 @@ import itertools
 import numpy as np
 import pandas as pd
 
+from lfc._validate import ParameterTypeError, check_sizes, is_sequence
 from lfc.experiments.scenarios import ATTACK_START
 from lfc.filters import CONFLICT_RULES, DEFAULT_READING, OUTSIDE_RULES, PREDICTIONS
 
@@ -19,6 +20,20 @@ NO_SCC = float("nan")
 READINGS = [dict(zip(("outside_rule", "conflict", "prediction"), r))
             for r in itertools.product(OUTSIDE_RULES, CONFLICT_RULES, PREDICTIONS)]
 ATTACK_KEY = ["waveform", "channel", "amplitude", "freq_hz"]
+
+
+def _grid(**axes) -> None:
+    """Raise unless every axis is a non-empty sequence (of numbers, or of strings
+    for ``waveforms``): ``"sinusoid"`` is not a list of waveforms, nor 0.5 of
+    amplitudes."""
+    for name, values in axes.items():
+        if name == "waveforms":
+            if not is_sequence(values) or not values or not all(isinstance(w, str)
+                                                                 for w in values):
+                raise ParameterTypeError(f"waveforms must be a non-empty list of names such as "
+                                         f"['sinusoid'], got {values!r}")
+        else:
+            check_sizes(name, values, empty=name == "alphas")     # no alphas: no SCC only
 
 
 def _table(rows: list[dict]) -> pd.DataFrame:
@@ -30,6 +45,7 @@ def attack_map(waveforms: list[str], amplitudes: list[float], freqs: list[float]
                alphas: list[float], Ts: float = 0.25) -> pd.DataFrame:
     """Periodic attacks on P_c: every waveform × amplitude (pu) × frequency (Hz),
     without SCC and with the SCC for each alpha (1/s)."""
+    _grid(waveforms=waveforms, amplitudes=amplitudes, freqs=freqs, alphas=alphas)
     return _table([{"waveform": w, "channel": "pc", "amplitude": a, "freq_hz": f,
                     "start": ATTACK_START, "alpha": al, "Ts": Ts}
                    for w, al, a, f in itertools.product(waveforms, [NO_SCC, *alphas],
@@ -39,6 +55,7 @@ def attack_map(waveforms: list[str], amplitudes: list[float], freqs: list[float]
 def bias_map(biases: list[float], alphas: list[float], Ts: float = 0.25) -> pd.DataFrame:
     """Bias (step) attacks on the frequency reference ω_ref (pu), without SCC and
     with the SCC for each alpha."""
+    _grid(biases=biases, alphas=alphas)
     return _table([{"waveform": "step", "channel": "wref", "amplitude": b, "freq_hz": 0.0,
                     "start": ATTACK_START, "alpha": al, "Ts": Ts}
                    for al, b in itertools.product([NO_SCC, *alphas], biases)])
@@ -49,6 +66,7 @@ def tradeoff(alphas: list[float], Ts_values: list[float], attack_amplitude: floa
     """For every (alpha, T_s), and once without SCC: the Fig. 4 sinusoid on P_c
     (``event="attack"``) and load steps (``event="load"``, where every
     intervention is a false alarm)."""
+    _grid(alphas=alphas, Ts_values=Ts_values, load_steps=load_steps)
     settings = [(NO_SCC, float("nan"))] + list(itertools.product(alphas, Ts_values))
     events = [("attack", "sinusoid", "pc", attack_amplitude, attack_freq)]
     events += [("load", "step", "load", s, 0.0) for s in load_steps]

@@ -80,7 +80,11 @@ def option_table(method: str) -> list[dict]:
 
 def alarm_mask(flags: dict[str, np.ndarray]) -> np.ndarray:
     """:attr:`FilterInfo.alarm` for the flags of :meth:`SafetyFilter.filter_batch`."""
-    return np.logical_or.reduce([flags[f] for f in ALARM_FLAGS if f in flags])
+    present = [np.asarray(flags[f], bool) for f in ALARM_FLAGS if f in flags]
+    if not present:
+        raise ValueError(f"flags must hold at least one of {ALARM_FLAGS} (the flags of "
+                         f"filter_batch), got keys {sorted(map(str, flags))}")
+    return np.logical_or.reduce(present)
 
 
 class SafetyFilter:
