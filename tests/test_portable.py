@@ -121,7 +121,9 @@ def test_tables_print_the_stable_digits_and_never_round_up_to_a_setting():
     assert [number(v) for v in (3.042, 3.044, 0.3118, 0.3121)] == ["3.04", "3.04", "0.312",
                                                                    "0.312"]
     assert number(0.9996) == "0.9996" and number(-0.99996) == "-0.99996"
-    assert number(1234.5) == "1234" and number(float("nan")) == "—"
+    assert number(1234.5) == "≈1230" and number(float("nan")) == "—"
+    from lfc._format import count
+    assert count(1551) == count(1547) == "≈1550" and count(999) == "999"
 
 
 def test_a_trip_count_near_a_setting_is_reported_at_the_edge_with_its_margin():

@@ -7,9 +7,10 @@ import ast
 import json
 import math
 import re
+from numbers import Integral, Real
 from pathlib import Path
 
-from lfc._format import STABLE_DIGITS, number
+from lfc._format import STABLE_DIGITS, count, number
 from lfc.experiments.deviations import DEVIATIONS
 from lfc.experiments.scenarios import ALL_PLANTS, PLANTS, check_plant, design_params
 from lfc.model import LFCParams
@@ -176,10 +177,13 @@ def record_claims(results_dir: str | Path, claims: dict[str, bool], check: bool,
 
 def markdown_table(table, digits: int = STABLE_DIGITS) -> str:
     """A pandas DataFrame as a GitHub markdown table; floats to ``digits``
-    significant digits (:func:`lfc._format.number`: the digits that are stable
-    across BLAS kernels, and a value below 1 never printed as 1)."""
+    significant digits and integers of 1000 or more to as many (:mod:`lfc._format`:
+    the digits that are stable across BLAS kernels; a value below 1 never
+    printed as 1)."""
     def cell(v) -> str:
-        return number(v, digits) if isinstance(v, float) else str(v)
+        if isinstance(v, bool) or not isinstance(v, Real):      # numpy's bool is no Real
+            return str(v)
+        return count(v, digits) if isinstance(v, Integral) else number(float(v), digits)
     lines = ["| " + " | ".join(map(str, table.columns)) + " |",
              "|" + "---|" * len(table.columns)]
     lines += ["| " + " | ".join(cell(v) for v in row) + " |"
