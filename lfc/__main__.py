@@ -7,8 +7,16 @@ import sys
 from lfc.repro.cli import INTERRUPTED, main
 
 
+_MAIN = os.getpid()
+
+
 def _terminated(signum, frame):
-    """SIGTERM (a CI job cancelled, ``kill``) stops everything as Ctrl-C does."""
+    """SIGTERM (a CI job cancelled, ``kill``) stops everything as Ctrl-C does; a
+    forked worker (which inherits this handler) is terminated as by default."""
+    if os.getpid() != _MAIN:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        os.kill(os.getpid(), signal.SIGTERM)
+        return
     raise KeyboardInterrupt
 
 
