@@ -17,7 +17,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from lfc._validate import check_flag, check_nonnegative, check_positive, check_range
+from lfc._validate import (ParameterTypeError, check_flag, check_nonnegative, check_positive,
+                           check_range)
 
 if TYPE_CHECKING:
     import control
@@ -94,6 +95,15 @@ class LFCParams:
             object.__setattr__(self, f.name, float(getattr(self, f.name)))
 
 
+def check_params(params: object, name: str = "params") -> "LFCParams":
+    """``params``; raise a :class:`~lfc._validate.ParameterTypeError` unless it is an
+    :class:`LFCParams` (a grid is a ``MultiAreaParams``, which takes its own calls)."""
+    if not isinstance(params, LFCParams):
+        raise ParameterTypeError(f"{name} must be an LFCParams (one area), got "
+                                 f"{type(params).__name__}")
+    return params
+
+
 def lfc_matrices(params: LFCParams, *, printed_droop_sign: bool = False
                  ) -> tuple[np.ndarray, np.ndarray]:
     """Return the continuous-time ``(A, B)`` of eq. (1).
@@ -112,7 +122,7 @@ def lfc_matrices(params: LFCParams, *, printed_droop_sign: bool = False
     B : ndarray, shape (5, 2)
         Columns: ``dPc``, ``dPL``.
     """
-    p = params
+    p = check_params(params)
     sign = 1.0 if check_flag("printed_droop_sign", printed_droop_sign) else -1.0
     A = np.array([
         [-1 / p.tau_g, 0, sign / (p.droop * p.tau_g), 0, 0],

@@ -178,6 +178,9 @@ def multiarea_matrices(params: MultiAreaParams) -> tuple[np.ndarray, np.ndarray]
     B : ndarray, shape (n_states, 2 n_areas)
         Columns: every area's ``dPc``, then every area's ``dP_L``.
     """
+    if not isinstance(params, MultiAreaParams):
+        raise ParameterTypeError(f"params must be a MultiAreaParams (a grid; one area: "
+                                 f"lfc_matrices), got {type(params).__name__}")
     n, m = params.n_areas, N_AREA_STATES
     A, B = np.zeros((params.n_states, params.n_states)), np.zeros((params.n_states, 2 * n))
     for a, area in enumerate(params.areas):

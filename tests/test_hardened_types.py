@@ -474,3 +474,22 @@ def test_an_empty_table_has_the_metric_dtypes_of_a_full_one():
     full = lfc.simulate_many(P, _row(), duration=1.0, progress=False)
     assert (empty.dtypes == full.dtypes).all()
     assert isinstance(empty, pd.DataFrame) and len(empty) == 0
+
+
+def test_small_public_helpers_name_their_bad_argument():
+    from lfc.experiments import redteam
+    cases = [
+        (lambda: lfc.discretize(None, 0.1), TypeError, "params must be an LFCParams"),
+        (lambda: lfc.multiarea_matrices(P), TypeError, "params must be a MultiAreaParams"),
+        (lambda: redteam.severity({"max_abs_rocof_meas": 0.1, "max_abs_dw_meas": 0.0}, 0),
+         TypeError, "relays must be a RelaySettings"),
+        (lambda: lfc.filters.register(object), TypeError, "backend must be a Backend"),
+        (lambda: lfc.SafetyFilter(P).check_period("x"), TypeError, "control_period must be"),
+        (lambda: redteam.piecewise_attack_table(n=1, amplitude=1.0, duration=0.5, seed=0),
+         ValueError, "duration must be > ATTACK_START"),
+        (lambda: redteam.piecewise_attack_table(n=1, amplitude=1.0, duration=2.0, seed=-1),
+         ValueError, "seed must be an integer >= 0"),
+    ]
+    for call, error, words in cases:
+        with pytest.raises(error, match=words):
+            call()

@@ -145,6 +145,7 @@ class Search:
 def severity(results, relays: RelaySettings) -> np.ndarray:
     """Per run: max(peak |ROCOF| / rocof_limit, peak |Δω̂| / F).  ``results`` is a
     batch table or one run's metrics (anything indexed by the metric names)."""
+    relays = relays_or_default(relays)
     return np.maximum(np.asarray(results["max_abs_rocof_meas"], float) / relays.rocof_limit,
                       np.asarray(results["max_abs_dw_meas"], float) / relays.F)
 
@@ -379,6 +380,12 @@ def piecewise_attack_table(*, n: int, amplitude: float, duration: float, seed: i
     """``n`` seeded random piecewise-constant attacks on P_c (values in
     ``±amplitude`` held for 0.05–2 s), paper filter α = 20 — a reproducible
     batch of red-team attacks for tests."""
+    check_count("n", n)
+    check_seed("seed", seed)
+    check_positive("amplitude", amplitude)
+    check_number("duration", duration)
+    if not duration > ATTACK_START:
+        raise ValueError(f"duration must be > ATTACK_START ({ATTACK_START} s), got {duration!r}")
     rng = np.random.default_rng(seed)
     steps = int(round((duration - ATTACK_START) / control_period))
     values = np.empty((steps, n))

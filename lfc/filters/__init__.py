@@ -22,7 +22,7 @@ from dataclasses import fields
 
 import numpy as np
 
-from lfc._validate import ParameterTypeError, check_array, check_number
+from lfc._validate import ParameterTypeError, check_array, check_number, check_positive
 from lfc.filters.base import (ALARM_BITS, ALARM_FLAGS, MEMORY, Backend, FilterInfo, Options,
                               binding_names, flag)
 from lfc.filters.certified import CertifiedFilter, CertifiedOptions
@@ -42,6 +42,8 @@ REGISTRY: dict[str, type[Backend]] = {}
 
 def register(backend: type[Backend]) -> type[Backend]:
     """Make ``backend`` a method of :class:`SafetyFilter`, under ``backend.name``."""
+    if not (isinstance(backend, type) and issubclass(backend, Backend)):
+        raise ParameterTypeError(f"backend must be a Backend subclass, got {backend!r:.80}")
     if not backend.name or backend.name in REGISTRY:
         raise ValueError(f"a filter method needs a new name, got {backend.name!r}")
     if not (isinstance(backend.Options, type) and issubclass(backend.Options, Options)):
@@ -150,6 +152,7 @@ class SafetyFilter:
         """Raise ``ValueError`` if this filter was built for calls at another period
         than ``control_period`` (s): its option ``control_period``, where it has one
         (the certified filter's estimation bound depends on it)."""
+        check_positive("control_period", control_period)
         own = getattr(self.options, "control_period", None)
         if own is not None and not math.isclose(own, control_period, rel_tol=1e-9):
             raise ValueError(f"the filter was built for control_period={own} s but the "
