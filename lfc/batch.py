@@ -42,6 +42,7 @@ from lfc.engine import METRICS, Scenarios
 from lfc.estimation import STD
 from lfc.filters import (CONFLICT_RULES, METHODS, OUTSIDE_RULES, PREDICTIONS, SafetyFilter,
                          options_of)
+from lfc.filters.base import given as holds_value
 from lfc.model import LFCParams
 from lfc.relays import RELAY_NAMES, RelaySettings, relays_or_default
 from lfc.signals import Chirp, Ramp, Samples, Signal, Sinusoid, Square, Step
@@ -144,6 +145,15 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
             raise ValueError(f"column 'stop' has no meaning for a "
                              f"{scenarios['waveform'][bad].iloc[0]!r} row (row "
                              f"{scenarios.index[bad][0]!r}): leave it NaN")
+    for col in ("values", "sample_period"):
+        if col not in scenarios.columns:
+            continue
+        bad = (scenarios["waveform"] != "samples") & scenarios[col].map(holds_value)
+        if bad.any():
+            raise ValueError(f"column {col!r} has no meaning for a "
+                             f"{scenarios['waveform'][bad].iloc[0]!r} row (row "
+                             f"{scenarios.index[bad][0]!r}; only 'samples' rows read it): "
+                             f"leave it empty (None or NaN)")
     if (scenarios["waveform"] == "samples").any():
         rows = scenarios[scenarios["waveform"] == "samples"]
         missing = [c for c in ("values", "sample_period") if c not in scenarios.columns]

@@ -47,6 +47,7 @@ DEFAULT_MEAS_STD = (1e-4, 1e-3)   # pu, pu/s: a Kalman filter's noise model wher
 # inf) or the sampled model loses the dynamics (a period of 10 s: unobservable)
 STD = (1e-9, 1e2)
 PERIOD = (1e-5, 1.0)
+LOAD_STD = 0.01   # pu/sqrt(s): the load random walk's default intensity (KalmanFilter)
 
 
 def check_noise_std(name: str, value: object) -> tuple[float, float]:
@@ -93,6 +94,7 @@ class KalmanFilter:
         estimate still tracks a 0.1 pu load step to 90 % within 0.15 s at the default
         noise, and its steady-state error is small (std 0.003 pu), which the
         certified filter's estimation bound depends on (``tests/test_estimation.py``).
+        Only with ``estimate_load`` (otherwise leave it at the default).
 
     Attributes
     ----------
@@ -112,7 +114,7 @@ class KalmanFilter:
 
     def __init__(self, params: LFCParams, period: float = 0.01, *,
                  meas_std: tuple[float, float] = DEFAULT_MEAS_STD, process_std: float = 1e-4,
-                 estimate_load: bool = True, load_std: float = 0.01) -> None:
+                 estimate_load: bool = True, load_std: float = LOAD_STD) -> None:
         if not isinstance(params, LFCParams):
             raise ParameterTypeError(f"params must be an LFCParams, got {params!r:.80}")
         check_range("period", period, *PERIOD, closed=True)
@@ -122,6 +124,9 @@ class KalmanFilter:
         check_range("process_std", process_std, *STD, closed=True)
         check_range("load_std", load_std, 0.0, STD[1], closed=True)
         estimate_load = check_flag("estimate_load", estimate_load)
+        if not estimate_load and load_std != LOAD_STD:
+            raise ValueError(f"load_std={load_std!r} has no effect with estimate_load=False "
+                             f"(no load state to drive): leave it at its default")
         period = float(period)        # a numpy float32 is not a timebase python-control takes
         self.params, self.period, self.estimate_load = params, period, estimate_load
         self.meas_std = (float(meas_std[0]), float(meas_std[1]))

@@ -187,8 +187,9 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
     stop_on_trip : bool
         End the run at the first relay trip.
     load_feedforward : bool
-        With ``estimator=None``, give the filter the true dPL (an idealized load
-        measurement) instead of 0 (E7: dPL is not measured at the generator).
+        Give the filter the true dPL (an idealized load measurement) instead of 0
+        (E7: dPL is not measured at the generator); needs ``scc`` and
+        ``estimator=None`` (else ``ValueError``: it would have no effect).
     relay_noise : bool
         The relays read ``dw_meas`` and ``rocof_meas`` through white noise of
         std ``noise_std`` too, drawn independently at every plant step (seeded
@@ -204,6 +205,10 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
         raise ParameterTypeError(f"scc must be a SafetyFilter or None, got {scc!r}")
     relays = relays_or_default(relays)
     check_flag("load_feedforward", load_feedforward)   # the engine calls it feedforward
+    if load_feedforward and (scc is None or estimator is not None):
+        raise ValueError("load_feedforward=True gives the filter the true load in place of "
+                         "an estimate: it needs scc and estimator=None (it would have no "
+                         "effect here)")
     sc = Scenarios(params, duration=duration, dt=dt, control_period=control_period,
                    relays=relays)
     sc.add(attacks={0: {"pc": pc_attack, "wref": wref_attack}}, loads={0: load},

@@ -4,6 +4,7 @@ bool or a number belongs is a TypeError naming the parameter."""
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 import pytest
 
 import lfc
@@ -493,3 +494,54 @@ def test_small_public_helpers_name_their_bad_argument():
     for call, error, words in cases:
         with pytest.raises(error, match=words):
             call()
+
+
+@pytest.mark.parametrize("build, match", [
+    (lambda: lfc.SafetyFilter(LFCParams(), method="certified", confidence=0.99),
+     "confidence=0.99 has no effect without noise_std"),
+    (lambda: lfc.SafetyFilter(LFCParams(), method="certified", noise_std=(1e-4, 1e-3),
+                              relay_rate=10.0), "relay_rate=10.0 has no effect without "
+                                                "trips_per_hour"),
+    (lambda: lfc.KalmanFilter(LFCParams(), estimate_load=False, load_std=0.1),
+     "load_std=0.1 has no effect with estimate_load=False"),
+    (lambda: lfc.simulate(LFCParams(), duration=0.1, load_feedforward=True),
+     "load_feedforward=True .* needs scc and estimator=None"),
+    (lambda: lfc.simulate(LFCParams(), duration=0.1, load_feedforward=True, estimator="kalman",
+                          scc=lfc.SafetyFilter(LFCParams())), "needs scc and estimator=None"),
+])
+def test_an_option_that_would_have_no_effect_is_refused(build, match):
+    """Third review: these were accepted and silently did nothing."""
+    with pytest.raises(ValueError, match=match):
+        build()
+
+
+def test_red_team_settings_that_would_be_dropped_are_refused():
+    from lfc.experiments.redteam import Defender, Search
+    with pytest.raises(ValueError, match="method 'none' does not read alpha"):
+        Defender("x", method="none", alpha=5.0)
+    with pytest.raises(ValueError, match="method 'paper' does not read uncertainty, "
+                                         "declare_noise"):
+        Defender("x", uncertainty=0.2, declare_noise=True)
+    with pytest.raises(ValueError, match="method 'certified' does not read Ts"):
+        Defender("x", method="certified", Ts=0.5)
+    with pytest.raises(ValueError, match="n_seeds=4 needs noise_std > 0"):
+        Search(n_seeds=4)
+    assert Defender("x", method="certified", uncertainty=0.2, declare_noise=True).columns()[
+        "uncertainty"] == 0.2
+    assert Search(noise_std=(1e-4, 1e-3), n_seeds=4).bounds() == [(0, 3)]
+
+
+def test_samples_columns_on_other_rows_are_refused():
+    rows = pd.DataFrame([dict(waveform="samples", channel="pc", amplitude=0.0, freq_hz=0.0,
+                              start=1.0, alpha=np.nan, Ts=0.25, values=[0.1, 0.2],
+                              sample_period=0.01),
+                         dict(waveform="step", channel="pc", amplitude=0.1, freq_hz=0.0,
+                              start=1.0, alpha=np.nan, Ts=0.25, values=None,
+                              sample_period=np.nan)])
+    assert len(lfc.simulate_many(LFCParams(), rows, duration=2.0, progress=False)) == 2
+    for col, value in (("sample_period", 0.01), ("values", [0.3])):
+        bad = rows.copy()
+        bad[col] = bad[col].astype(object)
+        bad.at[1, col] = value
+        with pytest.raises(ValueError, match=f"column '{col}' has no meaning for a 'step' row"):
+            lfc.simulate_many(LFCParams(), bad, duration=2.0, progress=False)

@@ -26,7 +26,7 @@ anywhere in a box around the design model (M, D, τ_G, τ_T, R within
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 import pandas as pd
@@ -60,11 +60,17 @@ FAMILIES = {
 MULTI_FAMILIES = {**FAMILIES, "bias on ACE": ("ace", "step", [(-3.0, 3.0)])}
 
 
+READ_BY = {"none": (), "paper": ("alpha", "Ts"), "certified": ("uncertainty", "declare_noise")}
+UNREAD_BY = {m: tuple(n for n in ("alpha", "Ts", "uncertainty", "declare_noise") if n not in r)
+             for m, r in READ_BY.items()}
+
+
 @dataclass(frozen=True)
 class Defender:
     """A filter setting to attack: ``method`` "none", "paper" (with ``alpha``,
     ``Ts``; the default reading) or "certified" (with its plant box
-    ``uncertainty`` and, with ``declare_noise``, the measurement noise covered)."""
+    ``uncertainty`` and, with ``declare_noise``, the measurement noise covered).
+    A field the method does not read keeps its default (else ``ValueError``)."""
 
     name: str
     method: str = "paper"
@@ -83,6 +89,13 @@ class Defender:
         if not 0.0 <= self.uncertainty < 1.0:
             raise ValueError(f"uncertainty must lie in [0, 1), got {self.uncertainty!r}")
         check_flag("declare_noise", self.declare_noise)
+        unread = [f.name for f in fields(self) if f.name in UNREAD_BY[self.method]
+                  and getattr(self, f.name) != f.default]
+        if unread:
+            raise ValueError(f"Defender method {self.method!r} does not read "
+                             f"{', '.join(unread)} (it reads "
+                             f"{', '.join(READ_BY[self.method]) or 'nothing'}): "
+                             f"leave {'it' if len(unread) == 1 else 'them'} at the default")
 
     def columns(self) -> dict:
         """The scenario-table columns that select this filter."""
@@ -110,6 +123,9 @@ class Search:
             raise ValueError(f"box must be in [0, 1), got {self.box!r}")
         object.__setattr__(self, "noise_std", check_noise_std("noise_std", self.noise_std))
         check_count("n_seeds", self.n_seeds)
+        if self.n_seeds > 1 and not self.noisy:
+            raise ValueError(f"n_seeds={self.n_seeds} needs noise_std > 0: without noise "
+                             f"every seed gives the same run")
 
     @property
     def noisy(self) -> bool:

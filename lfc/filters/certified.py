@@ -85,7 +85,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from numbers import Real
 from typing import ClassVar
 
@@ -223,6 +223,12 @@ class CertifiedOptions(Options):
             pair = check_pair("noise_std", self.noise_std, positive=True)
             check_noise_std("noise_std", pair)
             object.__setattr__(self, "noise_std", pair)
+        defaults = {f.name: f.default for f in fields(self)}
+        for name, needs, needed in (("confidence", "noise_std", self.noise_std),
+                                    ("relay_rate", "trips_per_hour", self.trips_per_hour)):
+            if needed is None and getattr(self, name) != defaults[name]:
+                raise ValueError(f"{name}={getattr(self, name)!r} has no effect without "
+                                 f"{needs}: give {needs} or leave {name} at its default")
         if self.trips_per_hour is not None:
             if self.noise_std is None:
                 raise ValueError("trips_per_hour needs noise_std (the relays' measurement "
