@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
+from lfc._format import count, number
 from lfc.simulate import SimResult
 
 __all__ = ["DEVIATIONS", "Deviation", "multiarea_records"]
@@ -77,7 +78,7 @@ def _held_explain(attack: str) -> Callable[[dict], str]:
         andes, model = _certified_areas(m, attack), _certified_areas(m, attack, "model/")
 
         def counts(runs: dict) -> str:
-            return ", ".join(f"{k} {v['outside']}" for k, v in runs.items())
+            return ", ".join(f"{k} {count(v['outside'])}" for k, v in runs.items())
 
         if any(v["outside"] for v in model.values()):
             cause = ("the tie-line flow drifts while a command is held, which ends the "
@@ -86,7 +87,8 @@ def _held_explain(attack: str) -> Callable[[dict], str]:
         else:
             cause = ("ANDES is not the fitted design model (assumption (a)): on the model "
                      "itself no filter flags outside")
-        moves = ", ".join(f"{k} {v['disturbance_step']:.3g} pu against {v['load_bound']:.3g}"
+        moves = ", ".join(f"{k} {number(v['disturbance_step'])} pu against "
+                          f"{number(v['load_bound'])}"
                           for k, v in andes.items())
         held = all(v["disturbance_step"] <= v["load_bound"] for v in andes.values())
         return (f"at some control samples no command was certified and the held one failed its "
