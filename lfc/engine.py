@@ -71,7 +71,8 @@ def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise0: flo
                      ka: np.ndarray, kb: np.ndarray, kc: np.ndarray, kg: np.ndarray,
                      kstate: np.ndarray, feedforward: bool, method: int, fd: np.ndarray,
                      mem: np.ndarray, gstate: np.ndarray, x_hat: np.ndarray,
-                     ctrl: np.ndarray, tie: float, k_tie_period: float) -> tuple:
+                     ctrl: np.ndarray, tie: float, k_tie_period: float,
+                     anti_windup: bool) -> tuple:
     """The generator side at control sample ``j`` (time ``t``, s) of one scenario.
 
     ``x`` is the plant's state in design-model coordinates and ``p_true`` the true
@@ -80,6 +81,9 @@ def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise0: flo
     disturbance (load plus tie-line export) and the integrator is the area's AGC:
     ``gstate[0] += k_i_period (wref - dw_meas) - k_tie_period tie`` with ``tie``
     the measured tie-line export plus any ACE attack (0 and 0 for one area).
+    With ``anti_windup`` the integrator does not move while the filter's command
+    differs from the incoming one in the direction the increment would widen
+    (conditional integration): it cannot wind up behind a held command.
     ``est`` >= 0 selects the Kalman filter ``(ka, kb, kc, kg)`` with state
     ``kstate`` (prior, then posterior; 2 x N_KF); ``method`` < 0 runs without a
     filter.
@@ -106,7 +110,9 @@ def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise0: flo
     else:
         u, flags, h0, h1, m0, m1, q0, q1, d0, d1 = u_ref, 0, nan, nan, nan, nan, nan, nan, \
             nan, nan
-    gstate[0] += k_i_period * (wref - y0) - k_tie_period * tie
+    increment = k_i_period * (wref - y0) - k_tie_period * tie
+    if not (anti_windup and increment * (u_ref - u) > 0.0):
+        gstate[0] += increment
     if est >= 0:
         kf_predict(ka, kb, kstate, u)
     if ctrl.shape[0]:
@@ -186,9 +192,9 @@ def _run(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarray,
     (:mod:`lfc.multiarea`; one area and no line is the single-area model).
     ``ad``, ``bu``, ``bl`` (plants, n_s, ...) are the discretized plants and
     ``plant_of`` (N,) each scenario's; ``k_freq``, ``k_tie`` (n_a,) the AGC
-    gains times the control period.  ``index`` (N, n_a, 4): each area's Kalman
-    filter (-1: none), noise row (-1: none), filter (-1: none) and disturbance
-    feed-forward (0/1); ``relay_noise`` (N, n_a, 3) the std of the relays' own
+    gains times the control period.  ``index`` (N, n_a, 5): each area's Kalman
+    filter (-1: none), noise row (-1: none), filter (-1: none), disturbance
+    feed-forward (0/1) and anti-windup (0/1); ``relay_noise`` (N, n_a, 3) the std of the relays' own
     measurement noise on ``(dw_meas, rocof_meas)`` (pu, pu/s; drawn at every
     plant step) and, in ``[i, 0, 2]``, the scenario's seed for it.  Writes
     ``metrics`` (N, n_a, len(METRICS)) and, when the trace arrays have rows (N =
@@ -241,6 +247,7 @@ def _run(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarray,
             for a in range(n_a):
                 e_i, q_i, f_i, ff = index[i, a, 0], index[i, a, 1], index[i, a, 2], \
                     index[i, a, 3]
+                aw = index[i, a, 4] == 1
                 if a == 0:
                     kinds_a, params_a, offsets_a = kinds0, params0, offsets0
                     ka_a, kb_a, kc_a, kg_a, method, fd = ka0, kb0, kc0, kg0, method0, fd0
@@ -260,7 +267,7 @@ def _run(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarray,
                     j, t, x_a, load + tie, noise[q_i, j, 0] if q_i >= 0 else 0.0,
                     noise[q_i, j, 1] if q_i >= 0 else 0.0, kinds_a, params_a, offsets_a, st,
                     sv, k_freq[a], e_i, ka_a, kb_a, kc_a, kg_a, ks_a, ff == 1, method, fd,
-                    mem_a, gs_a, x_hat, ctrl_a, tie + ace, k_tie[a])
+                    mem_a, gs_a, x_hat, ctrl_a, tie + ace, k_tie[a], aw)
                 u[a] = ua
                 met[a, 4] += (flags & ACTIVE) != 0
                 met[a, 5] += (flags & ALARM_BITS) != 0
@@ -526,14 +533,15 @@ class Scenarios:
             attacks: dict | None = None, loads: dict | None = None,
             filters: dict | None = None, estimator=None,
             noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0,
-            feedforward: bool = False, relay_noise: bool = False) -> int:
+            feedforward: bool = False, relay_noise: bool = False,
+            anti_windup: bool = False) -> int:
         """One scenario; returns its row number.
 
         ``attacks`` (``{area: {"pc" | "wref" | "ace": signal}}``), ``loads``
         (``{area: signal}``), ``filters`` (``{area: SafetyFilter}``, built),
         ``estimator``, ``noise_std``, ``seed`` (area ``a > 0`` draws from ``(seed,
-        a)``), ``feedforward`` (the filter is given the area's net disturbance)
-        and ``relay_noise`` as in :func:`lfc.simulate` (a grid) and
+        a)``), ``feedforward`` (the filter is given the area's net disturbance),
+        ``anti_windup`` (:func:`generator_period`) and ``relay_noise`` as in :func:`lfc.simulate` (a grid) and
         :func:`lfc.simulate`; ``plant`` (default the design model) is the grid
         the scenario runs on, with the design's areas and tie-lines.
         """
@@ -550,6 +558,7 @@ class Scenarios:
         noisy = check_noise(noise_std)
         seed = check_seed("seed", seed)
         feedforward = check_flag("feedforward", feedforward)
+        anti_windup = check_flag("anti_windup", anti_windup)
         relay_noise = check_flag("relay_noise", relay_noise)
         if relay_noise and not noisy:
             raise ValueError("relay_noise=True needs noise_std > 0 (the relays' measurement "
@@ -581,7 +590,8 @@ class Scenarios:
             self._st.append(st)
             self._sv.append(sv)
             self._n_samples += len(st)
-            row.append((e_i, len(self._noise) - 1 if noisy else -1, f_i, int(feedforward)))
+            row.append((e_i, len(self._noise) - 1 if noisy else -1, f_i, int(feedforward),
+                        int(anti_windup)))
         self._rows.append(row)
         self._plant_of.append(p_i)
         self._relay_noise.append([(*(noise_std if relay_noise else (0.0, 0.0)), seed)] * n)
@@ -612,7 +622,7 @@ class Scenarios:
         tc = np.full((self.n_ctrl if trace else 0, n_a, N_CTRL), np.nan)
         _run(self.n_steps, self.ratio, self.dt, ad, bu, bl, grid.incidence(),
              k_freq * self.period, k_tie * self.period, np.array(self._plant_of, np.int64),
-             np.array(self._rows, np.int64).reshape(n, n_a, 4), kinds, params, offsets, st,
+             np.array(self._rows, np.int64).reshape(n, n_a, 5), kinds, params, offsets, st,
              sv, noise, ka, kb, kc, kg, kdim, methods, fdata, foff, limits, delays,
              np.array(self._relay_noise, float).reshape(n, n_a, 3), stop_on_trip, metrics,
              tx, tc, tt, ends, np.zeros(n_s), np.zeros(n_s), np.zeros(n_a), np.zeros(n_a),
@@ -674,7 +684,7 @@ class GeneratorSide:
     design : LFCParams
         Design model (local controller gain, ``"kalman"`` model).
     scc : SafetyFilter or None
-    estimator, noise_std, seed, pc_attack, wref_attack, load_feedforward
+    estimator, noise_std, seed, pc_attack, wref_attack, load_feedforward, anti_windup
         As in :func:`lfc.simulate`.
     tc : ndarray
         Control sample times (s), uniform with step ``period``.
@@ -692,7 +702,7 @@ class GeneratorSide:
     def __init__(self, design: LFCParams, scc: SafetyFilter | None, estimator,
                  noise_std: tuple[float, float], seed: int, tc: np.ndarray, pc_attack,
                  wref_attack, load_feedforward: bool, period: float, *, ace_attack=None,
-                 k_agc: tuple[float, float] | None = None) -> None:
+                 k_agc: tuple[float, float] | None = None, anti_windup: bool = False) -> None:
         if scc is not None:
             scc.check_period(period)
         self.tc, self.scc = tc, scc
@@ -707,6 +717,7 @@ class GeneratorSide:
         k_freq, k_tie = (design.k_i, 0.0) if k_agc is None else k_agc
         self.k_i_period, self.k_tie_period = k_freq * period, k_tie * period
         self.feedforward = load_feedforward
+        self.anti_windup = check_flag("anti_windup", anti_windup)
         self.method = scc.method_id if scc is not None else -1
         self.data = scc.data if scc is not None else np.zeros(0)
         self.kstate, self.gstate = np.zeros((2, N_KF)), np.zeros(1)
@@ -728,6 +739,7 @@ class GeneratorSide:
                                    params, offsets, st, sv, self.k_i_period, self.est, self.ka,
                                    self.kb, self.kc, self.kg, self.kstate, self.feedforward,
                                    self.method, self.data, self.memory, self.gstate,
-                                   self.x_hat, self.ctrl, tie, self.k_tie_period)
+                                   self.x_hat, self.ctrl, tie, self.k_tie_period,
+                                   self.anti_windup)
         self.n_done = j + 1
         return u

@@ -151,7 +151,8 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
              scc: SafetyFilter | None = None, relays: RelaySettings | None = None,
              estimator=None, noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0,
              dt: float = 1e-3, control_period: float = 0.01, stop_on_trip: bool = False,
-             load_feedforward: bool = False, relay_noise: bool = False) -> SimResult:
+             load_feedforward: bool = False, relay_noise: bool = False,
+             anti_windup: bool = False) -> SimResult:
     """Simulate the closed loop from equilibrium.
 
     Parameters
@@ -195,6 +196,11 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
         std ``noise_std`` too, drawn independently at every plant step (seeded
         by ``seed``); default False: the relays see the noise-free signals.
         ``trace`` and the metrics keep the noise-free signals.
+    anti_windup : bool
+        While the filter's command differs from the incoming one, the local
+        integrator does not integrate in the direction that widens the
+        difference (conditional integration), so it cannot wind up behind a
+        held command.  Default False: the paper's loop, where it winds up.
 
     Returns
     -------
@@ -213,7 +219,7 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
                    relays=relays)
     sc.add(attacks={0: {"pc": pc_attack, "wref": wref_attack}}, loads={0: load},
            filters={0: scc}, estimator=estimator, noise_std=noise_std, seed=seed,
-           feedforward=load_feedforward, relay_noise=relay_noise)
+           feedforward=load_feedforward, relay_noise=relay_noise, anti_windup=anti_windup)
     run = sc.run(trace=True, stop_on_trip=stop_on_trip)
     end = int(run.ends[0])
     t = sc.t[:end + 1]
@@ -229,7 +235,7 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
                 "noise_std": list(noise_std), "scc": repr(scc), "estimator": repr(estimator),
                 "pc_attack": repr(pc_attack), "wref_attack": repr(wref_attack),
                 "load": repr(load), "stop_on_trip": stop_on_trip,
-                "load_feedforward": load_feedforward}
+                "load_feedforward": load_feedforward, "anti_windup": anti_windup}
     return result(trace, sc.tc, run.ctrl[:, 0], trips, scc, settings)
 
 

@@ -177,7 +177,7 @@ def simulate_grid_linear(params: MultiAreaParams, *, duration: float,
                        estimator=None, noise_std: tuple[float, float] = (0.0, 0.0),
                        seed: int = 0, dt: float = 1e-3, control_period: float = 0.01,
                        stop_on_trip: bool = False, feedforward: bool = True,
-                       relay_noise: bool = False) -> MultiAreaResult:
+                       relay_noise: bool = False, anti_windup: bool = False) -> MultiAreaResult:
     """Simulate an interconnected grid from equilibrium.
 
     Parameters
@@ -209,6 +209,10 @@ def simulate_grid_linear(params: MultiAreaParams, *, duration: float,
         Every area's relays read through white noise of std ``noise_std``, as
         in :func:`lfc.simulate` (one generator seeded by ``seed`` draws for the
         areas in turn at every plant step).
+    anti_windup : bool
+        Each area's AGC integrator does not integrate in the direction that
+        widens the gap between its command and what the area's filter applies
+        (conditional integration, as in :func:`lfc.simulate`).  Default False.
 
     Returns
     -------
@@ -223,7 +227,8 @@ def simulate_grid_linear(params: MultiAreaParams, *, duration: float,
     sc = Scenarios(params, duration=duration, dt=dt, control_period=control_period,
                    relays=relays)
     sc.add(attacks=attacks, loads=loads, filters=built, estimator=estimator,
-           noise_std=noise_std, seed=seed, feedforward=feedforward, relay_noise=relay_noise)
+           noise_std=noise_std, seed=seed, feedforward=feedforward, relay_noise=relay_noise,
+           anti_windup=anti_windup)
     run = sc.run(trace=True, stop_on_trip=stop_on_trip)
     end = int(run.ends[0])
     t = sc.t[:end + 1]
@@ -242,6 +247,7 @@ def simulate_grid_linear(params: MultiAreaParams, *, duration: float,
                 "attacks": repr(attacks), "loads": repr(loads),
                 "filters": {a: repr(f) for a, f in built.items()},
                 "stop_on_trip": stop_on_trip, "feedforward": feedforward,
+                "anti_windup": anti_windup,
                 "relay_noise": relay_noise}
     return multiarea_result(params, t, states, p_load, tie, trips, sc.tc,
                             [run.ctrl[:, a] for a in range(n_a)], built, settings)
@@ -284,7 +290,7 @@ def simulate_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
     scenarios : list of dict
         Each with any of the keyword arguments ``attacks``, ``loads``,
         ``filters``, ``estimator``, ``noise_std``, ``seed``, ``feedforward``,
-        ``relay_noise`` of
+        ``relay_noise``, ``anti_windup`` of
         :func:`simulate_grid_linear` (filters named by kind are built once).
     duration, relays, dt, control_period
         As in :func:`simulate_grid_linear`.
@@ -303,7 +309,7 @@ def simulate_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
     if not isinstance(scenarios, (list, tuple)) or not scenarios:
         raise ValueError(f"scenarios must be a non-empty list of dicts, got {scenarios!r}")
     keys = {"attacks", "loads", "filters", "estimator", "noise_std", "seed", "feedforward",
-            "relay_noise"}
+            "relay_noise", "anti_windup"}
     relays = relays_or_default(relays)
     cache: dict = {}
     rows = []
