@@ -58,7 +58,8 @@ def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
                         estimator=None, noise_std: tuple[float, float] = (0.0, 0.0),
                         seed: int = 0, control_period: float = 0.01, step: float = 0.005,
                         stop_on_trip: bool = False, feedforward: bool = True,
-                        case: GridCase | None = None, plant: AndesPlant | None = None
+                        anti_windup: bool = False, case: GridCase | None = None,
+                        plant: AndesPlant | None = None
                         ) -> MultiAreaResult:
     """Simulate an interconnected grid on ANDES with AGC and filters; the
     arguments and result of :func:`lfc.simulate` (a grid), plus the ones below.
@@ -122,7 +123,7 @@ def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
     gens = [GeneratorSide(area, built.get(a), estimator, noise_std, seed if a == 0 else (seed, a),
                           tc, attacks.get(a, {}).get("pc"), attacks.get(a, {}).get("wref"),
                           feedforward, control_period, ace_attack=attacks.get(a, {}).get("ace"),
-                          k_agc=(float(k_freq[a]), float(k_tie[a])))
+                          k_agc=(float(k_freq[a]), float(k_tie[a])), anti_windup=anti_windup)
             for a, area in enumerate(params.areas)]
     loop = AndesLoop(plant, loads, gens, relays, stop_on_trip)
     loop.run(duration, step)
@@ -136,7 +137,8 @@ def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
                 "control_period": control_period, "seed": seed, "noise_std": list(noise_std),
                 "estimator": repr(estimator), "attacks": repr(attacks), "loads": repr(loads),
                 "filters": {a: repr(f) for a, f in built.items()},
-                "stop_on_trip": stop_on_trip, "feedforward": feedforward}
+                "stop_on_trip": stop_on_trip, "feedforward": feedforward,
+                "anti_windup": anti_windup}
     return multiarea_result(params, t, per_area[:, :, :5], per_area[:, :, 5],
                             per_area[:, :, 6], trips, tc, [g.ctrl for g in gens], built,
                             settings, p_net=per_area[:, :, 7])

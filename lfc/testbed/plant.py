@@ -76,7 +76,7 @@ def simulate_microgrid(params: LFCParams, *, duration: float,
                        noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0,
                        control_period: float = 0.01, step: float = 0.005,
                        stop_on_trip: bool = False, load_feedforward: bool = False,
-                       case: MicrogridCase | None = None,
+                       anti_windup: bool = False, case: MicrogridCase | None = None,
                        overcurrent: OvercurrentSettings | None = None) -> SimResult:
     """Simulate the closed loop on the ANDES microgrid; the same arguments and
     :class:`~lfc.simulate.SimResult` as :func:`lfc.simulate`, plus the ones below.
@@ -122,7 +122,8 @@ def simulate_microgrid(params: LFCParams, *, duration: float,
 
     def run(open_t: float | None) -> tuple[AndesLoop, MicrogridPlant]:
         gen = GeneratorSide(params, scc, estimator, noise_std, seed, tc, pc_attack,
-                            wref_attack, load_feedforward, control_period)
+                            wref_attack, load_feedforward, control_period,
+                            anti_windup=anti_windup)
         plant = MicrogridPlant(case, fault, OvercurrentRelay(oc), open_t)
         loop = AndesLoop(plant, {} if load is None else {0: load}, [gen], relays,
                          stop_on_trip)
@@ -142,7 +143,7 @@ def simulate_microgrid(params: LFCParams, *, duration: float,
                 "scc": repr(scc), "estimator": repr(estimator), "pc_attack": repr(pc_attack),
                 "wref_attack": repr(wref_attack), "load": repr(load), "fault": repr(fault),
                 "overcurrent": repr(oc), "stop_on_trip": stop_on_trip,
-                "load_feedforward": load_feedforward}
+                "load_feedforward": load_feedforward, "anti_windup": anti_windup}
     return _result(loop, plant, settings)
 
 
