@@ -57,7 +57,8 @@ CHIRP_F0 = 0.1  # Hz, where every chirp starts
 PLANT = ("M", "D", "tau_g", "tau_t", "droop")   # optional columns: the row's own plant
 UNREAD_PARAMS = tuple(f.name for f in fields(LFCParams) if f.name not in PLANT)  # refused
 NOISE = ("noise_w", "noise_rocof")             # optional: measurement noise std (pu, pu/s)
-FLAGS = ("declare_noise", "relay_noise")       # optional booleans
+FLAGS = ("declare_noise", "relay_noise", "anti_windup")   # optional booleans
+NOISE_FLAGS = FLAGS[:2]                        # ... that need measurement noise
 FILTER_COLUMNS = ("method", *dict.fromkeys(c for m in METHODS for c in options_of(m).COLUMNS))
 # the columns that select a filter: each method's options declare theirs
 INPUTS = tuple(dict.fromkeys((*REQUIRED, "stop", "values", "sample_period", *READINGS, *PLANT,
@@ -230,10 +231,17 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
             raise ParameterTypeError(f"column {col!r} must be True or False; row "
                                      f"{scenarios.index[bad][0]!r} has {value!r} "
                                      f"({type(value).__name__})")
-        bad = scenarios[col].astype(bool).to_numpy() & ~noisy
-        if bad.any():
-            raise ValueError(f"column {col!r} is True on row {scenarios.index[bad][0]!r}, which "
-                             f"has no measurement noise ({', '.join(NOISE)} all 0)")
+        if col in NOISE_FLAGS:
+            bad = scenarios[col].astype(bool).to_numpy() & ~noisy
+            if bad.any():
+                raise ValueError(f"column {col!r} is True on row {scenarios.index[bad][0]!r}, "
+                                 f"which has no measurement noise ({', '.join(NOISE)} all 0)")
+        else:
+            bad = scenarios[col].astype(bool).to_numpy() & scenarios["alpha"].isna().to_numpy()
+            if bad.any():
+                raise ValueError(f"column {col!r} is True on row {scenarios.index[bad][0]!r}, "
+                                 f"which has no SCC (alpha NaN): there is nothing to wind up "
+                                 f"behind")
     if "seed" in scenarios.columns:
         seeds = pd.to_numeric(scenarios["seed"], errors="coerce").astype(float)  # NA: NaN
         bad = ~(np.isfinite(seeds) & (seeds == np.round(seeds)) & (seeds >= 0))
@@ -310,6 +318,7 @@ def run_chunk(params: LFCParams, scenarios: pd.DataFrame, duration: float,
         sc.add(plant=_plant(params, row), filters={0: _filter(params, relays, row, control_period)},
                estimator="kalman" if any(noise) else None, noise_std=noise,
                seed=int(row.get("seed", 0)), relay_noise=bool(row.get("relay_noise", False)),
+               anti_windup=bool(row.get("anti_windup", False)),
                attacks={0: {channel: signal}} if channel != "load" else None,
                loads={0: signal} if channel == "load" else None)
     run = sc.run()
@@ -393,7 +402,8 @@ def simulate_table(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
         ``declare_noise`` (True: it covers the row's noise, ``noise_std``) with
         its ``trips_per_hour`` (NaN: none), and
         ``relay_noise`` (True: the relays read through the row's noise too, as
-        ``simulate(relay_noise=True)``).  A row equals, bitwise,
+        ``simulate(relay_noise=True)``) and ``anti_windup`` (as in
+        :func:`lfc.simulate`; rows with SCC).  A row equals, bitwise,
         ``lfc.simulate(row_plant, scc=SafetyFilter(params, ...),
         estimator=KalmanFilter(params, control_period, meas_std=...),
         noise_std=..., seed=...)`` with the same attack (``tests/test_batch.py``).

@@ -5,6 +5,7 @@ off behind a held command: pinned here as a finding."""
 
 from __future__ import annotations
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -90,3 +91,24 @@ def test_anti_windup_on_the_andes_testbed():
     gap = lambda r: float((r.controls.pc_ref - r.controls.pc).abs().max())  # noqa: E731
     assert held.settings["anti_windup"] and gap(plain) > 5 * gap(held)
     assert not held.metrics()["tripped"]
+
+
+def test_a_scenario_table_row_with_anti_windup_equals_simulate():
+    P = LFCParams()
+    row = dict(waveform="step", channel="wref", amplitude=0.04, freq_hz=0.0, start=1.0,
+               stop=11.0, alpha=20.0, Ts=0.25, method="certified")
+    table = pd.DataFrame([row, {**row, "anti_windup": True}])
+    table["anti_windup"] = table["anti_windup"].fillna(False).astype(bool)
+    got = lfc.simulate_many(P, table, duration=20.0, progress=False)
+    run = dict(duration=20.0, wref_attack=lfc.Step(0.04, start=1.0, stop=11.0),
+               scc=lfc.SafetyFilter(P, method="certified"))
+    for k, aw in enumerate((False, True)):
+        want = lfc.simulate(P, **run, anti_windup=aw).metrics()
+        assert got.loc[k, "mean_abs_modification"] == pytest.approx(want["mean_abs_modification"],
+                                                                    rel=1e-12)
+        assert got.loc[k, "final_abs_dw_meas"] == want["final_abs_dw_meas"]
+    assert got.loc[1, "max_abs_modification"] < got.loc[0, "max_abs_modification"]
+    table.loc[0, ["alpha", "method"]] = [np.nan, "paper"]
+    table.loc[0, "anti_windup"] = True
+    with pytest.raises(ValueError, match="'anti_windup' is True on row 0, which has no SCC"):
+        lfc.simulate_many(P, table, duration=20.0, progress=False)

@@ -235,14 +235,14 @@ def test_a_step_stop_of_a_numpy_integer_is_a_number():
 
 def test_a_kalman_filter_exists_at_every_corner_or_says_why():
     """Every corner of the valid ranges (noise std 1e-9 and 100, period 1e-5 and
-    1 s, load_std 0 and 100, both estimate_load) gives a finite gain or a
-    ValueError that names the noise models: never a solver's exception."""
+    1 s, load_std 0 and 100 with estimate_load, and without it) gives a finite gain
+    or a ValueError that names the noise models: never a solver's exception."""
     import itertools
 
-    from lfc.estimation import PERIOD, STD
+    from lfc.estimation import LOAD_STD, PERIOD, STD
     solved = 0
-    for m0, m1, q, ls, per, est in itertools.product(STD, STD, STD, (0.0, STD[1]), PERIOD,
-                                                     (True, False)):
+    for m0, m1, q, (ls, est), per in itertools.product(
+            STD, STD, STD, ((0.0, True), (STD[1], True), (LOAD_STD, False)), PERIOD):
         try:
             k = lfc.KalmanFilter(P, meas_std=(m0, m1), process_std=q, load_std=ls,
                                  period=per, estimate_load=est)
