@@ -71,7 +71,14 @@ def _parser() -> argparse.ArgumentParser:
                      help="then run the same notebooks again with OPENBLAS_CORETYPE=CORE "
                           "(e.g. Haswell) into BUILD_DIR/blas-CORE and list every claim "
                           "and table cell that differs (exit 1 if any)")
-    sw = sub.add_parser("sweep", help="run a notebook over a parameter grid")
+    sw = sub.add_parser(
+        "sweep", help="run a notebook over a parameter grid",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="example: Fig. 4 at two gains and three amplitudes, 6 runs on 2 processes\n"
+               "  python -m lfc sweep notebooks/02_fig4_rocof_attack.ipynb \\\n"
+               "      -p alpha 3 20 -p amplitude 0.3 0.5 1.0 --jobs 2\n"
+               "writes OUT/sweep.csv (a row per run and panel: parameters and metrics)\n"
+               "and each run's executed notebook and figures in its own folder of OUT.")
     sw.add_argument("notebook", type=Path)
     sw.add_argument("-p", "--param", nargs="+", action="append", default=[],
                     metavar=("NAME", "VALUE"),
