@@ -59,6 +59,35 @@ def test_exact_state_steps_up_to_0p1_pu_during_every_attack_trip_nothing():
     assert table.severity.max() < 1.0
 
 
+def test_a_hold_is_proven_period_by_period_with_recheck_bound():
+    """``recheck_bound`` (module docstring of :mod:`lfc.filters.certified`): steps of
+    exactly that size landing 1 ms after a control sample (where a held command has
+    just been re-checked), every 0.25 s of every attack, both signs: no trip and no
+    ``outside``, so the proven statement covers every run.  Steps of 0.1 pu, within
+    ``load_bound`` but above ``recheck_bound``, still trip nothing (the certification
+    covers them) and the re-check flags ``outside`` where it cannot."""
+    scc = SafetyFilter(P, method="certified", load_kind="steps", load_bound=0.1,
+                       recheck_bound=0.06)
+    instants = np.arange(1.501, 10.5, 0.25)
+    table = battery(P, scc, (0.06,), instants=instants)
+    assert len(table) == 4 * 2 * len(instants) == 288
+    assert table.tripped.sum() == 0 and (table.outside > 0).sum() == 0
+    assert table.severity.max() < 1.0
+    above = battery(P, scc, (0.1,), instants=instants)
+    assert above.tripped.sum() == 0 and (above.outside > 0).sum() > 0
+
+
+@pytest.mark.parametrize("options, match", [
+    ({"recheck_bound": 0.01}, "recheck_bound=0.01 needs load_kind='steps'"),
+    ({"recheck_bound": 0.06, "load_kind": "steps", "load_bound": 0.001},
+     "a command certified now would fail its own re-check"),
+    ({"recheck_bound": -0.1, "load_kind": "steps"}, "recheck_bound"),
+])
+def test_recheck_bound_is_refused_where_it_cannot_hold(options, match):
+    with pytest.raises(ValueError, match=match):
+        SafetyFilter(P, method="certified", **options)
+
+
 def test_robust_kalman_steps_up_to_0p05_pu_during_every_attack_trip_nothing():
     scc = SafetyFilter(P, method="certified", load_kind="steps", load_bound=0.05,
                        uncertainty=0.2, noise_std=(1e-4, 1e-3))

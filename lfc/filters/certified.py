@@ -61,6 +61,22 @@ are tightened further so that relays reading the outputs through white
 Gaussian noise ``noise_std`` at ``relay_rate`` trip at most that often (a
 union bound over an hour of samples).
 
+**A hold proven period by period** (``recheck_bound`` > 0, ``load_kind="steps"``).
+Without it a held command is proven only while the load's total variation since
+that command was *certified* stays within ``load_bound``; a disturbance that keeps
+moving (an interconnected area's tie-line flow) can exceed it while a command is
+held.  With it, the held command's re-check also leaves room for a total variation
+of ``recheck_bound`` within the coming control period (each limit tightened by
+``recheck_bound`` times the step response's peak over one period,
+:func:`period_step_gain`; at most what ``load_bound`` takes, so a command
+certified now passes its own re-check), so the guarantee above also holds under
+this assumption instead: at every control sample the applied command is new (and
+the load's variation from then on is within ``load_bound``) or held and re-checked
+without an ``outside`` flag, and within each control period the load varies by at
+most ``recheck_bound`` — whatever it did before.  Proven up to the first
+``outside`` flag; ``tests/test_proven_load.py`` checks it at steps of exactly
+``recheck_bound`` landing at every instant of every attack.
+
 **Measured, not proven.**  Plants inside the box but not at its corners (the
 held response is not monotone in the parameters): tested on random interior
 plants by ``tests/test_robust.py``.  That the estimation error stays within
@@ -183,6 +199,10 @@ class CertifiedOptions(Options):
     load_kind: str = option("band", "", "'band' or 'steps'",
                             "'band': |dP_L - p_load| <= load_bound at every instant; 'steps': "
                             "its total variation since certification (a step, a ramp)")
+    recheck_bound: float = option(0.0, "pu", ">= 0, with load_kind 'steps'",
+                                  "the load's total variation within one control period that "
+                                  "the held command's re-check covers (a hold then stays "
+                                  "proven period by period)")
     margin: float = option(0.0, "", "[0, 1)", "extra fractional tightening of both limits")
     uncertainty: float | dict = option(0.0, "", "[0, 1) or {name: (low, high)} factors",
                                        "the plant box: a relative half-width of M, D, tau_g, "
@@ -212,6 +232,10 @@ class CertifiedOptions(Options):
         check_nonnegative("load_bound", self.load_bound)
         if self.load_kind not in LOAD_KINDS:
             raise ValueError(f"load_kind must be one of {LOAD_KINDS}, got {self.load_kind!r}")
+        check_nonnegative("recheck_bound", self.recheck_bound)
+        if self.recheck_bound > 0 and self.load_kind != "steps":
+            raise ValueError(f"recheck_bound={self.recheck_bound!r} needs load_kind='steps' "
+                             f"(with 'band' the re-check already covers load_bound)")
         check_range("confidence", self.confidence, 0.0, 1.0)
         check_positive("relay_rate", self.relay_rate)
         check_positive("control_period", self.control_period)
@@ -240,7 +264,8 @@ class CertifiedOptions(Options):
             raise ValueError(f"u_min <= 0 <= u_max is required (the filter starts by holding "
                              f"the equilibrium command 0), got u_min={self.u_min!r}, "
                              f"u_max={self.u_max!r}")
-        for name in ("load_bound", "margin", "u_min", "u_max", "control_period"):
+        for name in ("load_bound", "recheck_bound", "margin", "u_min", "u_max",
+                     "control_period"):
             object.__setattr__(self, name, float(getattr(self, name)))
 
     @classmethod
@@ -322,7 +347,8 @@ class CertifiedSet:
         gains = [_curvature_gains(lfc_matrices(p)[0], output_matrix(), fine) for p in self.plants]
         self.times = _design_grid(params, fine, gains, limits, o.tightening)
         self.blocks = [_PlantBlock(p, self.times, fine, g, limits, self.load_bound,
-                                   o.load_kind, cov, self.kappa)
+                                   o.load_kind, cov, self.kappa,
+                                   (o.recheck_bound, o.control_period))
                        for p, g in zip(self.plants, gains)]
         self.n_rows = 2 * len(self.times)
         self.tau = max(b.tau for b in self.blocks)   # largest inter-sample tightening (pu, pu/s)
@@ -365,7 +391,8 @@ class _PlantBlock:
 
     def __init__(self, plant: LFCParams, times: np.ndarray, fine: np.ndarray,
                  gains: np.ndarray, limits: np.ndarray, load: float, load_kind: str,
-                 cov: np.ndarray | None, kappa: float) -> None:
+                 cov: np.ndarray | None, kappa: float,
+                 recheck: tuple[float, float] = (0.0, 0.01)) -> None:
         A, B = lfc_matrices(plant)
         C = output_matrix()
         q = -np.linalg.solve(A, B)                       # x_eq = q[:, 0] u + q[:, 1] p
@@ -403,8 +430,18 @@ class _PlantBlock:
         # bound around the load given now; with "steps" the variation since its
         # certification is spent on the way here, so the check is for the load given now
         held = lim + load * gain if load_kind == "steps" else lim
+        # recheck_bound: the held command's trajectory must leave room for the load's
+        # variation within the coming period, whose effect until the next sample is at
+        # most its total variation times the step response's peak over one period
+        again = recheck[0] * period_step_gain(A, B[:, 1], C, recheck[1])
+        if np.any(again > load * gain):
+            raise ValueError(f"recheck_bound={recheck[0]:g} pu takes {_pair(again)} of the "
+                             f"limits in one period, more than load_bound={load:g} pu takes "
+                             f"({_pair(load * gain)}): a command certified now would fail "
+                             f"its own re-check; raise load_bound or lower recheck_bound")
+        held = held - again
         self.budget = {"limits": limits, "load": load * gain, "estimate": est,
-                       "between samples": t_max + tau0}
+                       "between samples": t_max + tau0, "re-check": again}
         # new commands: every sample tau_max plus its own tau inside, so that the
         # trajectory stays tau_max inside between samples; the held one: tau_max
         self.plant, self.times = plant, times
@@ -621,6 +658,21 @@ def load_gains(A: np.ndarray, bl: np.ndarray, C: np.ndarray) -> dict[str, np.nda
     final = np.abs(C @ np.linalg.solve(A, bl))
     peak = np.maximum(np.abs(step).max(axis=1) + 0.5e-3 * np.abs(resp).max(axis=1), final)
     return {"band": 1.01 * np.trapezoid(np.abs(resp), t, axis=1), "steps": 1.01 * peak}
+
+
+def period_step_gain(A: np.ndarray, bl: np.ndarray, C: np.ndarray,
+                     period: float) -> np.ndarray:
+    """Per output, the most a load of total variation 1 pu moves it within
+    ``period`` s of its start: ``sup_{t <= period} |S(t)|``, ``S`` the load's step
+    response (:func:`load_gains`), on a 0.1 ms grid plus the most ``S`` moves in
+    half a grid step (``|h| dt / 2``) and 1 %."""
+    dt = 1e-4
+    t = np.append(np.arange(0.0, period, dt), period)
+    E = _expm_at(A, t)                                        # (n, states, states)
+    A_inv_bl = np.linalg.solve(A, bl)
+    step = C @ (np.einsum("tij,j->ti", E, A_inv_bl) - A_inv_bl).T    # (2, n)
+    resp = C @ np.einsum("tij,j->ti", E, bl).T
+    return 1.01 * (np.abs(step).max(axis=1) + 0.5 * dt * np.abs(resp).max(axis=1))
 
 
 def largest_load_bound(params: LFCParams, relays: RelaySettings, *, tol: float = 1e-3,
