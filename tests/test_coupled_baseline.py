@@ -47,11 +47,13 @@ def steps_filters(grid: MultiAreaParams, bound: float, recheck: bool = False,
                   **options) -> dict:
     """Per-area certified filters with ``load_kind="steps"`` and ``load_bound=bound``;
     with ``recheck``, ``recheck_bound`` = the step plus the tie-line's move in one
-    control period (:func:`tie_step_bound`), so a hold is proven period by period."""
-    return {a: lfc.SafetyFilter(
-        area, RELAYS, method="certified", load_kind="steps", load_bound=bound,
-        recheck_bound=STEP + tie_step_bound(grid, a, RELAYS, 0.01) if recheck else 0.0,
-        **options) for a, area in enumerate(grid.areas)}
+    control period (:func:`tie_step_bound`), so a hold is proven period by period
+    (``load_bound`` raised to it where it is larger: behind a T = 98 pu tie)."""
+    def build(a: int, area: lfc.LFCParams) -> lfc.SafetyFilter:
+        again = STEP + tie_step_bound(grid, a, RELAYS, 0.01) if recheck else 0.0
+        return lfc.SafetyFilter(area, RELAYS, method="certified", load_kind="steps",
+                                load_bound=max(bound, again), recheck_bound=again, **options)
+    return {a: build(a, area) for a, area in enumerate(grid.areas)}
 
 
 def test_finding_the_default_per_area_filter_trips_on_a_load_step_during_an_attack():

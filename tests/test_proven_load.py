@@ -80,7 +80,7 @@ def test_a_hold_is_proven_period_by_period_with_recheck_bound():
 @pytest.mark.parametrize("options, match", [
     ({"recheck_bound": 0.01}, "recheck_bound=0.01 needs load_kind='steps'"),
     ({"recheck_bound": 0.06, "load_kind": "steps", "load_bound": 0.001},
-     "a command certified now would fail its own re-check"),
+     "recheck_bound=0.06 must be <= load_bound=0.001"),
     ({"recheck_bound": -0.1, "load_kind": "steps"}, "recheck_bound"),
 ])
 def test_recheck_bound_is_refused_where_it_cannot_hold(options, match):

@@ -69,7 +69,8 @@ held.  With it, the held command's re-check also leaves room for a total variati
 of ``recheck_bound`` within the coming control period (each limit tightened by
 ``recheck_bound`` times the step response's peak over one period,
 :func:`period_step_gain`; at most what ``load_bound`` takes, so a command
-certified now passes its own re-check), so the guarantee above also holds under
+certified now passes its own re-check; and at most ``load_bound``, which covers a new
+command's first period), so the guarantee above also holds under
 this assumption instead: at every control sample the applied command is new (and
 the load's variation from then on is within ``load_bound``) or held and re-checked
 without an ``outside`` flag, and within each control period the load varies by at
@@ -236,6 +237,10 @@ class CertifiedOptions(Options):
         if self.recheck_bound > 0 and self.load_kind != "steps":
             raise ValueError(f"recheck_bound={self.recheck_bound!r} needs load_kind='steps' "
                              f"(with 'band' the re-check already covers load_bound)")
+        if self.recheck_bound > self.load_bound:
+            raise ValueError(f"recheck_bound={self.recheck_bound!r} must be <= load_bound="
+                             f"{self.load_bound!r}: a new command's first period is covered "
+                             f"by load_bound")
         check_range("confidence", self.confidence, 0.0, 1.0)
         check_positive("relay_rate", self.relay_rate)
         check_positive("control_period", self.control_period)
@@ -434,7 +439,7 @@ class _PlantBlock:
         # variation within the coming period, whose effect until the next sample is at
         # most its total variation times the step response's peak over one period
         again = recheck[0] * period_step_gain(A, B[:, 1], C, recheck[1])
-        if np.any(again > load * gain):
+        if np.any(again > load * gain):   # recheck <= load: only by the gains' roundings
             raise ValueError(f"recheck_bound={recheck[0]:g} pu takes {_pair(again)} of the "
                              f"limits in one period, more than load_bound={load:g} pu takes "
                              f"({_pair(load * gain)}): a command certified now would fail "
