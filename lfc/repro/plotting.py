@@ -51,22 +51,29 @@ def _finish(axes, title: str) -> None:
 
 
 def _rocof(ax, runs: dict[str, SimResult], labels: dict[str, str], relays: RelaySettings,
-           dashed: tuple[str, ...] = ()) -> None:
+           dashed: tuple[str, ...] = (), mark_trips: bool = False) -> None:
     for key, label in labels.items():
         tr = runs[key].trace
         ax.plot(tr.t, tr.rocof_meas, color=COLORS[key], lw=1.2, label=label,
                 ls="--" if key in dashed else "-")
+        m = runs[key].metrics()
+        if mark_trips and m["tripped"]:       # the first trip, on the curve
+            t = m["first_trip_t"]
+            y = float(np.interp(t, tr.t, tr.rocof_meas))
+            ax.plot([t], [y], marker="x", ms=9, mew=2, ls="none", color=COLORS[key],
+                    label=f"{label}: {m['first_trip_relay']} trips at {t:.2f} s")
     _limits(ax, [relays.rocof_limit, -relays.rocof_limit],
             f"ROCOF setting $\\pm${relays.rocof_limit:g} pu/s")
     ax.set_ylabel("Measured ROCOF $\\hat{\\dot\\omega}$ (pu/s)")
 
 
 def rocof_figure(runs: dict[str, SimResult], labels: dict[str, str], relays: RelaySettings,
-                 title: str) -> Figure:
-    """Command (top) and measured ROCOF (bottom, pu/s) with the ROCOF setting dashed."""
+                 title: str, mark_trips: bool = False) -> Figure:
+    """Command (top) and measured ROCOF (bottom, pu/s) with the ROCOF setting dashed;
+    ``mark_trips``: each run's first relay trip as a cross on its ROCOF curve."""
     fig, (top, bot) = plt.subplots(2, 1, sharex=True, figsize=(10, 6.5), layout="constrained")
     _command(top, runs, labels)
-    _rocof(bot, runs, labels, relays)
+    _rocof(bot, runs, labels, relays, mark_trips=mark_trips)
     _finish((top, bot), title)
     return fig
 
