@@ -350,3 +350,14 @@ def test_a_kernel_is_shut_down_without_an_interrupt(monkeypatch):
     finally:
         if km.has_kernel:
             km.shutdown_kernel(now=True)
+
+
+def test_the_claims_verdict_explains_a_documented_deviation_on_the_page(tmp_path):
+    """A chapter ends with the verdict table: every claim, reproduced or not, and
+    the documented deviation's explanation (this run's numbers) where not."""
+    claim = "with SCC no relay trips"
+    verdict = record_claims(tmp_path, {claim: False, "another": True}, check=True,
+                            plant="testbed", metrics=fig5_metrics("OF2", 0.0361))
+    assert verdict.columns.tolist() == ["claim", "reproduced", "why not"]
+    assert verdict.reproduced.tolist() == ["no (documented)", "yes"]
+    assert "1.0361 pu" in verdict["why not"][0] and verdict["why not"][1] == ""

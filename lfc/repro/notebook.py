@@ -10,6 +10,8 @@ import re
 from numbers import Integral, Real
 from pathlib import Path
 
+import pandas as pd
+
 from lfc._format import STABLE_DIGITS, count, number
 from lfc.experiments.deviations import DEVIATIONS
 from lfc.experiments.scenarios import ALL_PLANTS, PLANTS, check_plant, design_params
@@ -148,10 +150,13 @@ def write_metrics(results_dir: str | Path, runs: dict[str, SimResult],
 
 
 def record_claims(results_dir: str | Path, claims: dict[str, bool], check: bool,
-                  plant: str = "linear", metrics: dict[str, dict] | None = None) -> None:
+                  plant: str = "linear", metrics: dict[str, dict] | None = None
+                  ) -> pd.DataFrame:
     """Write ``claims.json`` (claim -> holds) and ``deviations.json`` (failed
     claims that match a documented :class:`Deviation`: claim -> why, with this
-    run's numbers from ``metrics``).
+    run's numbers from ``metrics``); return the verdict as a table for the page:
+    ``claim``, ``reproduced`` (``"yes"``, ``"no (documented)"`` or ``"no"``) and
+    ``why not`` (a documented deviation's explanation, with this run's numbers).
 
     With ``check``, raise ``AssertionError`` on a failed claim that is not a
     documented deviation or fails in another way than documented, and on a
@@ -173,6 +178,10 @@ def record_claims(results_dir: str | Path, claims: dict[str, bool], check: bool,
         raise AssertionError("claim(s) not reproduced: " + "; ".join(failed) if failed else
                              "documented deviation(s) no longer observed, update DEVIATIONS "
                              "and the README: " + "; ".join(stale))
+    verdict = ["yes" if ok else "no (documented)" if k in deviations else "no"
+               for k, ok in claims.items()]
+    return pd.DataFrame({"claim": list(claims), "reproduced": verdict,
+                         "why not": [deviations.get(k, "") for k in claims]})
 
 
 def markdown_table(table, digits: int = STABLE_DIGITS) -> str:
