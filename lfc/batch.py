@@ -57,8 +57,8 @@ CHIRP_F0 = 0.1  # Hz, where every chirp starts
 PLANT = ("M", "D", "tau_g", "tau_t", "droop")   # optional columns: the row's own plant
 UNREAD_PARAMS = tuple(f.name for f in fields(LFCParams) if f.name not in PLANT)  # refused
 NOISE = ("noise_w", "noise_rocof")             # optional: measurement noise std (pu, pu/s)
-FLAGS = ("declare_noise", "relay_noise", "anti_windup")   # optional booleans
-NOISE_FLAGS = FLAGS[:2]                        # ... that need measurement noise
+NOISE_FLAGS = ("declare_noise", "relay_noise")  # optional booleans that need noise
+FLAGS = (*NOISE_FLAGS, "anti_windup")           # optional booleans
 FILTER_COLUMNS = ("method", *dict.fromkeys(c for m in METHODS for c in options_of(m).COLUMNS))
 # the columns that select a filter: each method's options declare theirs
 INPUTS = tuple(dict.fromkeys((*REQUIRED, "stop", "values", "sample_period", *READINGS, *PLANT,

@@ -194,9 +194,9 @@ def _run(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarray,
     ``plant_of`` (N,) each scenario's; ``k_freq``, ``k_tie`` (n_a,) the AGC
     gains times the control period.  ``index`` (N, n_a, 5): each area's Kalman
     filter (-1: none), noise row (-1: none), filter (-1: none), disturbance
-    feed-forward (0/1) and anti-windup (0/1); ``relay_noise`` (N, n_a, 3) the std of the relays' own
-    measurement noise on ``(dw_meas, rocof_meas)`` (pu, pu/s; drawn at every
-    plant step) and, in ``[i, 0, 2]``, the scenario's seed for it.  Writes
+    feed-forward (0/1) and anti-windup (0/1); ``relay_noise`` (N, n_a, 3) the std
+    of the relays' own measurement noise on ``(dw_meas, rocof_meas)`` (pu, pu/s;
+    drawn at every plant step) and, in ``[i, 0, 2]``, the scenario's seed for it.  Writes
     ``metrics`` (N, n_a, len(METRICS)) and, when the trace arrays have rows (N =
     1), every state (samples, n_s), control sample (n_ctrl, n_a, N_CTRL) and trip
     (samples, n_a); ``ends`` the last sample kept.  The arrays after ``ends``
@@ -541,7 +541,8 @@ class Scenarios:
         (``{area: signal}``), ``filters`` (``{area: SafetyFilter}``, built),
         ``estimator``, ``noise_std``, ``seed`` (area ``a > 0`` draws from ``(seed,
         a)``), ``feedforward`` (the filter is given the area's net disturbance),
-        ``anti_windup`` (:func:`generator_period`) and ``relay_noise`` as in :func:`lfc.simulate` (a grid) and
+        ``anti_windup`` (:func:`generator_period`) and ``relay_noise`` as in
+        :func:`lfc.simulate` (a grid) and
         :func:`lfc.simulate`; ``plant`` (default the design model) is the grid
         the scenario runs on, with the design's areas and tie-lines.
         """

@@ -61,8 +61,6 @@ MULTI_FAMILIES = {**FAMILIES, "bias on ACE": ("ace", "step", [(-3.0, 3.0)])}
 
 
 READ_BY = {"none": (), "paper": ("alpha", "Ts"), "certified": ("uncertainty", "declare_noise")}
-UNREAD_BY = {m: tuple(n for n in ("alpha", "Ts", "uncertainty", "declare_noise") if n not in r)
-             for m, r in READ_BY.items()}
 
 
 @dataclass(frozen=True)
@@ -89,7 +87,8 @@ class Defender:
         if not 0.0 <= self.uncertainty < 1.0:
             raise ValueError(f"uncertainty must lie in [0, 1), got {self.uncertainty!r}")
         check_flag("declare_noise", self.declare_noise)
-        unread = [f.name for f in fields(self) if f.name in UNREAD_BY[self.method]
+        unread = [f.name for f in fields(self)
+                  if f.name not in ("name", "method", *READ_BY[self.method])
                   and getattr(self, f.name) != f.default]
         if unread:
             raise ValueError(f"Defender method {self.method!r} does not read "

@@ -396,8 +396,7 @@ class _PlantBlock:
 
     def __init__(self, plant: LFCParams, times: np.ndarray, fine: np.ndarray,
                  gains: np.ndarray, limits: np.ndarray, load: float, load_kind: str,
-                 cov: np.ndarray | None, kappa: float,
-                 recheck: tuple[float, float] = (0.0, 0.01)) -> None:
+                 cov: np.ndarray | None, kappa: float, recheck: tuple[float, float]) -> None:
         A, B = lfc_matrices(plant)
         C = output_matrix()
         q = -np.linalg.solve(A, B)                       # x_eq = q[:, 0] u + q[:, 1] p
@@ -656,10 +655,7 @@ def load_gains(A: np.ndarray, bl: np.ndarray, C: np.ndarray) -> dict[str, np.nda
       final value ``-C A^-1 bl``.
     """
     t = np.arange(0.0, L1_HORIZON, 1e-3)
-    w, V = np.linalg.eig(A)
-    modes = np.linalg.solve(V, bl)
-    resp = np.real((C @ V) @ (np.exp(np.outer(w, t)) * modes[:, None]))
-    step = np.real((C @ V) @ (np.expm1(np.outer(w, t)) * (modes / w)[:, None]))
+    resp, step = _load_responses(A, bl, C, t)
     final = np.abs(C @ np.linalg.solve(A, bl))
     peak = np.maximum(np.abs(step).max(axis=1) + 0.5e-3 * np.abs(resp).max(axis=1), final)
     return {"band": 1.01 * np.trapezoid(np.abs(resp), t, axis=1), "steps": 1.01 * peak}
@@ -672,12 +668,19 @@ def period_step_gain(A: np.ndarray, bl: np.ndarray, C: np.ndarray,
     response (:func:`load_gains`), on a 0.1 ms grid plus the most ``S`` moves in
     half a grid step (``|h| dt / 2``) and 1 %."""
     dt = 1e-4
-    t = np.append(np.arange(0.0, period, dt), period)
-    E = _expm_at(A, t)                                        # (n, states, states)
-    A_inv_bl = np.linalg.solve(A, bl)
-    step = C @ (np.einsum("tij,j->ti", E, A_inv_bl) - A_inv_bl).T    # (2, n)
-    resp = C @ np.einsum("tij,j->ti", E, bl).T
+    resp, step = _load_responses(A, bl, C, np.append(np.arange(0.0, period, dt), period))
     return 1.01 * (np.abs(step).max(axis=1) + 0.5 * dt * np.abs(resp).max(axis=1))
+
+
+def _load_responses(A: np.ndarray, bl: np.ndarray, C: np.ndarray,
+                    t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The outputs' impulse response ``h(t) = C e^{At} bl`` and step response
+    ``S(t) = C A^-1 (e^{At} - I) bl`` to the load at times ``t`` (each (2, len(t)))."""
+    w, V = np.linalg.eig(A)
+    modes = np.linalg.solve(V, bl)
+    resp = np.real((C @ V) @ (np.exp(np.outer(w, t)) * modes[:, None]))
+    step = np.real((C @ V) @ (np.expm1(np.outer(w, t)) * (modes / w)[:, None]))
+    return resp, step
 
 
 def largest_load_bound(params: LFCParams, relays: RelaySettings, *, tol: float = 1e-3,

@@ -56,8 +56,8 @@ def _rocof(ax, runs: dict[str, SimResult], labels: dict[str, str], relays: Relay
         tr = runs[key].trace
         ax.plot(tr.t, tr.rocof_meas, color=COLORS[key], lw=1.2, label=label,
                 ls="--" if key in dashed else "-")
-        m = runs[key].metrics()
-        if mark_trips and m["tripped"]:       # the first trip, on the curve
+        m = runs[key].metrics() if mark_trips else {"tripped": False}
+        if m["tripped"]:                      # the first trip, on the curve
             t = m["first_trip_t"]
             y = float(np.interp(t, tr.t, tr.rocof_meas))
             ax.plot([t], [y], marker="x", ms=9, mew=2, ls="none", color=COLORS[key],
