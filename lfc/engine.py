@@ -35,6 +35,9 @@ from lfc.estimation import (KalmanFilter, check_noise_std, kf_correct, kf_predic
                             measurement_std)
 from lfc.filters import SafetyFilter
 from lfc.filters.base import ACTIVE, ALARM_BITS, MEMORY, OUTSIDE
+from lfc.filters.coupled import METHOD_ID as COUPLED
+from lfc.filters.coupled import CoupledFilter
+from lfc.filters.coupled import decide as decide_coupled
 from lfc.filters.dispatch import decide
 from lfc.model import LFCParams
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams, as_grid, discretize_grid
@@ -72,7 +75,7 @@ def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise0: flo
                      kstate: np.ndarray, feedforward: bool, method: int, fd: np.ndarray,
                      mem: np.ndarray, gstate: np.ndarray, x_hat: np.ndarray,
                      ctrl: np.ndarray, tie: float, k_tie_period: float,
-                     anti_windup: bool) -> tuple:
+                     anti_windup: bool, grid: tuple) -> tuple:
     """The generator side at control sample ``j`` (time ``t``, s) of one scenario.
 
     ``x`` is the plant's state in design-model coordinates and ``p_true`` the true
@@ -84,6 +87,11 @@ def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise0: flo
     With ``anti_windup`` the integrator does not move while the filter's command
     differs from the incoming one in the direction the increment would widen
     (conditional integration): it cannot wind up behind a held command.
+    The coupled certificate (``method`` ``COUPLED``, :mod:`lfc.filters.coupled`)
+    reads the whole grid instead: ``grid`` is ``(area, x, u, p)``, this area's
+    index, the grid's state, every area's latest command and every area's load
+    (one argument: a call with more than 30 is packed by Python in a way numba
+    cannot inline).
     ``est`` >= 0 selects the Kalman filter ``(ka, kb, kc, kg)`` with state
     ``kstate`` (prior, then posterior; 2 x N_KF); ``method`` < 0 runs without a
     filter.
@@ -105,7 +113,12 @@ def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise0: flo
     u_ref = gstate[0] + _signal(PC, kinds, params, offsets, st, sv, t, j)
     wref = _signal(WREF, kinds, params, offsets, st, sv, t, j)
     nan = math.nan
-    if method >= 0:
+    if method == COUPLED:
+        area, grid_x, grid_u, grid_p = grid
+        u, flags, h0, h1, m0, m1, q0, q1, d0, d1 = decide_coupled(fd, grid_x, grid_u, grid_p,
+                                                                  area, u_ref, mem)
+        p_hat = grid_p[area]
+    elif method >= 0:
         u, flags, h0, h1, m0, m1, q0, q1, d0, d1 = decide(method, fd, x_hat, u_ref, p_hat, mem)
     else:
         u, flags, h0, h1, m0, m1, q0, q1, d0, d1 = u_ref, 0, nan, nan, nan, nan, nan, nan, \
@@ -216,7 +229,7 @@ def _run(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarray,
     for i in range(index.shape[0]):
         p_i = plant_of[i]
         A, Bu, Bl = ad[p_i], bu[p_i], bl[p_i]
-        x[:], mem[:], gstate[:], kstate[:], due[:] = 0.0, 0.0, 0.0, 0.0, 0.0
+        x[:], mem[:], gstate[:], kstate[:], due[:], u[:] = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
         start[:] = np.nan
         met = metrics[i]
         met[:] = 0.0
@@ -244,6 +257,8 @@ def _run(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarray,
         for j in range(n_ctrl):
             k0 = j * ratio
             t = k0 * dt
+            for a in range(n_a):     # every area's load now (the coupled filter reads all)
+                pl[a] = _signal(LOAD, kinds[i, a], params[i, a], offsets[i, a], st, sv, t, k0)
             for a in range(n_a):
                 e_i, q_i, f_i, ff = index[i, a, 0], index[i, a, 1], index[i, a, 2], \
                     index[i, a, 3]
@@ -261,13 +276,12 @@ def _run(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarray,
                 tie = 0.0
                 for line in range(n_l):
                     tie += inc[a, line] * x[m * n_a + line]
-                load = _signal(LOAD, kinds_a, params_a, offsets_a, st, sv, t, k0)
                 ace = _signal(ACE, kinds_a, params_a, offsets_a, st, sv, t, j)
                 ua, flags, mod = generator_period(
-                    j, t, x_a, load + tie, noise[q_i, j, 0] if q_i >= 0 else 0.0,
+                    j, t, x_a, pl[a] + tie, noise[q_i, j, 0] if q_i >= 0 else 0.0,
                     noise[q_i, j, 1] if q_i >= 0 else 0.0, kinds_a, params_a, offsets_a, st,
                     sv, k_freq[a], e_i, ka_a, kb_a, kc_a, kg_a, ks_a, ff == 1, method, fd,
-                    mem_a, gs_a, x_hat, ctrl_a, tie + ace, k_tie[a], aw)
+                    mem_a, gs_a, x_hat, ctrl_a, tie + ace, k_tie[a], aw, (a, x, u, pl))
                 u[a] = ua
                 met[a, 4] += (flags & ACTIVE) != 0
                 met[a, 5] += (flags & ALARM_BITS) != 0
@@ -564,12 +578,14 @@ class Scenarios:
         if relay_noise and not noisy:
             raise ValueError("relay_noise=True needs noise_std > 0 (the relays' measurement "
                              "noise)")
+        _check_coupled(filters, grid, estimator)
         row = []
         for a, area in enumerate(grid.areas):
             channels = attacks.get(a, {})
             scc = filters.get(a)
-            if scc is not None and not isinstance(scc, SafetyFilter):
-                raise ValueError(f"filters[{a}] must be a SafetyFilter or None, got {scc!r}")
+            if scc is not None and not isinstance(scc, (SafetyFilter, CoupledFilter)):
+                raise ValueError(f"filters[{a}] must be a SafetyFilter, a CoupledFilter or "
+                                 f"None, got {scc!r}")
             if scc is not None and not np.array_equal(scc.relays.arrays()[0],
                                                       self.relays.arrays()[0]):
                 raise ValueError(f"the filter of area {a} keeps the safe set of {scc.relays} "
@@ -641,6 +657,26 @@ class Scenarios:
         return Run(metrics, ends, tx, tc, tt)
 
 
+def _check_coupled(filters: dict, grid: MultiAreaParams, estimator) -> None:
+    """``ValueError`` unless a coupled filter (:mod:`lfc.filters.coupled`), if any,
+    is the same one at every area, built for a grid of the design's areas and
+    tie-lines, and reads exact states (its guarantee needs all three)."""
+    coupled = [f for f in filters.values() if isinstance(f, CoupledFilter)]
+    if not coupled:
+        return
+    if len(filters) != grid.n_areas or any(f is not coupled[0] for f in filters.values()):
+        raise ValueError("a coupled filter must be the same CoupledFilter at every area (its "
+                         "certificate holds every other area's command; an area without it "
+                         "would move its command freely)")
+    built = coupled[0].params
+    if built.n_areas != grid.n_areas or [t[:2] for t in built.tie] != [t[:2] for t in grid.tie]:
+        raise ValueError(f"the coupled filter was built for {built!r}, not for this grid's "
+                         f"{grid.n_areas} areas and tie-lines {grid.tie}")
+    if estimator is not None:
+        raise ValueError(f"estimator={estimator!r}: the coupled filter reads the grid's exact "
+                         f"state (a wide-area measurement); give estimator=None")
+
+
 def signal_tables(sig: list[tuple], st: list[np.ndarray], sv: list[np.ndarray],
                   shape: tuple[int, ...]) -> tuple:
     """The signals of :func:`scenario_signals`, one per generator side, as the
@@ -704,6 +740,10 @@ class GeneratorSide:
                  noise_std: tuple[float, float], seed: int, tc: np.ndarray, pc_attack,
                  wref_attack, load_feedforward: bool, period: float, *, ace_attack=None,
                  k_agc: tuple[float, float] | None = None, anti_windup: bool = False) -> None:
+        if isinstance(scc, CoupledFilter):
+            raise ValueError("the coupled filter reads the whole grid's state, which a plant "
+                             "driving time itself (ANDES) does not give the generator side; "
+                             "run it on the linear grid (lfc.simulate)")
         if scc is not None:
             scc.check_period(period)
         self.tc, self.scc = tc, scc
@@ -741,6 +781,7 @@ class GeneratorSide:
                                    self.kb, self.kc, self.kg, self.kstate, self.feedforward,
                                    self.method, self.data, self.memory, self.gstate,
                                    self.x_hat, self.ctrl, tie, self.k_tie_period,
-                                   self.anti_windup)
+                                   self.anti_windup,
+                                   (0, self.x_hat, self.memory[:0], self.memory[:0]))
         self.n_done = j + 1
         return u

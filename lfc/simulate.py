@@ -268,7 +268,7 @@ def result(trace: pd.DataFrame, tc: np.ndarray, ctrl: np.ndarray, trips: pd.Data
     alarm = (flags & ALARM_BITS) != 0
     a = c[alarm]
     fa = flags[alarm]
-    explain = scc.backend.reason if scc is not None else (lambda f: "")
+    explain = scc.reason if scc is not None else (lambda f: "")
     alarms = pd.DataFrame({
         "t": tc[:n][alarm], "u_ref": a["u_ref"], "u": a["u"],
         "binding": [";".join(binding_names(f)) if f & ACTIVE else "" for f in fa],

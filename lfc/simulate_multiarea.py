@@ -29,6 +29,10 @@ constant load (:mod:`lfc.filters.certified`), so the filters keep certifying
 however large the tie-line flow grows (``tests/test_proven_recovery.py``:
 opposite ACE biases of ±3 pu, after which AGC restores frequency and schedule).
 
+``filters={i: "coupled"}`` at every area is the other way: one certificate on
+the coupled model, each filter reading the grid's state, the tie-line flows part
+of the prediction (:mod:`lfc.filters.coupled`, ``docs/coupled-certificate.md``).
+
 Measured, not proven: what happens after an ``outside`` flag.  The held
 command was certified for the net disturbance of an earlier sample; while it
 is held the tie-line flow can drift by more than ``load_bound`` although it
@@ -52,6 +56,7 @@ filter's error bound does not cover the tie-line flow's inter-area swing
 
 from __future__ import annotations
 
+import functools
 import json
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -64,6 +69,7 @@ from lfc._validate import check_count, check_index
 from lfc.batch import metrics_frame
 from lfc.engine import METRICS, Scenarios, check_area_keys, sample_signal
 from lfc.filters import SafetyFilter
+from lfc.filters.coupled import CoupledFilter
 from lfc.model import STATES
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams
 from lfc.relays import RELAY_NAMES, RelaySettings, relays_or_default
@@ -72,7 +78,7 @@ from lfc.simulate import SimResult, check_timing, result
 __all__ = ["MultiAreaResult", "area_filter", "multiarea_result", "simulate_grid_linear",
            "simulate_grid_table",
            "tie_step_bound"]
-FILTER_KINDS = ("paper", "certified")
+FILTER_KINDS = ("paper", "certified", "coupled")
 PAPER_ALPHA = 20.0   # 1/s: "paper" as notebook 08 runs it (notebook 09 also runs α = 3)
 
 
@@ -85,15 +91,20 @@ def tie_step_bound(params: MultiAreaParams, area: int, relays: RelaySettings,
     return float(control_period * rate)
 
 
-def area_filter(params: MultiAreaParams, area: int, kind: str | SafetyFilter | None,
-                relays: RelaySettings, control_period: float) -> SafetyFilter | None:
+def area_filter(params: MultiAreaParams, area: int,
+                kind: str | SafetyFilter | CoupledFilter | None, relays: RelaySettings,
+                control_period: float) -> SafetyFilter | CoupledFilter | None:
     """The filter of ``area``: ``"paper"`` (the paper's SCC at α = 20 and its
     default reading, on the area's model; build a :class:`SafetyFilter` for
     another α), ``"certified"`` (the certified
     filter of the area's model with ``load_bound`` = :func:`tie_step_bound`),
-    a :class:`SafetyFilter` as given, or None."""
-    if kind is None or isinstance(kind, SafetyFilter):
+    ``"coupled"`` (the grid's coupled certificate with its default options,
+    :mod:`lfc.filters.coupled`: the same object for every area, which must all
+    have it), a filter as given, or None."""
+    if kind is None or isinstance(kind, (SafetyFilter, CoupledFilter)):
         return kind
+    if kind == "coupled":
+        return coupled_filter(params, relays, control_period)
     model = params.areas[area]
     if kind == "paper":
         return SafetyFilter(model, relays, alpha=PAPER_ALPHA)
@@ -109,6 +120,14 @@ def area_filter(params: MultiAreaParams, area: int, kind: str | SafetyFilter | N
                              f"a SafetyFilter yourself") from err
     raise ValueError(f"filters[{area}] must be one of {FILTER_KINDS}, a SafetyFilter or None, "
                      f"got {kind!r}")
+
+
+@functools.lru_cache(maxsize=8)
+def coupled_filter(params: MultiAreaParams, relays: RelaySettings,
+                   control_period: float) -> CoupledFilter:
+    """The coupled certificate of ``params`` with its default options (built once
+    per grid, relays and period: its construction solves linear programs)."""
+    return CoupledFilter(params, relays, control_period=control_period)
 
 
 @dataclass
@@ -192,7 +211,7 @@ def simulate_grid_linear(params: MultiAreaParams, *, duration: float,
     loads : dict, optional
         ``{area: signal}``: the area's load change (pu).
     filters : dict, optional
-        ``{area: "paper" | "certified" | SafetyFilter}`` (:func:`area_filter`);
+        ``{area: "paper" | "certified" | "coupled" | filter}`` (:func:`area_filter`);
         areas not named run without a filter.
     relays : RelaySettings, optional
         The same settings in every area (default IEEE 1547 Cat. III).

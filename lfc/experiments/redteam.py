@@ -345,7 +345,7 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
     included), maximizing the worst :func:`severity` over the areas.
 
     ``filters`` is :func:`lfc.simulate`'s ``{area: "paper" |
-    "certified" | SafetyFilter}``, built once for the controller period
+    "certified" | "coupled" | filter}``, built once for the controller period
     ``control_period`` (s).  Returns the family, the worst severity, the area it
     is reached in, whether any area tripped and the attack per area.
     """

@@ -563,9 +563,16 @@ def _derivative_bound(A: np.ndarray, B: np.ndarray, C: np.ndarray, G: np.ndarray
     a_ub = np.vstack([Gz, -Gz, eq])
     b_ub = np.concatenate([lim, lim, [limits[0], limits[0]]])
     bounds = [(None, None)] * 6 + [(-LP_LOAD, LP_LOAD)]
-    M = np.hstack([A, B])
-    V = np.zeros(len(A))
-    for i in range(len(A)):
+    return rate_bound(np.hstack([A, B]), a_ub, b_ub, bounds)
+
+
+def rate_bound(M: np.ndarray, a_ub: np.ndarray, b_ub: np.ndarray,
+               bounds: list[tuple]) -> np.ndarray:
+    """``V_i = max |M_i v|`` over ``a_ub v <= b_ub`` within ``bounds`` (two linear
+    programs per row of ``M``): the rate of change ``x' = M v`` of a state and
+    input ``v`` over a polytope."""
+    V = np.zeros(len(M))
+    for i in range(len(M)):
         for sign in (1.0, -1.0):
             res = linprog(-sign * M[i], A_ub=a_ub, b_ub=b_ub, bounds=bounds, method="highs")
             if res.status != 0:   # unbounded or numerically hopeless: parameters too extreme

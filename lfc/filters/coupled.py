@@ -1,0 +1,567 @@
+"""A certificate for a whole grid: every area's filter knows the grid's state.
+
+``area_filter(grid, a, "coupled", ...)`` (:mod:`lfc.simulate_multiarea`; every
+area must have it) builds one :class:`CoupledFilter` for the grid, shared by
+its areas.  It is the certified filter (:mod:`lfc.filters.certified`) on the
+*coupled* model instead of one area's: the state is every area's five states
+and the tie-line flows (a wide-area measurement system gives each area's filter
+all of them, and every area's load), the outputs are every area's measured
+frequency and ROCOF, the input is the vector of every area's command.
+
+**Fixed order.**  At each control sample the areas decide one after another
+(area 0 first).  Area ``k`` chooses its own command ``u_k`` with every other
+area's command held at its latest value (the areas before ``k`` have decided
+this period, the others hold last period's).  A vector of commands is
+*certified* at a state if holding it for ever keeps every area's outputs inside
+its relay limits in continuous time: checked at samples up to the horizon, each
+limit tightened by a proven bound on how far an output moves between samples
+(:func:`lfc.filters.certified._intersample` on the coupled model), and after the
+horizon by a Lyapunov ellipsoid of the coupled model around the vector's
+equilibrium.  Every condition is affine in ``u_k`` (the ellipsoid a convex
+quadratic), so each area's admissible set is one interval and its command is
+``u_ref`` clipped to it.  Two levels as in one area: a new command is
+certified with the limits tightened twice; if none is, the area holds its
+command and re-checks the current vector with the limits tightened once, which
+passes whenever the vector was certified anew at some earlier sample and
+nothing but the state has moved since (the same trajectory, seen later).  In a
+period the last area to certify a new command certified the whole vector the
+areas after it re-check, at the same state: their check passes.
+
+**The tie-lines are states, not disturbances.**  The per-area certificate
+(``"certified"``) bounds the tie-line flow's move as a load; here it is part of
+the prediction, so a stiff tie (Kundur's T ≈ 98 pu) costs nothing.  A ring's
+circulating flow (the sum of ``dP_l / T_l`` around a loop never changes) is a
+zero eigenvalue of the line-flow model; the certificate works on the flows'
+reachable subspace (:func:`reduced_model`), where the held grid is
+asymptotically stable.
+
+**Guarantee (proven).**  For the grid the filter was built for (its design
+model; no box), with every area's state, tie-line flow and load known at each
+control sample (exact), every area's command chosen by this filter in the fixed
+order, a start from a state where the commands held are certified (e.g.
+equilibrium), and loads whose total variation summed over the areas is at most
+``recheck_bound`` within each control period (any area, any instant, either
+sign): every area's OF2, UF2 and ROCOF relays stay untripped at every instant
+up to the first control sample at which a filter flags ``outside`` — whatever
+commands, frequency references and ACE signals an attacker sends to any subset
+of the areas.  A new vector leaves room for a total load variation of
+``load_bound`` from its certification on (each limit tightened by
+``load_bound`` times the largest step response of any area's load on that
+output, :func:`lfc.filters.certified.load_gains`), a held one for
+``recheck_bound`` over the coming period (:func:`~lfc.filters.certified.period_step_gain`);
+``outside`` is then flagged only if the loads moved by more than the new vector
+left room for.  Proof and the tests that check it: ``docs/coupled-certificate.md``.
+
+**Not covered.**  Estimated states (no estimator is accepted), plants other
+than the design grid (ANDES: measured, not proven), an area without this filter.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import expm, solve_continuous_lyapunov
+
+from lfc._jit import inline, jit, maxnum, minnum
+from lfc._validate import check_nonnegative, check_positive, check_range
+from lfc.filters.base import (ACTIVE, BIND_CERT, BIND_UMAX, BIND_UMIN, INVALID, MAX_ABS_INPUT,
+                              OUTSIDE, check_limits)
+from lfc.filters.certified import (NUMERIC_MARGIN, _curvature_gains, _expm_at,
+                                   _intersample, _merge_intervals, grid, load_gains,
+                                   period_step_gain, rate_bound)
+from lfc.multiarea import N_AREA_STATES, MultiAreaParams, multiarea_matrices
+from lfc.relays import RelaySettings
+
+METHOD_ID = 2          # the engine's code for this filter (lfc.engine.generator_period)
+DW, ROCOF = 3, 4       # an area's measured outputs among its five states
+# header of the data array decide() reads
+(N_S, N_A, N_R, N_ROWS, U_MIN, U_MAX, F_LIM, R_LIM, RHO_NEW, RHO_HELD, HALF_NEW, HALF_HELD,
+ Y0_F_NEW, Y0_R_NEW, Y0_F_HELD, Y0_R_HELD, HEAD) = range(17)
+
+
+@dataclass(frozen=True)
+class CoupledOptions:
+    """Options of the coupled certificate (module docstring).
+
+    Parameters
+    ----------
+    load_bound : float
+        Total variation of the loads, summed over the areas, that a new vector
+        of commands leaves room for from its certification on (pu), >= 0.
+        Default 0.06 pu: a held vector's re-check absorbs ``load_bound -
+        recheck_bound`` = 0.05 pu since its certification, one 0.05 pu step in
+        any area.
+    recheck_bound : float
+        Total variation of the loads within one control period that the held
+        vector's re-check covers (pu), in [0, ``load_bound``]; the guarantee's
+        assumption.  Default 0.01 pu.
+    horizon : float
+        Look-ahead before the terminal ellipsoid (s), in [0.2, 20].  Default 8 s.
+    tightening : float
+        How far (fraction of each limit) an output may move between two
+        certificate samples, in [1e-4, 0.1]; sets their spacing.  Default 0.005.
+    margin : float
+        Extra fractional tightening of every limit, in [0, 1).  Default 0.
+    u_min, u_max : float
+        Actuator limits on every area's command (pu), ``u_min <= 0 <= u_max``.
+    control_period : float
+        Period of the calls (s), in (0, 1].  Default 0.01 s.
+    """
+
+    load_bound: float = 0.06
+    recheck_bound: float = 0.01
+    horizon: float = 8.0
+    tightening: float = 0.005
+    margin: float = 0.0
+    u_min: float = -math.inf
+    u_max: float = math.inf
+    control_period: float = 0.01
+
+    def __post_init__(self) -> None:
+        check_nonnegative("load_bound", self.load_bound)
+        check_nonnegative("recheck_bound", self.recheck_bound)
+        if self.recheck_bound > self.load_bound:
+            raise ValueError(f"recheck_bound={self.recheck_bound!r} must be <= load_bound="
+                             f"{self.load_bound!r}: a new vector's first period is covered "
+                             f"by load_bound")
+        check_range("horizon", self.horizon, 0.2, 20.0, closed=True)
+        check_range("tightening", self.tightening, 1e-4, 0.1, closed=True)
+        if not 0.0 <= self.margin < 1.0:
+            raise ValueError(f"margin must be in [0, 1), got {self.margin!r}")
+        check_limits(self.u_min, self.u_max)
+        if not self.u_min <= 0.0 <= self.u_max:
+            raise ValueError(f"u_min <= 0 <= u_max is required (the filters start by holding "
+                             f"the equilibrium commands 0), got u_min={self.u_min!r}, "
+                             f"u_max={self.u_max!r}")
+        check_positive("control_period", self.control_period)
+        if self.control_period > 1.0:
+            raise ValueError(f"control_period must lie in (0, 1] s, got "
+                             f"{self.control_period!r}")
+
+
+def reduced_model(params: MultiAreaParams) -> tuple[np.ndarray, ...]:
+    """The grid on its tie-line flows' reachable subspace.
+
+    The line flows ``P`` (n_l) move as ``P' = S w`` (``S``: each line's
+    ``T_ij`` on its areas' frequencies), so from equilibrium they stay in the
+    column space of ``S``, of dimension ``n_areas - 1`` for a connected grid;
+    a ring's extra line adds a direction (the circulating flow) that never
+    moves and is a zero eigenvalue of the full model.  With ``W`` an
+    orthonormal basis of that space and ``P = W phi``, the reduced state is
+    ``z = [area states; phi] = R x``.
+
+    Returns
+    -------
+    A, Bu, Bl : ndarray
+        Reduced ``z' = A z + Bu u + Bl p`` (every area's command ``u``, load ``p``).
+    R : ndarray
+        ``z = R x`` from the full state ``x`` of :func:`lfc.multiarea.multiarea_matrices`.
+    """
+    A_full, B_full = multiarea_matrices(params)
+    n_a, m = params.n_areas, N_AREA_STATES
+    head = m * n_a
+    S = A_full[head:, :head]
+    if S.shape[0]:
+        basis, sv, _ = np.linalg.svd(S, full_matrices=False)
+        W = basis[:, sv > 1e-9 * sv.max()]
+    else:
+        W = np.zeros((0, 0))
+    R = np.zeros((head + W.shape[1], A_full.shape[0]))
+    R[:head, :head] = np.eye(head)
+    R[head:, head:] = W.T
+    L = R.T                       # lift: x = L z on the reachable subspace (W orthonormal)
+    return R @ A_full @ L, R @ B_full[:, :n_a], R @ B_full[:, n_a:], R
+
+
+def output_rows(n_areas: int, n_states: int) -> np.ndarray:
+    """``C`` (2 n_areas, n_states): area ``a``'s measured frequency (row ``2a``)
+    and ROCOF (row ``2a + 1``)."""
+    C = np.zeros((2 * n_areas, n_states))
+    for a in range(n_areas):
+        C[2 * a, N_AREA_STATES * a + DW] = C[2 * a + 1, N_AREA_STATES * a + ROCOF] = 1.0
+    return C
+
+
+class CoupledSet:
+    """The rows, equilibrium room and terminal ellipsoid of the coupled certificate.
+
+    Parameters
+    ----------
+    params : MultiAreaParams
+        The grid (its design model).
+    relays : RelaySettings
+        The same relays in every area.
+    options : CoupledOptions
+
+    Attributes
+    ----------
+    times : ndarray
+        The certificate's sample times (s).
+    budget : dict
+        Each tightening of the limits (pu, pu/s per output kind): ``load``,
+        ``re-check``, ``between samples``.
+    """
+
+    def __init__(self, params: MultiAreaParams, relays: RelaySettings,
+                 options: CoupledOptions) -> None:
+        self.params, self.relays, self.options = params, relays, options
+        o = options
+        A, Bu, Bl, R = reduced_model(params)
+        growth = float(np.max(np.linalg.eigvals(A).real))
+        if growth >= 0:
+            raise ValueError(f"the grid {params!r} with every command held is not "
+                             f"asymptotically stable (eigenvalue real part {growth:.3g} 1/s); "
+                             f"the coupled certificate needs it")
+        n_a, n_r = params.n_areas, len(A)
+        C = output_rows(n_a, n_r)
+        pair = np.array([relays.F, relays.rocof_limit]) * (1 - o.margin) * (1 - NUMERIC_MARGIN)
+        limits = np.tile(pair, n_a)                                  # per output
+        qu, ql = -np.linalg.solve(A, Bu), -np.linalg.solve(A, Bl)    # z_eq = qu u + ql p
+        # the loads: the worst area's step response on each output, per pu of variation
+        load = np.max([load_gains(A, Bl[:, j], C)["steps"] for j in range(n_a)], axis=0)
+        again = np.max([period_step_gain(A, Bl[:, j], C, o.control_period)
+                        for j in range(n_a)], axis=0)
+        lim = limits - o.load_bound * load
+        if np.any(lim <= 0):
+            raise ValueError(f"load_bound={o.load_bound:g} pu takes the whole of a limit: "
+                             f"{_worst(o.load_bound * load / limits)} of it; lower load_bound")
+        if np.any(again > load):   # the proof's step (C) needs it: only by roundings
+            raise ValueError("the loads' effect within one control period exceeds their "
+                             "step response's peak; raise recheck_bound or lower "
+                             "control_period")
+        held = limits - o.recheck_bound * again
+        fine = grid(o.horizon)
+        gains = _curvature_gains(A, C, fine)                          # (fine, outputs, n_r)
+        E_ref = _expm_at(A, fine[(fine <= 0.05) | (np.arange(len(fine)) % 4 == 0)])
+        V = _rate(A, C, E_ref, limits)
+        self.times = times = fine[_merge_intervals(fine, (gains @ V) / limits, o.tightening)]
+        E = _expm_at(A, times)
+        G = C @ E                                                    # y(t_k) = G z + Hu u + Hl p
+        rest = np.eye(n_r)[None] - E
+        Hu, Hl = C @ rest @ qu, C @ rest @ ql
+        # the inter-sample bound, proven on these times for the states the rows allow
+        sub = (times <= 0.05) | (np.arange(len(times)) % 3 == 0)
+        V = _rate(A, C, E[sub], limits)
+        tau = _intersample(gains, V, fine, times)                     # (n, outputs)
+        t_max, tau0 = tau.max(axis=0), tau[0]
+        self.budget = {"load": _by_kind(o.load_bound * load),
+                       "re-check": _by_kind(o.recheck_bound * again),
+                       "between samples": _by_kind(t_max + tau0)}
+        bound_new = lim - t_max - tau                                # (n, outputs)
+        bound_held = np.broadcast_to(held - t_max, tau.shape)
+        y0_new, y0_held = lim - t_max - tau0, held - tau0
+        if np.any(bound_new <= 0) or np.any(y0_new <= 0):
+            raise ValueError(f"the tightenings leave nothing of the relay limits: "
+                             f"{self._describe()}; lower load_bound or tightening")
+        n_rows = len(times) * 2 * n_a
+        rows = np.concatenate([bound_new.reshape(-1, 1), bound_held.reshape(-1, 1),
+                               (G @ R).reshape(n_rows, -1), Hu.reshape(n_rows, n_a),
+                               Hl.reshape(n_rows, n_a)], axis=1)
+        # the terminal ellipsoid, in coordinates where P is the identity: f = K' e
+        scale = np.ones(n_r)
+        for a in range(n_a):
+            scale[N_AREA_STATES * a + 2:N_AREA_STATES * a + 5] = (lim[2 * a], lim[2 * a],
+                                                                  lim[2 * a + 1])
+        P = solve_continuous_lyapunov(A.T, -np.diag(scale ** -2.0))
+        K = np.linalg.cholesky(P)                                    # P = K K'
+        sigma = np.sqrt(np.einsum("ij,jk,ik->i", C, np.linalg.inv(P), C))
+        Eh = expm(A * times[-1])
+        dw_u, dw_p = (C @ qu)[0], (C @ ql)[0]      # every area's equilibrium frequency
+        # the held level absorbs what the loads may have moved since the vector was
+        # certified (up to load_bound - recheck_bound): its equilibrium frequency
+        # moves by at most that times |dw_p|, its state at the horizon by that times
+        # kappa in the ellipsoid's norm (which only decreases along e^{At})
+        # (plus 1 %, as the load gains: a step of exactly that size lands the
+        # equilibrium on the held level's boundary, where rounding would decide)
+        spent = 1.01 * (o.load_bound - o.recheck_bound)
+        kappa = float(np.max(np.linalg.norm(K.T @ Eh @ ql, axis=0)))
+        drift = spent * float(np.max(np.abs(dw_p)))
+        new, hold = lim - 2 * t_max, held - t_max          # room at each level, per output
+        free = hold[0::2] - spent * kappa * sigma[0::2] - drift   # the held level's, after it
+        r = float(min(np.min(0.5 * new[0::2] / sigma[0::2]), np.min(new[1::2] / sigma[1::2]),
+                      np.min(hold[1::2] / sigma[1::2]) - spent * kappa,
+                      np.min(0.5 * free / sigma[0::2])))
+        h = float(min(np.min(new[0::2] - r * sigma[0::2]),
+                      np.min(hold[0::2] - (r + spent * kappa) * sigma[0::2]) - drift))
+        if r <= 0 or h <= 0:
+            why = (f"; a held vector's re-check absorbs load_bound - recheck_bound = "
+                   f"{o.load_bound - o.recheck_bound:g} pu of load moved since its "
+                   f"certification, which moves its state at the horizon by up to "
+                   f"{spent * kappa * np.max(sigma[0::2]):.3g} pu of frequency in the "
+                   f"terminal set's norm: lower load_bound - recheck_bound (0: no such "
+                   f"absorption, as on a lightly damped grid)" if spent > 0 else "")
+            raise ValueError(f"the tightenings leave no room for the terminal set: "
+                             f"{self._describe()}; lower load_bound or tightening{why}")
+        rho = {"new": r, "held": r + spent * kappa}
+        half = {"new": h, "held": h + drift}
+        head = np.zeros(HEAD)
+        head[:] = (len(R.T), n_a, n_r, n_rows, o.u_min, o.u_max, relays.F, relays.rocof_limit,
+                   rho["new"], rho["held"], half["new"], half["held"], y0_new[0], y0_new[1],
+                   y0_held[0], y0_held[1])
+        self.rows, self.n_rows = rows, n_rows
+        self.data = np.concatenate([head, rows.ravel(), dw_u, dw_p, (K.T @ Eh @ R).ravel(),
+                                    (-K.T @ Eh @ qu).ravel(), (-K.T @ Eh @ ql).ravel()])
+        self.A, self.Bu, self.Bl, self.R, self.C = A, Bu, Bl, R, C
+
+    def _describe(self) -> str:
+        return ", ".join(f"{name} {v}" for name, v in self.budget.items())
+
+
+def _by_kind(per_output: np.ndarray) -> str:
+    """The largest of an array over the outputs, per kind: ``(frequency pu, ROCOF pu/s)``."""
+    return f"({np.max(per_output[0::2]):.3g}, {np.max(per_output[1::2]):.3g})"
+
+
+def _worst(fraction: np.ndarray) -> str:
+    return f"{100 * float(np.max(fraction)):.0f} %"
+
+
+def _rate(A: np.ndarray, C: np.ndarray, E: np.ndarray, limits: np.ndarray) -> np.ndarray:
+    """``V >= |z'|`` entrywise over every state and command vector whose held
+    outputs satisfy the untightened limits at the samples of ``E`` (``e^{At_k}``)
+    and whose equilibrium frequency is inside its limit
+    (:func:`~lfc.filters.certified.rate_bound`).
+
+    In the deviation ``e = z - z_eq`` from the held vector's equilibrium ``z' =
+    A e`` and the held outputs are ``C e^{At} e + w c`` with ``w`` the
+    equilibrium frequency, the same in every area (``c``: 1 on the frequency
+    outputs, 0 on ROCOF, whose equilibrium is 0): the programs are in ``(e, w)``
+    only, whatever the commands and loads (in ``z`` they would be unbounded
+    along the equilibria of opposite commands, where the rate is 0)."""
+    n_r = A.shape[0]
+    c = np.tile([1.0, 0.0], C.shape[0] // 2)
+    rows = np.concatenate([C @ E, np.broadcast_to(c[None, :, None], (len(E), len(c), 1))],
+                          axis=2).reshape(-1, n_r + 1)
+    lim = np.tile(limits, len(E))
+    a_ub = np.vstack([rows, -rows])
+    bounds = [(None, None)] * n_r + [(-limits[0], limits[0])]
+    return rate_bound(np.hstack([A, np.zeros((n_r, 1))]), a_ub, np.concatenate([lim, lim]),
+                      bounds)
+
+
+@inline
+def _valid(x: np.ndarray, u: np.ndarray, p: np.ndarray, u_ref: float) -> bool:
+    """Every number of the call finite and within ``MAX_ABS_INPUT``."""
+    ok = abs(u_ref) <= MAX_ABS_INPUT      # False for NaN
+    for v in x:
+        ok = ok and abs(v) <= MAX_ABS_INPUT
+    for j in range(len(u)):
+        ok = ok and abs(u[j]) <= MAX_ABS_INPUT and abs(p[j]) <= MAX_ABS_INPUT
+    return ok
+
+
+@inline
+def _intervals(fd: np.ndarray, x: np.ndarray, u: np.ndarray, p: np.ndarray, k: int) -> tuple:
+    """Area ``k``'s certified intervals for its command with the others at ``u``:
+    ``(lo_f, hi_f, lo_r, hi_r, lo_held, hi_held)`` (pu; empty where ``lo > hi``),
+    the first four for a new command (frequency and ROCOF rows apart, the
+    equilibrium and ellipsoid in both), the last pair the held level."""
+    inf = np.inf
+    n_s, n_a, n_r, n_rows = int(fd[N_S]), int(fd[N_A]), int(fd[N_R]), int(fd[N_ROWS])
+    lo_f, hi_f, lo_r, hi_r, lo_h, hi_h = -inf, inf, -inf, inf, -inf, inf
+    new_ok, held_ok = True, True
+    for a in range(n_a):          # the current outputs: room for the first interval
+        dw, rc = abs(x[N_AREA_STATES * a + DW]), abs(x[N_AREA_STATES * a + ROCOF])
+        new_ok = new_ok and dw <= fd[Y0_F_NEW] and rc <= fd[Y0_R_NEW]
+        held_ok = held_ok and dw <= fd[Y0_F_HELD] and rc <= fd[Y0_R_HELD]
+    width = 2 + n_s + 2 * n_a
+    u_k = u[k]
+    for r in range(n_rows):
+        b0 = HEAD + r * width
+        s = 0.0
+        for c in range(n_s):
+            s += fd[b0 + 2 + c] * x[c]
+        for j in range(n_a):
+            s += fd[b0 + 2 + n_s + j] * u[j] + fd[b0 + 2 + n_s + n_a + j] * p[j]
+        h = fd[b0 + 2 + n_s + k]
+        s -= h * u_k                  # the rest of the output, without area k's command
+        bn, bh = fd[b0], fd[b0 + 1]
+        if h != 0.0:
+            a1, a2, c1, c2 = (-bn - s) / h, (bn - s) / h, (-bh - s) / h, (bh - s) / h
+            lo_n, hi_n, lo_hh, hi_hh = min(a1, a2), max(a1, a2), min(c1, c2), max(c1, c2)
+        else:
+            lo_n, hi_n = (-inf, inf) if abs(s) <= bn else (inf, -inf)
+            lo_hh, hi_hh = (-inf, inf) if abs(s) <= bh else (inf, -inf)
+        if r % 2 == 0:
+            lo_f, hi_f = maxnum(lo_f, lo_n), minnum(hi_f, hi_n)
+        else:
+            lo_r, hi_r = maxnum(lo_r, lo_n), minnum(hi_r, hi_n)
+        lo_h, hi_h = maxnum(lo_h, lo_hh), minnum(hi_h, hi_hh)
+    o = HEAD + n_rows * width
+    w, c_k = 0.0, fd[o + k]          # the equilibrium frequency, every area's
+    for j in range(n_a):
+        w += fd[o + j] * u[j] + fd[o + n_a + j] * p[j]
+    w -= c_k * u_k
+    e0, e1 = (-fd[HALF_NEW] - w) / c_k, (fd[HALF_NEW] - w) / c_k
+    g0, g1 = (-fd[HALF_HELD] - w) / c_k, (fd[HALF_HELD] - w) / c_k
+    lo_e, hi_e, lo_eh, hi_eh = min(e0, e1), max(e0, e1), min(g0, g1), max(g0, g1)
+    o += 2 * n_a                     # the ellipsoid: f = K'(z(T) - z_eq), |f| <= rho
+    ke, keu, kel = o, o + n_r * n_s, o + n_r * n_s + n_r * n_a
+    qa, qb, ff = 0.0, 0.0, 0.0
+    for r in range(n_r):
+        f = 0.0
+        for c in range(n_s):
+            f += fd[ke + r * n_s + c] * x[c]
+        for j in range(n_a):
+            f += fd[keu + r * n_a + j] * u[j] + fd[kel + r * n_a + j] * p[j]
+        g = fd[keu + r * n_a + k]
+        f -= g * u_k
+        qa += g * g
+        qb += 2.0 * g * f
+        ff += f * f
+    for held in (False, True):
+        rho = fd[RHO_HELD] if held else fd[RHO_NEW]
+        disc = qb * qb - 4.0 * qa * (ff - rho * rho)
+        if disc < 0.0 or qa <= 0.0:
+            q_lo, q_hi = (inf, -inf) if disc < 0.0 or ff > rho * rho else (-inf, inf)
+        else:
+            root = math.sqrt(disc)
+            q_lo, q_hi = (-qb - root) / (2.0 * qa), (-qb + root) / (2.0 * qa)
+        if held:
+            lo_h, hi_h = max(lo_h, lo_eh, q_lo), min(hi_h, hi_eh, q_hi)
+        else:
+            lo_q, hi_q = max(lo_e, q_lo), min(hi_e, q_hi)
+    if not new_ok:
+        lo_f, hi_f, lo_r, hi_r = inf, -inf, inf, -inf
+    if not held_ok:
+        lo_h, hi_h = inf, -inf
+    return (max(lo_f, lo_q), min(hi_f, hi_q), max(lo_r, lo_q), min(hi_r, hi_q), lo_h, hi_h)
+
+
+@inline
+def decide(fd: np.ndarray, x: np.ndarray, u: np.ndarray, p: np.ndarray, k: int,
+           u_ref: float, mem: np.ndarray) -> tuple:
+    """Area ``k``'s call (module docstring): the grid's state ``x`` (every area's
+    five states, then the line flows; pu), every area's latest command ``u``
+    (``u[k]`` is area ``k``'s, held) and load ``p`` (pu), the incoming command
+    ``u_ref``; ``mem[0]`` the command area ``k`` holds.  Returns what
+    :func:`lfc.filters.dispatch.decide` does, for area ``k``'s outputs."""
+    nan = math.nan
+    if not _valid(x, u, p, u_ref):
+        held = mem[0]
+        return held, INVALID | (ACTIVE if held != u_ref else 0), nan, nan, nan, nan, nan, \
+            nan, nan, nan
+    lo_f, hi_f, lo_r, hi_r, lo_h, hi_h = _intervals(fd, x, u, p, k)
+    lo = max(lo_f, lo_r, fd[U_MIN])
+    hi = min(hi_f, hi_r, fd[U_MAX])
+    certified = lo <= hi
+    flags = 0
+    if certified:
+        v = min(max(u_ref, lo), hi)
+    else:                              # hold; the vector as it is, at the held level
+        v = mem[0]
+        if not lo_h <= v <= hi_h:
+            flags |= OUTSIDE
+    mem[0] = v
+    if v != u_ref:
+        flags |= ACTIVE
+        if certified:
+            flags |= BIND_CERT
+            for lim, bit in ((fd[U_MIN], BIND_UMIN), (fd[U_MAX], BIND_UMAX)):
+                if math.isfinite(lim) and abs(v - lim) <= 1e-9 * (1 + abs(lim)):
+                    flags |= bit
+    dw, rc = x[N_AREA_STATES * k + DW], x[N_AREA_STATES * k + ROCOF]
+    return (v, flags, fd[F_LIM] ** 2 - dw ** 2, fd[R_LIM] ** 2 - rc ** 2,
+            min(v - lo_f, hi_f - v), min(v - lo_r, hi_r - v), dw, rc, lo, hi)
+
+
+@jit
+def decide_once(fd: np.ndarray, x: np.ndarray, u: np.ndarray, p: np.ndarray, k: int,
+                u_ref: float, mem: np.ndarray) -> tuple:
+    """:func:`decide`, callable from Python (:meth:`CoupledFilter.filter`)."""
+    return decide(fd, x, u, p, k, u_ref, mem)
+
+
+class CoupledFilter:
+    """The coupled certificate of one grid, shared by its areas (module docstring).
+
+    Parameters
+    ----------
+    params : MultiAreaParams
+        The grid it is built for.
+    relays : RelaySettings
+        The relays of every area.
+    **options
+        :class:`CoupledOptions`.
+
+    Raises
+    ------
+    ValueError
+        For an invalid option, a grid that is not stable with its commands held,
+        or tightenings that leave nothing of the limits (the message says which).
+    """
+
+    method_id = METHOD_ID
+    name = "coupled"
+
+    def __init__(self, params: MultiAreaParams, relays: RelaySettings, **options) -> None:
+        if not isinstance(params, MultiAreaParams):
+            raise ValueError(f"params must be a MultiAreaParams, got {type(params).__name__}")
+        if not isinstance(relays, RelaySettings):
+            raise ValueError(f"relays must be a RelaySettings, got {relays!r}")
+        self.params, self.relays = params, relays
+        self.options = CoupledOptions(**options)
+        self.cert = CoupledSet(params, relays, self.options)
+        self.data = self.cert.data
+
+    def __repr__(self) -> str:
+        opts = ", ".join(f"{k}={v!r}" for k, v in vars(self.options).items())
+        return f"CoupledFilter({self.params.n_areas} areas, {opts})"
+
+    def check_period(self, control_period: float) -> None:
+        """``ValueError`` unless the calls come every ``control_period`` s, the
+        period its re-check was built for."""
+        if not math.isclose(self.options.control_period, control_period, rel_tol=1e-9):
+            raise ValueError(f"the coupled filter was built for control_period="
+                             f"{self.options.control_period} s but the simulation calls it "
+                             f"every {control_period} s; build it with "
+                             f"control_period={control_period}")
+
+    def filter(self, x: np.ndarray, u: np.ndarray, p: np.ndarray, area: int, u_ref: float,
+               memory: np.ndarray) -> tuple[float, int, str]:
+        """One call of area ``area``'s filter, as the engine makes it.
+
+        Parameters
+        ----------
+        x : array_like, shape (n_states,)
+            The grid's state (every area's five states, then the line flows; pu).
+        u, p : array_like, shape (n_areas,)
+            Every area's latest command and load (pu); ``u[area]`` is the one held.
+        area : int
+        u_ref : float
+            The command area ``area`` receives (pu).
+        memory : ndarray, shape (2,)
+            The area's memory (``memory[0]``: the command it holds); updated.
+
+        Returns
+        -------
+        u : float
+            The command to apply (pu), always finite.
+        flags : int
+            The flag bits (:mod:`lfc.filters.base`).
+        reason : str
+            :meth:`reason` of the flags.
+        """
+        n = self.params.n_areas
+        x = np.ascontiguousarray(x, float)
+        u, p = np.ascontiguousarray(u, float), np.ascontiguousarray(p, float)
+        if x.shape != (self.params.n_states,) or u.shape != (n,) or p.shape != (n,):
+            raise ValueError(f"x must have {self.params.n_states} entries and u, p {n}, got "
+                             f"shapes {x.shape}, {u.shape}, {p.shape}")
+        if not (isinstance(area, int) and 0 <= area < n):
+            raise ValueError(f"area must be an area index in [0, {n - 1}], got {area!r}")
+        out = decide_once(self.data, x, u, p, area, float(u_ref), memory)
+        return out[0], int(out[1]), self.reason(int(out[1]))
+
+    def reason(self, flags: int) -> str:
+        """What a call with these flag bits did, in words."""
+        if flags & INVALID:
+            return "invalid input (non-finite or beyond 1e6); last certified command held"
+        if flags & OUTSIDE:
+            return ("no command is certified and the vector held fails its own check (the "
+                    "loads moved by more than the bounds); last certified command held")
+        if flags & ACTIVE and not flags & BIND_CERT:
+            return "no new command is certified from this state; last certified command held"
+        return "command clipped to the certified interval" if flags & ACTIVE else ""
