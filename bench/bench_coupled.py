@@ -1,0 +1,91 @@
+"""Benchmark: what the coupled certificate costs per area and control period, and
+how its conservatism grows with the number of areas.
+
+Prints, from one run on this machine, for rings of 2 (the two-area preset), 4, 6
+and 10 areas (the three-area preset's areas in turn, T = 2 pu) and for the
+two-area preset with stiffer ties (T = 2, 10, 30 pu): the construction time, the
+certificate's size (samples, rows), its tightenings of the frequency and ROCOF
+limits (load, between samples), and the median time of one filter call per area
+and control period inside the engine: a 20 s run with a coordinated sinusoid on
+every area's command with the filter, minus the same run without it, divided by
+the calls (goal <= 1 ms at 10 areas).  Reference: the per-area certified filter
+(``"certified"``, built once) on the same run, where it builds.  Where the
+coupled filter's defaults do not build (a finding, ``tests/test_coupled.py``) the
+row uses ``load_bound = recheck_bound = 0.05`` and says so.
+
+Run: python bench/bench_coupled.py
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+
+import lfc
+from lfc import MultiAreaParams
+from lfc.filters.coupled import CoupledFilter
+from lfc.simulate_multiarea import area_filter
+
+DURATION, REPEAT = 20.0, 3
+THREE = MultiAreaParams.three_area()
+
+
+def ring(n: int) -> MultiAreaParams:
+    if n == 2:
+        return MultiAreaParams.two_area()
+    return MultiAreaParams(areas=tuple(THREE.areas[i % 3] for i in range(n)),
+                           tie=tuple((i, (i + 1) % n, 2.0) for i in range(n)))
+
+
+def run_time(grid: MultiAreaParams, filters: dict | None) -> float:
+    attack = {a: {"pc": lfc.Sinusoid(1.0, 0.5, start=1.0)} for a in range(grid.n_areas)}
+    times = []
+    for _ in range(REPEAT):
+        t0 = time.perf_counter()
+        lfc.simulate(grid, duration=DURATION, attacks=attack, filters=filters)
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def row(name: str, grid: MultiAreaParams) -> None:
+    relays = lfc.RelaySettings()
+    t0 = time.perf_counter()
+    try:
+        filt = CoupledFilter(grid, relays)
+    except ValueError:     # where the defaults do not build (a finding): nothing absorbed
+        t0 = time.perf_counter()
+        filt = CoupledFilter(grid, relays, load_bound=0.05, recheck_bound=0.05)
+        name += " (defaults do not build; load_bound = recheck_bound = 0.05)"
+    built = time.perf_counter() - t0
+    calls = grid.n_areas * DURATION / 0.01
+    bare = run_time(grid, None)
+    per_call = (run_time(grid, {a: filt for a in range(grid.n_areas)}) - bare) / calls
+    try:
+        per_area = {a: area_filter(grid, a, "certified", relays, 0.01)
+                    for a in range(grid.n_areas)}
+        ref = f"{1e6 * (run_time(grid, per_area) - bare) / calls:.2f} µs"
+    except ValueError:
+        ref = "does not build"
+    b = filt.cert.budget
+    print(f"| {name} | {built:.1f} s | {len(filt.cert.times)} / {filt.cert.n_rows} | "
+          f"{b['load']} | {b['between samples']} | {1e6 * per_call:.1f} µs | {ref} |",
+          flush=True)
+
+
+def main() -> None:
+    ring(2)
+    lfc.simulate(ring(2), duration=0.1, filters={0: "coupled", 1: "coupled"})   # compile
+    print(f"coupled certificate, {DURATION:g} s runs, median of {REPEAT}; tightenings "
+          f"(frequency pu, ROCOF pu/s) of the limits ({lfc.RelaySettings().F:.3g}, "
+          f"{lfc.RelaySettings().rocof_limit:.3g})")
+    print("| grid | build | samples / rows | load tightening | between samples | "
+          "per call | per-area certified, per call |")
+    print("|---|---|---|---|---|---|---|")
+    for n in (2, 4, 6, 10):
+        row(f"ring of {n}" if n > 2 else "two-area", ring(n))
+    for T in (10.0, 30.0):
+        row(f"two-area, T = {T:g} pu", MultiAreaParams.two_area(T=T))
+
+
+if __name__ == "__main__":
+    main()
