@@ -91,6 +91,9 @@ CHAPTERS = (
             ("multiarea_load_step", "multiarea_single", "multiarea_coordinated", "multiarea_ace"),
             {"duration": 10.0, "red_team_families": ["bias on ACE"], "red_team_maxiter": 1,
              "red_team_popsize": 2, "red_team_duration": 5.0}),
+    Chapter("coupled", "10_coupled_certificate.ipynb",
+            "Beyond the paper: one certificate for a whole grid", ("linear",),
+            ("coupled_certificate",), {"duration": 10.0, "kundur_instants": [3.37]}),
 )
 
 
