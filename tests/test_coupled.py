@@ -224,3 +224,28 @@ def test_the_red_teams_coordinated_search_trips_nothing(family):
     found = coordinated_search(grid, {0: "coupled", 1: "coupled"}, family, duration=20.0,
                                maxiter=2, popsize=4, jobs=1)
     assert not found["tripped"] and found["severity"] < 1.0
+
+
+def test_finding_a_step_four_times_the_bound_during_an_attack_trips_after_outside():
+    """Finding, pinned (attacking the guarantee where it ends): opposite 1 pu,
+    0.5 Hz sinusoids on both areas' commands and a -0.2 pu load step in area 0
+    (total variation 0.2 pu, beyond ``load_bound`` = 0.06 pu and the 0.01 pu per
+    period): ROCOF trips, after the filters flagged ``outside`` (the step alone,
+    without attack or filter, does not trip: its ROCOF peaks at 0.045 pu/s).
+    Steps of 0.1 and 0.15 pu, also beyond the proof, trip nothing (measured)."""
+    grid = MultiAreaParams.two_area()
+    every = {0: "coupled", 1: "coupled"}
+    attack = {a: {"pc": lfc.Sinusoid((-1.0) ** a, 0.5, start=1.0)} for a in range(2)}
+
+    def run(step):
+        return lfc.simulate(grid, duration=30.0, attacks=attack, filters=every,
+                            loads={0: lfc.Step(step, start=3.001)}, anti_windup=True)
+
+    r = run(-0.2)
+    assert r.tripped
+    first_trip = min(a.metrics()["first_trip_t"] or np.inf for a in r.areas)
+    first_outside = min(a.alarms.query("outside").t.min() for a in r.areas)
+    assert 3.0 < first_outside < first_trip
+    assert not lfc.simulate(grid, duration=30.0, loads={0: lfc.Step(-0.2, start=3.001)}).tripped
+    for step in (-0.1, -0.15):
+        assert not run(step).tripped
