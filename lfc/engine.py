@@ -578,7 +578,7 @@ class Scenarios:
         if relay_noise and not noisy:
             raise ValueError("relay_noise=True needs noise_std > 0 (the relays' measurement "
                              "noise)")
-        _check_coupled(filters, grid, estimator)
+        check_coupled(filters, grid, estimator)
         row = []
         for a, area in enumerate(grid.areas):
             channels = attacks.get(a, {})
@@ -657,7 +657,7 @@ class Scenarios:
         return Run(metrics, ends, tx, tc, tt)
 
 
-def _check_coupled(filters: dict, grid: MultiAreaParams, estimator) -> None:
+def check_coupled(filters: dict, grid: MultiAreaParams, estimator) -> None:
     """``ValueError`` unless a coupled filter (:mod:`lfc.filters.coupled`), if any,
     is the same one at every area, built for a grid of the design's areas and
     tie-lines, and reads exact states (its guarantee needs all three)."""
@@ -740,10 +740,9 @@ class GeneratorSide:
                  noise_std: tuple[float, float], seed: int, tc: np.ndarray, pc_attack,
                  wref_attack, load_feedforward: bool, period: float, *, ace_attack=None,
                  k_agc: tuple[float, float] | None = None, anti_windup: bool = False) -> None:
-        if isinstance(scc, CoupledFilter):
-            raise ValueError("the coupled filter reads the whole grid's state, which a plant "
-                             "driving time itself (ANDES) does not give the generator side; "
-                             "run it on the linear grid (lfc.simulate)")
+        if isinstance(scc, CoupledFilter) and estimator is not None:
+            raise ValueError(f"estimator={estimator!r}: the coupled filter reads the grid's "
+                             f"exact state (a wide-area measurement); give estimator=None")
         if scc is not None:
             scc.check_period(period)
         self.tc, self.scc = tc, scc
@@ -767,11 +766,16 @@ class GeneratorSide:
         self.ctrl = np.full((len(tc), N_CTRL), np.nan)
         self.n_done = 0
 
-    def step(self, j: int, x: np.ndarray, p_load: float, tie: float = 0.0) -> float:
+    def step(self, j: int, x: np.ndarray, p_load: float, tie: float = 0.0,
+             grid: tuple | None = None) -> float:
         """Control sample ``j``: read the plant state ``x`` (design-model
         coordinates, pu), the true load — in an interconnected area the net
         disturbance, load plus tie-line export — and the measured tie-line
-        export ``tie`` (pu); return the command to hold (pu)."""
+        export ``tie`` (pu); return the command to hold (pu).  A coupled filter
+        (:mod:`lfc.filters.coupled`) also reads ``grid``: ``(area, grid state,
+        every area's latest command, every area's load)``."""
+        if self.method == COUPLED and grid is None:
+            raise ValueError("the coupled filter needs grid=(area, state, commands, loads)")
         kinds, params, offsets, st, sv = self.signals
         t = float(self.tc[j])
         tie += _signal(ACE, kinds, params, offsets, st, sv, t, j)
@@ -782,6 +786,9 @@ class GeneratorSide:
                                    self.method, self.data, self.memory, self.gstate,
                                    self.x_hat, self.ctrl, tie, self.k_tie_period,
                                    self.anti_windup,
-                                   (0, self.x_hat, self.memory[:0], self.memory[:0]))
+                                   (0, self.x_hat, self.memory[:0], self.memory[:0])
+                                   if grid is None else
+                                   (int(grid[0]), *(np.ascontiguousarray(v, float)
+                                                    for v in grid[1:])))
         self.n_done = j + 1
         return u

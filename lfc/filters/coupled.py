@@ -53,7 +53,10 @@ output, :func:`lfc.filters.certified.load_gains`), a held one for
 left room for.  Proof and the tests that check it: ``docs/coupled-certificate.md``.
 
 **Not covered.**  Estimated states (no estimator is accepted), plants other
-than the design grid (ANDES: measured, not proven), an area without this filter.
+than the design grid, an area without this filter.  On ANDES (``lfc.simulate``
+of a ``GridCase``) the filters read each area's metered states and tie-line
+export (:meth:`CoupledFilter.grid_state`) and the certificate is the fitted
+model's: measured there, not proven (``tests/test_coupled.py``).
 """
 
 from __future__ import annotations
@@ -304,6 +307,7 @@ class CoupledSet:
         self.data = np.concatenate([head, rows.ravel(), dw_u, dw_p, (K.T @ Eh @ R).ravel(),
                                     (-K.T @ Eh @ qu).ravel(), (-K.T @ Eh @ ql).ravel()])
         self.A, self.Bu, self.Bl, self.R, self.C = A, Bu, Bl, R, C
+        self.W = R[N_AREA_STATES * n_a:, N_AREA_STATES * n_a:].T   # the reachable flows' basis
 
     def _describe(self) -> str:
         return ", ".join(f"{name} {v}" for name, v in self.budget.items())
@@ -509,6 +513,17 @@ class CoupledFilter:
     def __repr__(self) -> str:
         opts = ", ".join(f"{k}={v!r}" for k, v in vars(self.options).items())
         return f"CoupledFilter({self.params.n_areas} areas, {opts})"
+
+    def grid_state(self, areas: np.ndarray, exports: np.ndarray) -> np.ndarray:
+        """The state :meth:`filter` reads, from what a plant meters: each area's five
+        states ``areas`` (n_areas, 5) and tie-line export ``exports`` (n_areas,; pu).
+        The line flows are the ones of the reachable subspace with these exports
+        (unique for a connected grid: least squares on ``incidence @ W phi =
+        exports``)."""
+        E, W = self.params.incidence(), self.cert.W
+        flows = W @ np.linalg.lstsq(E @ W, np.asarray(exports, float), rcond=None)[0] \
+            if W.size else np.zeros(0)
+        return np.concatenate([np.asarray(areas, float).ravel(), flows])
 
     def check_period(self, control_period: float) -> None:
         """``ValueError`` unless the calls come every ``control_period`` s, the

@@ -44,7 +44,8 @@ from __future__ import annotations
 import numpy as np
 
 from lfc._validate import check_count, check_flag, check_multiple, check_positive
-from lfc.engine import GeneratorSide, check_area_keys, check_attacks, sample_signal
+from lfc.engine import (GeneratorSide, check_area_keys, check_attacks, check_coupled,
+                        sample_signal)
 from lfc.multiarea import MultiAreaParams
 from lfc.relays import RelaySettings, relays_or_default
 from lfc.simulate_multiarea import MultiAreaResult, area_filter, multiarea_result
@@ -117,6 +118,7 @@ def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
     for a, load in loads.items():
         sample_signal(load, np.arange(0.0, duration + step, step), f"loads[{a}]")
     built = {a: area_filter(params, a, f, relays, control_period) for a, f in filters.items()}
+    check_coupled(built, params, estimator)
     n_ctrl = int(np.ceil(duration / control_period - 1e-9))
     tc = np.arange(n_ctrl) * control_period
     k_freq, k_tie = params.agc_gains()

@@ -25,6 +25,7 @@ import pandas as pd
 
 from lfc._validate import check_flag
 from lfc.engine import GeneratorSide, sample_signal
+from lfc.filters.coupled import CoupledFilter
 from lfc.relays import RelayBank, RelaySettings
 
 # columns of AndesPlant.measure, per area
@@ -139,6 +140,7 @@ class AndesLoop:
         self.rows: list[list[float]] = []
         self.stopped: tuple | None = None
         self.next_j = 0
+        self.commands = np.zeros(plant.n_areas)   # each area's latest command (pu)
         self._load_at = (math.nan, np.zeros(plant.n_areas))
 
     def run(self, duration: float, step: float) -> bool:
@@ -198,10 +200,18 @@ class AndesLoop:
                 self.stopped = (found, round(t, 9))
                 raise Stop
         tc = self.gens[0].tc
+        coupled = self.gens[0].scc if isinstance(self.gens[0].scc, CoupledFilter) else None
         while self.next_j < len(tc) and tc[self.next_j] <= t + 1e-7:
+            grid = None
+            if coupled is not None:     # the grid's state as its design model sees it
+                grid = [0, coupled.grid_state(state[:, :5], state[:, 6]), self.commands,
+                        state[:, 5]]
             for a, gen in enumerate(self.gens):
-                self.plant.actuate(self.ss, a, gen.step(self.next_j, state[a, :5],
-                                                        state[a, 7], state[a, 6]))
+                if grid is not None:
+                    grid[0] = a
+                u = gen.step(self.next_j, state[a, :5], state[a, 7], state[a, 6], grid)
+                self.commands[a] = u
+                self.plant.actuate(self.ss, a, u)
             self.next_j += 1
 
 
