@@ -13,6 +13,10 @@ a Python ``decide_python`` with ``jit = False``), then :func:`register` it; a
 compiled one also gets its line in :func:`lfc.filters.dispatch.decide`
 (numba dispatches on codes known when it compiles).  ``tests/test_conformance.py``
 checks every registered method.
+
+A grid's coupled certificate (:mod:`lfc.filters.coupled`) is not a method here:
+it reads the whole grid's state, not one area's, and is shared by the areas
+(``filters={i: "coupled"}`` in :func:`lfc.simulate`).
 """
 
 from __future__ import annotations
