@@ -49,6 +49,22 @@ def valid_input(x: np.ndarray, u_ref: float, p: float) -> bool:
     return ok
 
 
+@inline
+def applied_flags(u: float, u_ref: float, certified: bool, u_min: float, u_max: float) -> int:
+    """The flag bits of applying ``u`` for ``u_ref``: ``ACTIVE`` if they differ and,
+    for a command clipped to a certified interval, ``BIND_CERT`` and the actuator
+    limit it sits on (``BIND_UMIN``, ``BIND_UMAX``)."""
+    flags = 0
+    if u != u_ref:
+        flags |= ACTIVE
+        if certified:
+            flags |= BIND_CERT
+            for lim, bit in ((u_min, BIND_UMIN), (u_max, BIND_UMAX)):
+                if math.isfinite(lim) and abs(u - lim) <= 1e-9 * (1 + abs(lim)):
+                    flags |= bit
+    return flags
+
+
 class FilterInfo(NamedTuple):
     """What a safety filter did at one call.
 

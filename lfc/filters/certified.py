@@ -115,8 +115,8 @@ from lfc._jit import inline, maxnum, minnum
 from lfc._validate import (check_nonnegative, check_pair, check_positive, check_range,
                            is_sequence)
 from lfc.estimation import KalmanFilter, check_noise_std, measurement_std
-from lfc.filters.base import (ACTIVE, BIND_CERT, BIND_UMAX, BIND_UMIN, INVALID, OUTSIDE,
-                              Backend, Options, check_limits, given, option, valid_input)
+from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, OUTSIDE, Backend, Options,
+                              applied_flags, check_limits, given, option, valid_input)
 from lfc.model import LFCParams, lfc_matrices, output_matrix
 from lfc.relays import RelaySettings
 
@@ -866,13 +866,7 @@ def decide(fd: np.ndarray, x: np.ndarray, u_ref: float, p: float, mem: np.ndarra
         if not (max(lo_f, lo_r) <= u <= min(hi_f, hi_r)):
             flags |= OUTSIDE
     mem[0] = u
-    if u != u_ref:
-        flags |= ACTIVE
-        if certified:
-            flags |= BIND_CERT
-            for lim, bit in ((fd[U_MIN], BIND_UMIN), (fd[U_MAX], BIND_UMAX)):
-                if math.isfinite(lim) and abs(u - lim) <= 1e-9 * (1 + abs(lim)):
-                    flags |= bit
+    flags |= applied_flags(u, u_ref, certified, fd[U_MIN], fd[U_MAX])
     m_f = min(u - lo_f, hi_f - u)
     m_r = min(u - lo_r, hi_r - u)
     return (u, flags, fd[F_LIM] ** 2 - x[3] ** 2, fd[R_LIM] ** 2 - x[4] ** 2, m_f, m_r, x[3],

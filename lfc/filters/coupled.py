@@ -69,8 +69,8 @@ from scipy.linalg import expm, solve_continuous_lyapunov
 
 from lfc._jit import inline, jit, maxnum, minnum
 from lfc._validate import check_nonnegative, check_positive, check_range
-from lfc.filters.base import (ACTIVE, BIND_CERT, BIND_UMAX, BIND_UMIN, INVALID, MAX_ABS_INPUT,
-                              OUTSIDE, check_limits)
+from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, MAX_ABS_INPUT, OUTSIDE,
+                              applied_flags, check_limits)
 from lfc.filters.certified import (NUMERIC_MARGIN, _curvature_gains, _expm_at,
                                    _intersample, _merge_intervals, grid, load_gains,
                                    period_step_gain, rate_bound)
@@ -459,13 +459,7 @@ def decide(fd: np.ndarray, x: np.ndarray, u: np.ndarray, p: np.ndarray, k: int,
         if not lo_h <= v <= hi_h:
             flags |= OUTSIDE
     mem[0] = v
-    if v != u_ref:
-        flags |= ACTIVE
-        if certified:
-            flags |= BIND_CERT
-            for lim, bit in ((fd[U_MIN], BIND_UMIN), (fd[U_MAX], BIND_UMAX)):
-                if math.isfinite(lim) and abs(v - lim) <= 1e-9 * (1 + abs(lim)):
-                    flags |= bit
+    flags |= applied_flags(v, u_ref, certified, fd[U_MIN], fd[U_MAX])
     dw, rc = x[N_AREA_STATES * k + DW], x[N_AREA_STATES * k + ROCOF]
     return (v, flags, fd[F_LIM] ** 2 - dw ** 2, fd[R_LIM] ** 2 - rc ** 2,
             min(v - lo_f, hi_f - v), min(v - lo_r, hi_r - v), dw, rc, lo, hi)
