@@ -50,6 +50,16 @@ def valid_input(x: np.ndarray, u_ref: float, p: float) -> bool:
 
 
 @inline
+def hold_invalid(mem: np.ndarray, u_ref: float) -> tuple:
+    """A filter's answer to a call it cannot evaluate (:func:`valid_input`): the
+    last command ``mem[0]`` held, flagged ``INVALID`` (and ``ACTIVE`` if it differs
+    from ``u_ref``), every value NaN — the ten outputs of every ``decide``."""
+    nan = math.nan
+    u = mem[0]
+    return u, INVALID | (ACTIVE if u != u_ref else 0), nan, nan, nan, nan, nan, nan, nan, nan
+
+
+@inline
 def applied_flags(u: float, u_ref: float, certified: bool, u_min: float, u_max: float) -> int:
     """The flag bits of applying ``u`` for ``u_ref``: ``ACTIVE`` if they differ and,
     for a command clipped to a certified interval, ``BIND_CERT`` and the actuator

@@ -116,7 +116,8 @@ from lfc._validate import (check_nonnegative, check_pair, check_positive, check_
                            is_sequence)
 from lfc.estimation import KalmanFilter, check_noise_std, measurement_std
 from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, OUTSIDE, Backend, Options,
-                              applied_flags, check_limits, given, option, valid_input)
+                              applied_flags, check_limits, given, hold_invalid, option,
+                              valid_input)
 from lfc.model import LFCParams, lfc_matrices, output_matrix
 from lfc.relays import RelaySettings
 
@@ -848,11 +849,8 @@ def decide(fd: np.ndarray, x: np.ndarray, u_ref: float, p: float, mem: np.ndarra
     h_rocof, margin_freq, margin_rocof, y_freq, y_rocof, lo, hi)``; the margins
     are the distances from ``u`` to the ends of each relay's own interval.
     """
-    nan = math.nan
     if not valid_input(x, u_ref, p):
-        u = mem[0]
-        return u, INVALID | (ACTIVE if u != u_ref else 0), nan, nan, nan, nan, nan, nan, \
-            nan, nan
+        return hold_invalid(mem, u_ref)
     lo_f, hi_f, lo_r, hi_r = _interval(fd, x, p, False)
     lo = max(lo_f, lo_r, fd[U_MIN])
     hi = min(hi_f, hi_r, fd[U_MAX])

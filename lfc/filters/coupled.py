@@ -70,7 +70,7 @@ from scipy.linalg import expm, solve_continuous_lyapunov
 from lfc._jit import inline, jit, maxnum, minnum
 from lfc._validate import check_nonnegative, check_positive, check_range
 from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, MAX_ABS_INPUT, OUTSIDE,
-                              applied_flags, check_limits)
+                              applied_flags, check_limits, hold_invalid, valid_input)
 from lfc.filters.certified import (NUMERIC_MARGIN, _curvature_gains, _expm_at,
                                    _intersample, _merge_intervals, grid, load_gains,
                                    period_step_gain, rate_bound)
@@ -348,9 +348,7 @@ def _rate(A: np.ndarray, C: np.ndarray, E: np.ndarray, limits: np.ndarray) -> np
 @inline
 def _valid(x: np.ndarray, u: np.ndarray, p: np.ndarray, u_ref: float) -> bool:
     """Every number of the call finite and within ``MAX_ABS_INPUT``."""
-    ok = abs(u_ref) <= MAX_ABS_INPUT      # False for NaN
-    for v in x:
-        ok = ok and abs(v) <= MAX_ABS_INPUT
+    ok = valid_input(x, u_ref, 0.0)
     for j in range(len(u)):
         ok = ok and abs(u[j]) <= MAX_ABS_INPUT and abs(p[j]) <= MAX_ABS_INPUT
     return ok
@@ -442,11 +440,8 @@ def decide(fd: np.ndarray, x: np.ndarray, u: np.ndarray, p: np.ndarray, k: int,
     (``u[k]`` is area ``k``'s, held) and load ``p`` (pu), the incoming command
     ``u_ref``; ``mem[0]`` the command area ``k`` holds.  Returns what
     :func:`lfc.filters.dispatch.decide` does, for area ``k``'s outputs."""
-    nan = math.nan
     if not _valid(x, u, p, u_ref):
-        held = mem[0]
-        return held, INVALID | (ACTIVE if held != u_ref else 0), nan, nan, nan, nan, nan, \
-            nan, nan, nan
+        return hold_invalid(mem, u_ref)
     lo_f, hi_f, lo_r, hi_r, lo_h, hi_h = _intervals(fd, x, u, p, k)
     lo = max(lo_f, lo_r, fd[U_MIN])
     hi = min(hi_f, hi_r, fd[U_MAX])
