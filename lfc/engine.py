@@ -37,7 +37,9 @@ from lfc.filters import SafetyFilter
 from lfc.filters.base import ACTIVE, ALARM_BITS, MEMORY, OUTSIDE
 from lfc.filters.coupled import METHOD_ID as COUPLED
 from lfc.filters.coupled import CoupledFilter
+from lfc.filters.coupled import N_R as N_R_COUPLED
 from lfc.filters.coupled import decide as decide_coupled
+from lfc.filters.coupled import grid_estimate
 from lfc.filters.dispatch import decide
 from lfc.model import LFCParams
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams, as_grid, discretize_grid
@@ -100,9 +102,9 @@ def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise0: flo
     returns ``(u, flags, |u - u_ref|)``.
     """
     y0, y1 = x[3] + noise0, x[4] + noise1
-    if est >= 0:
+    if est >= 0 and method != COUPLED:
         n = ka.shape[0]
-        kf_correct(kg, kc, kstate, y0, y1)
+        kf_correct(kg, kc, kstate, (y0, y1), x_hat)     # x_hat: scratch until below
         for r in range(5):
             x_hat[r] = kstate[1, r]
         p_hat = kstate[1, 5] if n == N_KF else 0.0
@@ -114,7 +116,16 @@ def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise0: flo
     wref = _signal(WREF, kinds, params, offsets, st, sv, t, j)
     nan = math.nan
     if method == COUPLED:
-        area, grid_x, grid_u, grid_p = grid
+        area, grid_x, grid_u, grid_p, ym, xe, ks = grid
+        if est >= 0:       # the grid's Kalman filter (state ks, area 0's), stepped by area 0
+            if area == 0:
+                grid_p = grid_estimate(fd, ka, kb, kc, kg, ks, ym[:kc.shape[0]],
+                                       ym[kc.shape[0]:], grid_u, j > 0, xe)
+            else:
+                grid_p = ks[1, int(fd[N_R_COUPLED]):int(fd[N_R_COUPLED]) + len(grid_u)]
+            grid_x = xe
+            for r in range(5):
+                x_hat[r] = xe[N_AREA_STATES * area + r]
         u, flags, h0, h1, m0, m1, q0, q1, d0, d1 = decide_coupled(fd, grid_x, grid_u, grid_p,
                                                                   area, u_ref, mem)
         p_hat = grid_p[area]
@@ -126,8 +137,8 @@ def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise0: flo
     increment = k_i_period * (wref - y0) - k_tie_period * tie
     if not (anti_windup and increment * (u_ref - u) > 0.0):
         gstate[0] += increment
-    if est >= 0:
-        kf_predict(ka, kb, kstate, u)
+    if est >= 0 and method != COUPLED:
+        kf_predict(ka, kb, kstate, (u,))
     if ctrl.shape[0]:
         vals = (u_ref, u, float(flags), h0, h1, m0, m1, q0, q1, d0, d1, x_hat[3], x_hat[4],
                 p_hat, wref)
@@ -144,11 +155,11 @@ def scenario_tables(e_i: int, f_i: int, ka: np.ndarray, kb: np.ndarray, kc: np.n
     """One generator side's Kalman matrices ``(A, B, C, gain)`` (empty without
     one, ``e_i`` < 0), filter method (-1 without one, ``f_i`` < 0) and filter
     data, as views into the engine's tables."""
-    n_kf = kdim[e_i] if e_i >= 0 else 0
+    n_kf, n_y, n_u = (kdim[e_i, 0], kdim[e_i, 1], kdim[e_i, 2]) if e_i >= 0 else (0, 0, 0)
     ka_i = ka[e_i, :n_kf, :n_kf] if e_i >= 0 else ka[0, :0, :0]
-    kb_i = kb[e_i, :n_kf] if e_i >= 0 else empty
-    kc_i = kc[e_i, :, :n_kf] if e_i >= 0 else kc[0, :, :0]
-    kg_i = kg[e_i, :n_kf] if e_i >= 0 else kg[0, :0]
+    kb_i = kb[e_i, :n_kf, :n_u] if e_i >= 0 else kb[0, :0, :0]
+    kc_i = kc[e_i, :n_y, :n_kf] if e_i >= 0 else kc[0, :0, :0]
+    kg_i = kg[e_i, :n_kf, :n_y] if e_i >= 0 else kg[0, :0, :0]
     method = methods[f_i] if f_i >= 0 else -1
     fd = fdata[foff[f_i]:foff[f_i + 1]] if f_i >= 0 else empty
     return ka_i, kb_i, kc_i, kg_i, method, fd
@@ -198,7 +209,8 @@ def _run(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarray,
          metrics: np.ndarray, trace_x: np.ndarray, trace_ctrl: np.ndarray,
          trace_trips: np.ndarray, ends: np.ndarray, x: np.ndarray, xn: np.ndarray,
          u: np.ndarray, pl: np.ndarray, x_hat: np.ndarray, mem: np.ndarray,
-         gstate: np.ndarray, kstate: np.ndarray, start: np.ndarray, due: np.ndarray) -> None:
+         gstate: np.ndarray, kstate: np.ndarray, start: np.ndarray, due: np.ndarray,
+         ym: np.ndarray, xe: np.ndarray) -> None:
     """Advance every scenario of one grid from equilibrium for ``n_steps`` plant steps.
 
     The grid has ``n_a = inc.shape[0]`` areas and ``inc.shape[1]`` tie-lines
@@ -213,7 +225,10 @@ def _run(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarray,
     ``metrics`` (N, n_a, len(METRICS)) and, when the trace arrays have rows (N =
     1), every state (samples, n_s), control sample (n_ctrl, n_a, N_CTRL) and trip
     (samples, n_a); ``ends`` the last sample kept.  The arrays after ``ends``
-    are scratch space: the kernel allocates nothing.
+    are scratch space: the kernel allocates nothing (``ym``, 6 n_a: the grid's
+    measurements ``dw_meas, rocof_meas`` of each area and each export, for a
+    coupled filter's grid Kalman filter, then its innovations; ``xe``, n_s: the
+    estimate of the full state).
 
     One area of five states (the single-area model) takes a path that keeps the
     state in registers for a control period; it computes the same sums in the
@@ -259,6 +274,15 @@ def _run(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarray,
             t = k0 * dt
             for a in range(n_a):     # every area's load now (the coupled filter reads all)
                 pl[a] = _signal(LOAD, kinds[i, a], params[i, a], offsets[i, a], st, sv, t, k0)
+            if method0 == COUPLED and index[i, 0, 0] >= 0:   # what its estimator measures
+                for a in range(n_a):
+                    q_a = index[i, a, 1]
+                    ym[2 * a] = x[m * a + 3] + (noise[q_a, j, 0] if q_a >= 0 else 0.0)
+                    ym[2 * a + 1] = x[m * a + 4] + (noise[q_a, j, 1] if q_a >= 0 else 0.0)
+                    s = 0.0
+                    for line in range(n_l):
+                        s += inc[a, line] * x[m * n_a + line]
+                    ym[2 * n_a + a] = s
             for a in range(n_a):
                 e_i, q_i, f_i, ff = index[i, a, 0], index[i, a, 1], index[i, a, 2], \
                     index[i, a, 3]
@@ -281,7 +305,8 @@ def _run(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarray,
                     j, t, x_a, pl[a] + tie, noise[q_i, j, 0] if q_i >= 0 else 0.0,
                     noise[q_i, j, 1] if q_i >= 0 else 0.0, kinds_a, params_a, offsets_a, st,
                     sv, k_freq[a], e_i, ka_a, kb_a, kc_a, kg_a, ks_a, ff == 1, method, fd,
-                    mem_a, gs_a, x_hat, ctrl_a, tie + ace, k_tie[a], aw, (a, x, u, pl))
+                    mem_a, gs_a, x_hat, ctrl_a, tie + ace, k_tie[a], aw,
+                    (a, x, u, pl, ym, xe, ks_0))
                 u[a] = ua
                 met[a, 4] += (flags & ACTIVE) != 0
                 met[a, 5] += (flags & ALARM_BITS) != 0
@@ -578,7 +603,7 @@ class Scenarios:
         if relay_noise and not noisy:
             raise ValueError("relay_noise=True needs noise_std > 0 (the relays' measurement "
                              "noise)")
-        check_coupled(filters, grid, estimator)
+        check_coupled(filters, grid, estimator, noise_std)
         row = []
         for a, area in enumerate(grid.areas):
             channels = attacks.get(a, {})
@@ -593,9 +618,11 @@ class Scenarios:
                                  f"would go unflagged; build it with the same thresholds")
             if scc is not None:
                 scc.check_period(self.period)
-            kf = make_estimator(estimator, area, self.period, noise_std)
+            kf = (scc.kalman if isinstance(scc, CoupledFilter)
+                  else make_estimator(estimator, area, self.period, noise_std))
             e_i = -1 if kf is None else self._kf.index(
-                id(kf) if not isinstance(estimator, str) else (a, tuple(noise_std)), lambda: kf)
+                id(kf) if not isinstance(estimator, str) or isinstance(scc, CoupledFilter)
+                else (a, tuple(noise_std)), lambda: kf)
             if noisy:
                 self._noise.append(make_noise(noise_std, self.n_ctrl, seed if a == 0
                                               else (seed, a)))
@@ -644,7 +671,8 @@ class Scenarios:
              np.array(self._relay_noise, float).reshape(n, n_a, 3), stop_on_trip, metrics,
              tx, tc, tt, ends, np.zeros(n_s), np.zeros(n_s), np.zeros(n_a), np.zeros(n_a),
              np.zeros(N_AREA_STATES), np.zeros((n_a, MEMORY)), np.zeros((n_a, 1)),
-             np.zeros((n_a, 2, N_KF)), np.zeros((n_a, 3)), np.zeros((n_a, 3)))
+             np.zeros((n_a, 2, ka.shape[1])), np.zeros((n_a, 3)), np.zeros((n_a, 3)),
+             np.zeros(6 * n_a), np.zeros(n_s))
         final = metrics[:, :, METRICS.index("final_abs_dw_meas")]
         bad = np.flatnonzero(~np.all(np.isfinite(final), axis=1))
         if len(bad):
@@ -657,10 +685,14 @@ class Scenarios:
         return Run(metrics, ends, tx, tc, tt)
 
 
-def check_coupled(filters: dict, grid: MultiAreaParams, estimator) -> None:
+def check_coupled(filters: dict, grid: MultiAreaParams, estimator,
+                  noise_std: tuple[float, float] = (0.0, 0.0)) -> None:
     """``ValueError`` unless a coupled filter (:mod:`lfc.filters.coupled`), if any,
     is the same one at every area, built for a grid of the design's areas and
-    tie-lines, and reads exact states (its guarantee needs all three)."""
+    tie-lines, and given what its certificate covers: the exact state
+    (``estimator=None``) if it was built without ``noise_std``, its own grid
+    Kalman filter (``estimator="kalman"``) if with it, on measurement noise no
+    larger than it was built for (its guarantee needs all three)."""
     coupled = [f for f in filters.values() if isinstance(f, CoupledFilter)]
     if not coupled:
         return
@@ -672,9 +704,21 @@ def check_coupled(filters: dict, grid: MultiAreaParams, estimator) -> None:
     if built.n_areas != grid.n_areas or [t[:2] for t in built.tie] != [t[:2] for t in grid.tie]:
         raise ValueError(f"the coupled filter was built for {built!r}, not for this grid's "
                          f"{grid.n_areas} areas and tie-lines {grid.tie}")
-    if estimator is not None:
+    estimates = coupled[0].kalman is not None
+    if estimator is None and estimates:
+        raise ValueError("the coupled filter was built with noise_std (it covers its grid "
+                         "Kalman estimate): give estimator='kalman'")
+    if estimator is not None and not (estimates and isinstance(estimator, str)
+                                      and estimator == "kalman"):
         raise ValueError(f"estimator={estimator!r}: the coupled filter reads the grid's exact "
-                         f"state (a wide-area measurement); give estimator=None")
+                         f"state (a wide-area measurement); give estimator=None, or build it "
+                         f"with noise_std and give estimator='kalman' (its own grid-wide "
+                         f"Kalman filter)")
+    built_for = coupled[0].options.noise_std
+    if estimates and any(s > b for s, b in zip(noise_std, built_for)):
+        raise ValueError(f"noise_std={tuple(noise_std)} exceeds the noise the coupled filter "
+                         f"was built for ({built_for}): its error bound would not hold; build "
+                         f"it with noise_std={tuple(noise_std)}")
 
 
 def signal_tables(sig: list[tuple], st: list[np.ndarray], sv: list[np.ndarray],
@@ -698,16 +742,22 @@ def filter_tables(filters: list[SafetyFilter]) -> tuple[np.ndarray, np.ndarray, 
     return methods, np.concatenate(data) if data else np.zeros(0), foff
 
 
-def _kalman_tables(filters: list[KalmanFilter]) -> tuple:
-    """The Kalman filters' matrices, padded to N_KF states: (A, B, C, gain, dims)."""
+def _kalman_tables(filters: list) -> tuple:
+    """The Kalman filters' matrices (each area's :class:`KalmanFilter`, or a
+    coupled filter's :class:`~lfc.filters.coupled.GridKalman`), padded to the
+    largest: ``(A, B, C, gain, dims)`` with ``dims[i]`` = (states,
+    measurements, inputs)."""
     m = max(len(filters), 1)
-    ka, kb = np.zeros((m, N_KF, N_KF)), np.zeros((m, N_KF))
-    kc, kg = np.zeros((m, 2, N_KF)), np.zeros((m, N_KF, 2))
-    kdim = np.zeros(m, np.int64)
+    n, n_y, n_u = (max([getattr(kf, d) for kf in filters], default=1)
+                   for d in ("n", "n_y", "n_u"))
+    n = max(n, N_KF)
+    ka, kb = np.zeros((m, n, n)), np.zeros((m, n, n_u))
+    kc, kg = np.zeros((m, n_y, n)), np.zeros((m, n, n_y))
+    kdim = np.zeros((m, 3), np.int64)
     for i, kf in enumerate(filters):
-        n = kf.n
-        ka[i, :n, :n], kb[i, :n], kc[i, :, :n], kg[i, :n] = kf.A, kf.B, kf.C, kf.gain
-        kdim[i] = n
+        a, y, b = kf.n, kf.n_y, kf.n_u
+        ka[i, :a, :a], kb[i, :a, :b], kc[i, :y, :a], kg[i, :a, :y] = kf.A, kf.B, kf.C, kf.gain
+        kdim[i] = a, y, b
     return ka, kb, kc, kg, kdim
 
 
@@ -740,9 +790,11 @@ class GeneratorSide:
                  noise_std: tuple[float, float], seed: int, tc: np.ndarray, pc_attack,
                  wref_attack, load_feedforward: bool, period: float, *, ace_attack=None,
                  k_agc: tuple[float, float] | None = None, anti_windup: bool = False) -> None:
-        if isinstance(scc, CoupledFilter) and estimator is not None:
-            raise ValueError(f"estimator={estimator!r}: the coupled filter reads the grid's "
-                             f"exact state (a wide-area measurement); give estimator=None")
+        if isinstance(scc, CoupledFilter) and (estimator is not None or scc.kalman is not None):
+            raise ValueError(f"estimator={estimator!r}: on a testbed the coupled filter reads "
+                             f"the grid's metered state (a wide-area measurement); give "
+                             f"estimator=None and a filter built without noise_std (its grid "
+                             f"Kalman filter runs on the linear grid only)")
         if scc is not None:
             scc.check_period(period)
         self.tc, self.scc = tc, scc
@@ -750,9 +802,9 @@ class GeneratorSide:
         kf = make_estimator(estimator, design, period, noise_std)
         self.est = -1 if kf is None else 0
         self.ka, self.kb, self.kc, self.kg, kdim = _kalman_tables([kf] if kf else [])
-        n = int(kdim[0]) if kf else 0
-        self.ka, self.kb = self.ka[0, :n, :n].copy(), self.kb[0, :n].copy()
-        self.kc, self.kg = self.kc[0, :, :n].copy(), self.kg[0, :n].copy()
+        n = int(kdim[0, 0]) if kf else 0
+        self.ka, self.kb = self.ka[0, :n, :n].copy(), self.kb[0, :n, :1].copy()
+        self.kc, self.kg = self.kc[0, :2, :n].copy(), self.kg[0, :n, :2].copy()
         self.signals = scenario_signals(pc_attack, wref_attack, None, tc, tc, ace_attack)
         k_freq, k_tie = (design.k_i, 0.0) if k_agc is None else k_agc
         self.k_i_period, self.k_tie_period = k_freq * period, k_tie * period
@@ -786,9 +838,11 @@ class GeneratorSide:
                                    self.method, self.data, self.memory, self.gstate,
                                    self.x_hat, self.ctrl, tie, self.k_tie_period,
                                    self.anti_windup,
-                                   (0, self.x_hat, self.memory[:0], self.memory[:0])
+                                   (0, self.x_hat, self.memory[:0], self.memory[:0],
+                                    self.memory[:0], self.memory[:0], self.kstate)
                                    if grid is None else
                                    (int(grid[0]), *(np.ascontiguousarray(v, float)
-                                                    for v in grid[1:])))
+                                                    for v in grid[1:]), self.memory[:0],
+                                    self.memory[:0], self.kstate))
         self.n_done = j + 1
         return u

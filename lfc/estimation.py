@@ -18,27 +18,68 @@ from lfc.model import LFCParams, discretize, output_matrix
 
 
 @inline
-def kf_correct(gain: np.ndarray, C: np.ndarray, xs: np.ndarray, y0: float, y1: float) -> None:
+def kf_correct(gain: np.ndarray, C: np.ndarray, xs: np.ndarray, y, e: np.ndarray) -> None:
     """``xs[1] = xs[0] + gain (y - C xs[0])`` (prior to posterior) for the
-    measurement ``(y0, y1)``; the filter has ``gain.shape[0]`` states."""
-    n = gain.shape[0]
-    e0, e1 = y0, y1
+    measurements ``y`` (a tuple or array of ``C.shape[0]`` values); the filter has
+    ``gain.shape[0]`` states; ``e`` (at least ``C.shape[0]``) is scratch space
+    for the innovations."""
+    n, n_y = gain.shape[0], C.shape[0]
+    for m in range(n_y):
+        acc = y[m]
+        for k in range(n):
+            acc -= C[m, k] * xs[0, k]
+        e[m] = acc
     for k in range(n):
-        e0 -= C[0, k] * xs[0, k]
-        e1 -= C[1, k] * xs[0, k]
-    for k in range(n):
-        xs[1, k] = xs[0, k] + (gain[k, 0] * e0 + gain[k, 1] * e1)
+        acc = gain[k, 0] * e[0]
+        for m in range(1, n_y):
+            acc += gain[k, m] * e[m]
+        xs[1, k] = xs[0, k] + acc
 
 
 @inline
-def kf_predict(A: np.ndarray, B: np.ndarray, xs: np.ndarray, u: float) -> None:
-    """``xs[0] = A xs[1] + B u`` (posterior to the next prior, command ``u`` held)."""
-    n = A.shape[0]
+def kf_predict(A: np.ndarray, B: np.ndarray, xs: np.ndarray, u) -> None:
+    """``xs[0] = A xs[1] + B u`` (posterior to the next prior, the commands ``u``
+    (a tuple or array of ``B.shape[1]`` values) held)."""
+    n, n_u = A.shape[0], B.shape[1]
     for i in range(n):
-        acc = B[i] * u
+        acc = B[i, 0] * u[0]
+        for j in range(1, n_u):
+            acc += B[i, j] * u[j]
         for k in range(n):
             acc += A[i, k] * xs[1, k]
         xs[0, i] = acc
+
+
+def steady_state_kalman(A: np.ndarray, C: np.ndarray, q: np.ndarray, r: np.ndarray,
+                        what: str) -> tuple[np.ndarray, np.ndarray]:
+    """The steady-state Kalman filter (current-estimate form) of ``x+ = A x + w``,
+    ``y = C x + v`` with diagonal noise variances ``q`` (per state) and ``r``
+    (per measurement): ``(gain, posterior covariance)``.
+
+    Raises
+    ------
+    ValueError
+        If the model is not observable from ``y``, or the Riccati equation has no
+        finite solution the solver finds (``what`` names the noise models in the
+        message).
+    """
+    import control as ct  # here, not at import: python-control loads matplotlib
+    n = len(A)
+    if np.linalg.matrix_rank(ct.obsv(A, C)) < n:
+        raise ValueError(f"the model is not observable from its measurements ({what})")
+    R = np.diag(r)
+    try:
+        _, P, _ = ct.dlqe(A, np.eye(n), C, np.diag(q), R)  # a-priori covariance
+        gain = P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
+        cov = (np.eye(n) - gain @ C) @ P
+        solved = np.isfinite(gain).all() and np.isfinite(cov).all()
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError, ct.ControlArgument):
+        solved = False
+    if not solved:
+        raise ValueError(f"no steady-state Kalman gain for {what}: the Riccati solver fails "
+                         f"on these noise models (tiny, or many decades apart); scale them "
+                         f"up or bring them closer")
+    return gain, cov
 
 
 DEFAULT_MEAS_STD = (1e-4, 1e-3)   # pu, pu/s: a Kalman filter's noise model where none is given
@@ -140,24 +181,12 @@ class KalmanFilter:
             q = np.append(q, max(load_std**2 * period, 1e-12))
         else:
             Bd = Bd[:, 0:1]
-        self.A, self.B, self.C = Ad, np.ascontiguousarray(Bd[:, 0]), C
-        self.n = Ad.shape[0]
-        import control as ct  # here, not at import: python-control loads matplotlib
-        if np.linalg.matrix_rank(ct.obsv(Ad, C)) < self.n:
-            raise ValueError("the LFC model is not observable from (dw_meas, rocof_meas)")
-        R = np.diag(np.square(self.meas_std))
-        try:
-            _, P, _ = ct.dlqe(Ad, np.eye(self.n), C, np.diag(q), R)  # a-priori covariance
-            self.gain = P @ C.T @ np.linalg.inv(C @ P @ C.T + R)
-            self.posterior_covariance = (np.eye(self.n) - self.gain @ C) @ P
-            solved = np.isfinite(self.gain).all() and np.isfinite(self.posterior_covariance).all()
-        except (ValueError, ArithmeticError, np.linalg.LinAlgError, ct.ControlArgument):
-            solved = False
-        if not solved:
-            raise ValueError(f"no steady-state Kalman gain for meas_std={self.meas_std}, "
-                             f"process_std={process_std}, load_std={load_std}, period={period}:"
-                             f" the Riccati solver fails on these noise models (tiny, or many "
-                             f"decades apart); scale them up or bring them closer")
+        self.A, self.B, self.C = Ad, np.ascontiguousarray(Bd[:, 0:1]), C
+        self.n, self.n_y, self.n_u = Ad.shape[0], 2, 1
+        self.gain, self.posterior_covariance = steady_state_kalman(
+            Ad, C, q, np.square(self.meas_std),
+            f"meas_std={self.meas_std}, process_std={process_std}, load_std={load_std}, "
+            f"period={period}")
         self.reset()
 
     def __repr__(self) -> str:
@@ -182,11 +211,11 @@ class KalmanFilter:
         if not np.all(np.isfinite(y)):
             raise ValueError(f"y must be finite (a NaN would poison every later estimate), "
                              f"got {y}")
-        kf_correct(self.gain, self.C, self._xs, float(y[0]), float(y[1]))
+        kf_correct(self.gain, self.C, self._xs, (float(y[0]), float(y[1])), np.zeros(2))
         pl = float(self._xs[1, 5]) if self.estimate_load else 0.0
         return self._xs[1, :5].copy(), pl
 
     def predict(self, u: float) -> None:
         """Propagate the last corrected estimate over one period with command ``u`` (pu)."""
         check_finite("u", u)
-        kf_predict(self.A, self.B, self._xs, float(u))
+        kf_predict(self.A, self.B, self._xs, (float(u),))

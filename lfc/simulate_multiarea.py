@@ -93,18 +93,21 @@ def tie_step_bound(params: MultiAreaParams, area: int, relays: RelaySettings,
 
 def area_filter(params: MultiAreaParams, area: int,
                 kind: str | SafetyFilter | CoupledFilter | None, relays: RelaySettings,
-                control_period: float) -> SafetyFilter | CoupledFilter | None:
+                control_period: float, noise_std: tuple[float, float] | None = None
+                ) -> SafetyFilter | CoupledFilter | None:
     """The filter of ``area``: ``"paper"`` (the paper's SCC at α = 20 and its
     default reading, on the area's model; build a :class:`SafetyFilter` for
     another α), ``"certified"`` (the certified
     filter of the area's model with ``load_bound`` = :func:`tie_step_bound`),
     ``"coupled"`` (the grid's coupled certificate with its default options,
     :mod:`lfc.filters.coupled`: the same object for every area, which must all
-    have it), a filter as given, or None."""
+    have it; with ``noise_std``, the measurement noise of its grid Kalman
+    estimate, ``estimator="kalman"``), a filter as given, or None."""
     if kind is None or isinstance(kind, (SafetyFilter, CoupledFilter)):
         return kind
     if kind == "coupled":
-        return coupled_filter(params, relays, control_period)
+        return coupled_filter(params, relays, control_period,
+                              None if noise_std is None else tuple(noise_std))
     model = params.areas[area]
     if kind == "paper":
         return SafetyFilter(model, relays, alpha=PAPER_ALPHA)
@@ -123,11 +126,17 @@ def area_filter(params: MultiAreaParams, area: int,
 
 
 @functools.lru_cache(maxsize=8)
-def coupled_filter(params: MultiAreaParams, relays: RelaySettings,
-                   control_period: float) -> CoupledFilter:
-    """The coupled certificate of ``params`` with its default options (built once
-    per grid, relays and period: its construction solves linear programs)."""
-    return CoupledFilter(params, relays, control_period=control_period)
+def coupled_filter(params: MultiAreaParams, relays: RelaySettings, control_period: float,
+                   noise_std: tuple[float, float] | None = None) -> CoupledFilter:
+    """The coupled certificate of ``params`` with its default options and
+    ``noise_std`` (built once per grid, relays, period and noise: its
+    construction solves linear programs)."""
+    return CoupledFilter(params, relays, control_period=control_period, noise_std=noise_std)
+
+
+def _kalman(estimator: object) -> bool:
+    """Whether ``estimator`` asks for the Kalman estimate (``"kalman"``)."""
+    return isinstance(estimator, str) and estimator == "kalman"
 
 
 @dataclass
@@ -242,7 +251,9 @@ def simulate_grid_linear(params: MultiAreaParams, *, duration: float,
         raise ValueError(f"params must be a MultiAreaParams, got {type(params).__name__}")
     relays = relays_or_default(relays)
     filters = check_area_keys(filters, params.n_areas, "filters")
-    built = {a: area_filter(params, a, f, relays, control_period) for a, f in filters.items()}
+    estimate = tuple(noise_std) if _kalman(estimator) else None
+    built = {a: area_filter(params, a, f, relays, control_period, estimate)
+             for a, f in filters.items()}
     sc = Scenarios(params, duration=duration, dt=dt, control_period=control_period,
                    relays=relays)
     sc.add(attacks=attacks, loads=loads, filters=built, estimator=estimator,
@@ -338,10 +349,12 @@ def simulate_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
                              f"got {s!r}")
         filters = check_area_keys(s.get("filters"), params.n_areas, f"scenarios[{k}].filters")
         built = {}
+        estimate = tuple(s.get("noise_std", (0.0, 0.0))) if _kalman(s.get("estimator")) \
+            else None
         for a, f in filters.items():
-            key = (a, f if isinstance(f, str) else id(f))
+            key = (a, f if isinstance(f, str) else id(f), estimate)
             if key not in cache:
-                cache[key] = area_filter(params, a, f, relays, control_period)
+                cache[key] = area_filter(params, a, f, relays, control_period, estimate)
             built[a] = cache[key]
         rows.append({"feedforward": True, **s, "filters": built})
     n_a = params.n_areas

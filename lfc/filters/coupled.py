@@ -52,7 +52,16 @@ output, :func:`lfc.filters.certified.load_gains`), a held one for
 ``outside`` is then flagged only if the loads moved by more than the new vector
 left room for.  Proof and the tests that check it: ``docs/coupled-certificate.md``.
 
-**Not covered.**  Estimated states (no estimator is accepted), plants other
+**With estimates** (``noise_std``, ``estimator="kalman"``): the areas share one
+grid-wide Kalman filter (:class:`GridKalman`) that fuses every area's frequency,
+ROCOF and tie-line export; its error is independent of every command and attack
+(a noise part plus a part linear in the loads), and the certificate is tightened
+by both.  Proven (theorem A'): if the loads' total variation over the run is at
+most ``load_bound`` and the noise's part of the error lies in its ellipsoid at
+``confidence`` at each certification, no relay trips.  The held re-check (B, C)
+is not proven on an estimate: ``outside`` flags are measured.
+
+**Not covered.**  Other estimators (refused), plants other
 than the design grid, an area without this filter.  On ANDES (``lfc.simulate``
 of a ``GridCase``) the filters read each area's metered states and tie-line
 export (:meth:`CoupledFilter.grid_state`) and the certificate is the fitted
@@ -66,6 +75,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import expm, solve_continuous_lyapunov
+from scipy.stats import chi2
 
 from lfc._jit import inline, jit, maxnum, minnum
 from lfc._validate import check_nonnegative, check_positive, check_range
@@ -74,6 +84,9 @@ from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, MAX_ABS_INPUT, OUTSIDE
 from lfc.filters.certified import (NUMERIC_MARGIN, _curvature_gains, _expm_at,
                                    _intersample, _merge_intervals, grid, load_gains,
                                    period_step_gain, rate_bound)
+from lfc.estimation import (LOAD_STD, check_noise_std, kf_correct, kf_predict, measurement_std,
+                            steady_state_kalman)
+from lfc.model import zoh
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams, multiarea_matrices
 from lfc.relays import RelaySettings
 
@@ -81,7 +94,8 @@ METHOD_ID = 2          # the engine's code for this filter (lfc.engine.generator
 DW, ROCOF = 3, 4       # an area's measured outputs among its five states
 # header of the data array decide() reads
 (N_S, N_A, N_R, N_ROWS, U_MIN, U_MAX, F_LIM, R_LIM, RHO_NEW, RHO_HELD, HALF_NEW, HALF_HELD,
- Y0_F_NEW, Y0_R_NEW, Y0_F_HELD, Y0_R_HELD, HEAD) = range(17)
+ Y0_F_NEW, Y0_R_NEW, Y0_F_HELD, Y0_R_HELD, N_K, LIFT, HEAD) = range(19)
+EXPORT_STD = 1e-4    # pu: the grid Kalman filter's noise model of the metered tie-line exports
 
 
 @dataclass(frozen=True)
@@ -111,6 +125,15 @@ class CoupledOptions:
         Actuator limits on every area's command (pu), ``u_min <= 0 <= u_max``.
     control_period : float
         Period of the calls (s), in (0, 1].  Default 0.01 s.
+    noise_std : (float, float) or None
+        The measurement noise (std of every area's ``dw_meas``, pu, and
+        ``rocof_meas``, pu/s) of the grid Kalman estimate the filters are given
+        (:class:`GridKalman`); None (default): the exact state and loads.  Each
+        entry 0 or in :data:`lfc.estimation.STD`.
+    confidence : float
+        Probability, in (0, 1), that the estimate's error lies in the ellipsoid
+        the certificate covers (chi-square of the error covariance's dimension).
+        Default 0.9999.  Only with ``noise_std``.
     """
 
     load_bound: float = 0.06
@@ -121,6 +144,8 @@ class CoupledOptions:
     u_min: float = -math.inf
     u_max: float = math.inf
     control_period: float = 0.01
+    noise_std: tuple[float, float] | None = None
+    confidence: float = 0.9999
 
     def __post_init__(self) -> None:
         check_nonnegative("load_bound", self.load_bound)
@@ -142,6 +167,12 @@ class CoupledOptions:
         if self.control_period > 1.0:
             raise ValueError(f"control_period must lie in (0, 1] s, got "
                              f"{self.control_period!r}")
+        if self.noise_std is not None:
+            object.__setattr__(self, "noise_std", check_noise_std("noise_std", self.noise_std))
+        check_range("confidence", self.confidence, 0.0, 1.0)
+        if self.noise_std is None and self.confidence != 0.9999:
+            raise ValueError(f"confidence={self.confidence!r} has no effect without noise_std "
+                             f"(the exact state): leave it at its default")
 
 
 def reduced_model(params: MultiAreaParams) -> tuple[np.ndarray, ...]:
@@ -185,6 +216,68 @@ def output_rows(n_areas: int, n_states: int) -> np.ndarray:
     for a in range(n_areas):
         C[2 * a, N_AREA_STATES * a + DW] = C[2 * a + 1, N_AREA_STATES * a + ROCOF] = 1.0
     return C
+
+
+class GridKalman:
+    """The grid-wide steady-state Kalman filter the coupled filters share.
+
+    On the reduced model (:func:`reduced_model`) discretized at the control
+    period, with every area's load as a random walk (as
+    :class:`lfc.estimation.KalmanFilter` does for one area), it fuses every
+    area's ``dw_meas`` and ``rocof_meas`` and every area's metered tie-line
+    export (the measurement the AGC already reads) at each control sample.
+    The tie-line flows are states of its model, so the inter-area swing is
+    predicted, not a disturbance to it.
+
+    Parameters
+    ----------
+    params : MultiAreaParams
+    period : float
+        Control period (s).
+    noise_std : (float, float)
+        Measurement noise std of every area's ``dw_meas`` (pu) and ``rocof_meas``
+        (pu/s); 0 takes :data:`lfc.estimation.DEFAULT_MEAS_STD`'s entry
+        (:func:`lfc.estimation.measurement_std`).  Exports: ``EXPORT_STD`` pu.
+    process_std : float
+        Process noise std per sample on each model state (pu).  Default 1e-4,
+        the single-area filter's.
+    load_std : float
+        Random-walk intensity of each load (pu per sqrt(s)).  Default
+        :data:`lfc.estimation.LOAD_STD`.
+
+    Attributes
+    ----------
+    A, B, C, gain : ndarray
+        ``x+ = A x + B u`` (``x``: reduced states then loads, ``u``: every area's
+        command), measurements ``C x`` (``dw_meas``, ``rocof_meas`` of each area in
+        turn, then each area's export), the steady-state gain.
+    posterior_covariance : ndarray
+        The error covariance after each correction.
+    n, n_y, n_u : int
+        Number of states, measurements and inputs.
+    """
+
+    def __init__(self, params: MultiAreaParams, period: float, noise_std: tuple[float, float],
+                 *, process_std: float = 1e-4, load_std: float = LOAD_STD) -> None:
+        A, Bu, Bl, R = reduced_model(params)
+        n_r, n_a, head = len(A), params.n_areas, N_AREA_STATES * params.n_areas
+        Ad, Bd = zoh(A, np.hstack([Bu, Bl]), period)
+        self.A = np.block([[Ad, Bd[:, n_a:]], [np.zeros((n_a, n_r)), np.eye(n_a)]])
+        self.B = np.vstack([Bd[:, :n_a], np.zeros((n_a, n_a))])
+        exports = np.zeros((n_a, n_r))
+        exports[:, head:] = params.incidence() @ R[head:, head:].T
+        self.C = np.hstack([np.vstack([output_rows(n_a, n_r), exports]),
+                            np.zeros((3 * n_a, n_a))])
+        meas = measurement_std(noise_std)
+        r = np.concatenate([np.tile(np.square(meas), n_a), np.full(n_a, EXPORT_STD ** 2)])
+        q = np.concatenate([np.full(n_r, process_std ** 2),
+                            np.full(n_a, max(load_std ** 2 * period, 1e-12))])
+        self.gain, self.posterior_covariance = steady_state_kalman(
+            self.A, self.C, q, r, f"noise_std={tuple(noise_std)}, period={period}")
+        self.n, self.n_y, self.n_u, self.period = len(self.A), 3 * n_a, n_a, float(period)
+
+    def __repr__(self) -> str:
+        return f"GridKalman({self.n} states, period={self.period})"
 
 
 class CoupledSet:
@@ -249,13 +342,34 @@ class CoupledSet:
         V = _rate(A, C, E[sub], limits)
         tau = _intersample(gains, V, fine, times)                     # (n, outputs)
         t_max, tau0 = tau.max(axis=0), tau[0]
+        # the estimate's error e = (e_z, e_p) moves row k's output by G_k e_z + Hl_k e_p
+        self.kalman = (GridKalman(params, o.control_period, o.noise_std)
+                       if o.noise_std is not None else None)
+        cov = self.kalman.posterior_covariance if self.kalman is not None else None
+        kappa_e = math.sqrt(chi2.ppf(o.confidence, len(cov))) if cov is not None else 0.0
+        est, est0 = np.zeros(tau.shape), np.zeros(len(limits))
+        load_rows, load_0 = np.broadcast_to(load, tau.shape), load
+        if cov is not None:
+            w = np.concatenate([G, Hl], axis=2)                      # (n, outputs, n_r + n_a)
+            est = kappa_e * np.sqrt(np.einsum("tij,jk,tik->ti", w, cov, w))
+            w0 = np.hstack([C, np.zeros((len(C), n_a))])
+            est0 = kappa_e * np.sqrt(np.einsum("ij,jk,ik->i", w0, cov, w0))
+            # the loads' part of the error: a load path of total variation V before
+            # the certification moves row i by at most V g_i, the loads after it by
+            # at most V' load: with V + V' <= load_bound, max(g_i, load) covers both
+            steps = _load_error_steps(self.kalman, A, Bl, o.control_period)
+            load_rows = np.maximum(load, 1.01 * _sup_abs(w, steps))
+            load_0 = np.maximum(load, 1.01 * _sup_abs(w0, steps))
         self.budget = {"load": _by_kind(o.load_bound * load),
                        "re-check": _by_kind(o.recheck_bound * again),
-                       "between samples": _by_kind(t_max + tau0)}
-        bound_new = lim - t_max - tau                                # (n, outputs)
-        bound_held = np.broadcast_to(held - t_max, tau.shape)
-        y0_new, y0_held = lim - t_max - tau0, held - tau0
-        if np.any(bound_new <= 0) or np.any(y0_new <= 0):
+                       "between samples": _by_kind(t_max + tau0),
+                       "estimate": _by_kind(np.max(est + o.load_bound * (load_rows - load),
+                                                   axis=0))}
+        bound_new = limits - o.load_bound * load_rows - t_max - tau - est   # (n, outputs)
+        bound_held = held - t_max - est
+        y0_new = limits - o.load_bound * load_0 - t_max - tau0 - est0
+        y0_held = held - tau0 - est0
+        if np.any(bound_new <= 0) or np.any(y0_new <= 0) or np.any(bound_held <= 0):
             raise ValueError(f"the tightenings leave nothing of the relay limits: "
                              f"{self._describe()}; lower load_bound or tightening")
         n_rows = len(times) * 2 * n_a
@@ -281,7 +395,21 @@ class CoupledSet:
         spent = 1.01 * (o.load_bound - o.recheck_bound)
         kappa = float(np.max(np.linalg.norm(K.T @ Eh @ ql, axis=0)))
         drift = spent * float(np.max(np.abs(dw_p)))
-        new, hold = lim - 2 * t_max, held - t_max          # room at each level, per output
+        # the estimate's error at the horizon (ellipsoid's norm) and in dw_eq: the
+        # noise's part (err_*) comes off both levels' radii; the loads' part, per pu
+        # of total variation before the certification (g_t, g_eq), moves each output
+        # by at most g_eq + g_t sigma_o after the horizon, which shares load_bound
+        # with the loads after it (g_o): the new level's room takes the larger
+        err_t, err_eq, g_t, g_eq = 0.0, 0.0, 0.0, 0.0
+        if cov is not None:
+            m = K.T @ Eh @ np.hstack([np.eye(n_r), -ql])
+            err_t = kappa_e * math.sqrt(np.max(np.linalg.eigvalsh(m @ cov @ m.T)))
+            err_eq = kappa_e * math.sqrt(dw_p @ cov[n_r:, n_r:] @ dw_p)
+            g_t = 1.01 * float(np.max(np.linalg.norm(steps @ m.T, axis=1)))
+            g_eq = 1.01 * float(np.max(np.abs(steps[:, n_r:] @ dw_p)))
+        after = np.tile([g_eq, 0.0], n_a) + g_t * sigma         # per output, per pu
+        new = limits - o.load_bound * np.maximum(load, after) - 2 * t_max
+        hold = held - t_max                                # room at each level, per output
         free = hold[0::2] - spent * kappa * sigma[0::2] - drift   # the held level's, after it
         r = float(min(np.min(0.5 * new[0::2] / sigma[0::2]), np.min(new[1::2] / sigma[1::2]),
                       np.min(hold[1::2] / sigma[1::2]) - spent * kappa,
@@ -297,20 +425,80 @@ class CoupledSet:
                    f"absorption, as on a lightly damped grid)" if spent > 0 else "")
             raise ValueError(f"the tightenings leave no room for the terminal set: "
                              f"{self._describe()}; lower load_bound or tightening{why}")
-        rho = {"new": r, "held": r + spent * kappa}
-        half = {"new": h, "held": h + drift}
+        rho = {"new": r - err_t, "held": r + spent * kappa - err_t}
+        half = {"new": h - err_eq, "held": h + drift - err_eq}
+        if rho["new"] <= 0 or half["new"] <= 0:
+            raise ValueError(f"the estimate's error moves the state at the horizon by "
+                             f"{err_t:.3g} in the terminal set's norm (radius {r:.3g}) and the "
+                             f"equilibrium frequency by {err_eq:.3g} pu (room {h:.3g}); lower "
+                             f"noise_std or confidence, or raise horizon")
+        lift = np.ascontiguousarray(R.T)            # x = R' z: the full state of a reduced one
         head = np.zeros(HEAD)
         head[:] = (len(R.T), n_a, n_r, n_rows, o.u_min, o.u_max, relays.F, relays.rocof_limit,
-                   rho["new"], rho["held"], half["new"], half["held"], y0_new[0], y0_new[1],
-                   y0_held[0], y0_held[1])
+                   rho["new"], rho["held"], half["new"], half["held"], np.min(y0_new[0::2]),
+                   np.min(y0_new[1::2]), np.min(y0_held[0::2]), np.min(y0_held[1::2]),
+                   0 if cov is None else len(cov), 0)
         self.rows, self.n_rows = rows, n_rows
-        self.data = np.concatenate([head, rows.ravel(), dw_u, dw_p, (K.T @ Eh @ R).ravel(),
-                                    (-K.T @ Eh @ qu).ravel(), (-K.T @ Eh @ ql).ravel()])
+        body = [head, rows.ravel(), dw_u, dw_p, (K.T @ Eh @ R).ravel(),
+                (-K.T @ Eh @ qu).ravel(), (-K.T @ Eh @ ql).ravel()]
+        head[LIFT] = sum(len(b) for b in body)
+        self.data = np.concatenate(body + [lift.ravel()])
         self.A, self.Bu, self.Bl, self.R, self.C = A, Bu, Bl, R, C
         self.W = R[N_AREA_STATES * n_a:, N_AREA_STATES * n_a:].T   # the reachable flows' basis
 
     def _describe(self) -> str:
         return ", ".join(f"{name} {v}" for name, v in self.budget.items())
+
+
+def _load_error_steps(kalman: GridKalman, A: np.ndarray, Bl: np.ndarray, period: float,
+                      offsets: int = 11, tol: float = 1e-6) -> np.ndarray:
+    """The grid Kalman filter's error (reduced states, then loads) at every
+    control sample after a unit load step in any area at any instant: rows
+    ``e(m; d, j)`` for ages ``m >= 1`` samples, ``offsets`` instants ``d`` in the
+    period before the first (its ends included) and every area ``j``, until the
+    error has decayed below ``tol`` of its largest.
+
+    The true grid moves exactly as the filter's model except at the load's step:
+    a step of area ``j``'s load at ``d`` s into a period adds
+    ``int_0^{T-d} e^{As} ds Bl_j`` to the state at the next sample and 1 to the
+    load, so the prior error jumps by that; then each sample multiplies the error
+    by ``(I - K C)`` (correction) and ``A`` (prediction).  The error is linear in
+    the load path (and independent of every command and attack), so a load path
+    of total variation ``V`` moves any linear function ``w e`` of the error by at
+    most ``V sup |w e(m; d, j)|`` (1 % is added for the instants between the
+    offsets by the callers)."""
+    n_r, n_a = len(A), Bl.shape[1]
+    n_k = n_r + n_a
+    ikc = np.eye(n_k) - kalman.gain @ kalman.C
+    phi = ikc @ kalman.A
+    jumps = []
+    for d in np.linspace(0.0, period, offsets):
+        block = np.zeros((n_r + n_a, n_r + n_a))
+        block[:n_r, :n_r], block[:n_r, n_r:] = A, Bl
+        integral = expm(block * (period - d))[:n_r, n_r:]           # int_0^{T-d} e^{As} ds Bl
+        jumps.append(np.vstack([integral, np.eye(n_a)]))            # (n_k, n_a)
+    e = ikc @ np.hstack(jumps)                                       # (n_k, offsets * n_a)
+    out, peak = [], 0.0
+    for _ in range(100_000):
+        out.append(e.T)
+        size = float(np.max(np.abs(e)))
+        peak = max(peak, size)
+        if size < tol * peak:
+            break
+        e = phi @ e
+    else:
+        raise ValueError("the grid Kalman filter's error does not decay")
+    return np.vstack(out)
+
+
+def _sup_abs(w: np.ndarray, steps: np.ndarray, chunk: int = 4096) -> np.ndarray:
+    """``max_s |w @ steps[s]|`` over the rows of ``steps``, for each row of ``w``
+    (shape ``(..., n_k)``), a block of ``steps`` at a time (the whole product
+    can take gigabytes)."""
+    out = np.zeros(w.shape[:-1])
+    for i in range(0, len(steps), chunk):
+        np.maximum(out, np.max(np.abs(w @ steps[i:i + chunk].T), axis=-1), out=out)
+    return out
 
 
 def _by_kind(per_output: np.ndarray) -> str:
@@ -433,6 +621,28 @@ def _intervals(fd: np.ndarray, x: np.ndarray, u: np.ndarray, p: np.ndarray, k: i
 
 
 @inline
+def grid_estimate(fd: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray,
+                  gain: np.ndarray, ks: np.ndarray, y: np.ndarray, scratch: np.ndarray,
+                  u: np.ndarray, predict: bool, xe: np.ndarray) -> np.ndarray:
+    """One step of the grid Kalman filter (:class:`GridKalman`, matrices ``A, B,
+    C, gain``, state ``ks``: prior, then posterior) at a control sample: predict
+    from the last posterior with the commands ``u`` held over the period (if
+    ``predict``), correct with the measurements ``y``; writes the full state of
+    the estimate into ``xe`` (every area's five states, then the line flows) and
+    returns the loads' estimate (a view).  ``scratch`` holds ``len(y)`` values."""
+    if predict:
+        kf_predict(A, B, ks, u)
+    kf_correct(gain, C, ks, y, scratch)
+    n_s, n_r, n_a, o = int(fd[N_S]), int(fd[N_R]), int(fd[N_A]), int(fd[LIFT])
+    for i in range(n_s):
+        acc = 0.0
+        for c in range(n_r):
+            acc += fd[o + i * n_r + c] * ks[1, c]
+        xe[i] = acc
+    return ks[1, n_r:n_r + n_a]
+
+
+@inline
 def decide(fd: np.ndarray, x: np.ndarray, u: np.ndarray, p: np.ndarray, k: int,
            u_ref: float, mem: np.ndarray) -> tuple:
     """Area ``k``'s call (module docstring): the grid's state ``x`` (every area's
@@ -497,7 +707,7 @@ class CoupledFilter:
         self.params, self.relays = params, relays
         self.options = CoupledOptions(**options)
         self.cert = CoupledSet(params, relays, self.options)
-        self.data = self.cert.data
+        self.data, self.kalman = self.cert.data, self.cert.kalman
 
     def __repr__(self) -> str:
         opts = ", ".join(f"{k}={v!r}" for k, v in vars(self.options).items())
