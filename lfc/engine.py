@@ -69,6 +69,20 @@ def _signal(channel: int, kinds: np.ndarray, params: np.ndarray, offsets: np.nda
 
 
 @inline
+def agc_step(gstate: np.ndarray, k_i_period: float, wref: float, y0: float,
+             k_tie_period: float, tie: float, anti_windup: bool, u_ref: float,
+             u: float) -> None:
+    """The AGC (or local) integrator over one control period: ``gstate[0] +=
+    k_i_period (wref - y0) - k_tie_period tie`` (pu), unless ``anti_windup`` and
+    the increment would widen the gap between the incoming command ``u_ref`` and
+    the applied ``u`` (conditional integration).  The generator side calls it;
+    so does a control centre across a network (:mod:`lfc.wire`)."""
+    increment = k_i_period * (wref - y0) - k_tie_period * tie
+    if not (anti_windup and increment * (u_ref - u) > 0.0):
+        gstate[0] += increment
+
+
+@inline
 def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise0: float,
                      noise1: float,
                      kinds: np.ndarray, params: np.ndarray, offsets: np.ndarray,
@@ -134,9 +148,7 @@ def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise0: flo
     else:
         u, flags, h0, h1, m0, m1, q0, q1, d0, d1 = u_ref, 0, nan, nan, nan, nan, nan, nan, \
             nan, nan
-    increment = k_i_period * (wref - y0) - k_tie_period * tie
-    if not (anti_windup and increment * (u_ref - u) > 0.0):
-        gstate[0] += increment
+    agc_step(gstate, k_i_period, wref, y0, k_tie_period, tie, anti_windup, u_ref, u)
     if est >= 0 and method != COUPLED:
         kf_predict(ka, kb, kstate, (u,))
     if ctrl.shape[0]:
@@ -783,13 +795,17 @@ class GeneratorSide:
     k_agc : (float, float), optional
         The AGC's gains on frequency and on tie-line export (1/s,
         :meth:`lfc.MultiAreaParams.agc_gains`); default ``(design.k_i, 0)``, the
-        local integral controller of one area.
+        local integral controller of one area; ``(0, 0)`` where the integrator
+        runs elsewhere (a control centre across a network).
+    network : bool
+        The command channels arrive by :meth:`receive` each period (:mod:`lfc.wire`).
     """
 
     def __init__(self, design: LFCParams, scc: SafetyFilter | None, estimator,
                  noise_std: tuple[float, float], seed: int, tc: np.ndarray, pc_attack,
                  wref_attack, load_feedforward: bool, period: float, *, ace_attack=None,
-                 k_agc: tuple[float, float] | None = None, anti_windup: bool = False) -> None:
+                 k_agc: tuple[float, float] | None = None, anti_windup: bool = False,
+                 network: bool = False) -> None:
         if isinstance(scc, CoupledFilter) and (estimator is not None or scc.kalman is not None):
             raise ValueError(f"estimator={estimator!r}: on a testbed the coupled filter reads "
                              f"the grid's metered state (a wide-area measurement); give "
@@ -805,7 +821,14 @@ class GeneratorSide:
         n = int(kdim[0, 0]) if kf else 0
         self.ka, self.kb = self.ka[0, :n, :n].copy(), self.kb[0, :n, :1].copy()
         self.kc, self.kg = self.kc[0, :2, :n].copy(), self.kg[0, :n, :2].copy()
-        self.signals = scenario_signals(pc_attack, wref_attack, None, tc, tc, ace_attack)
+        if network and (pc_attack is not None or wref_attack is not None
+                        or ace_attack is not None):
+            raise ValueError("network=True: the command channels arrive by receive(); give "
+                             "no pc_attack, wref_attack or ace_attack")
+        zero = (lambda t: np.zeros_like(t)) if network else None
+        self.network = network
+        self.signals = scenario_signals(pc_attack or zero, wref_attack or zero, None, tc, tc,
+                                        ace_attack or zero)
         k_freq, k_tie = (design.k_i, 0.0) if k_agc is None else k_agc
         self.k_i_period, self.k_tie_period = k_freq * period, k_tie * period
         self.feedforward = load_feedforward
@@ -817,6 +840,17 @@ class GeneratorSide:
         self.x_hat = np.zeros(5)
         self.ctrl = np.full((len(tc), N_CTRL), np.nan)
         self.n_done = 0
+
+    def receive(self, j: int, pc: float, wref: float = 0.0, ace: float = 0.0) -> None:
+        """Control sample ``j``'s command channels as they arrived over a network
+        (:mod:`lfc.wire`; built with ``network=True``): the command ``pc`` added to
+        the integrator's output, the reference ``wref`` and the ACE term ``ace``
+        (pu), in place of ``pc_attack``, ``wref_attack`` and ``ace_attack``."""
+        if not self.network:
+            raise ValueError("receive() needs a generator side built with network=True")
+        _, _, offsets, _, sv = self.signals
+        for channel, value in ((PC, pc), (WREF, wref), (ACE, ace)):
+            sv[offsets[channel, 0] + j] = value
 
     def step(self, j: int, x: np.ndarray, p_load: float, tie: float = 0.0,
              grid: tuple | None = None) -> float:

@@ -102,6 +102,21 @@ def _parser() -> argparse.ArgumentParser:
                     help=f"a subset of {list(runner.FIGURES)}")
     bk.add_argument("--figures-dir", type=_folder, default=runner.ROOT / "figures")
     bk.add_argument("--build-dir", type=_folder, default=runner.ROOT / "build")
+    wr = sub.add_parser(
+        "wire", help="one run over Modbus/TCP on loopback: control centre, man in the "
+        "middle, generator", formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="example: Fig. 4's attack injected in the frames, with and without the\n"
+               "paper's filter, and the traffic as a capture Wireshark decodes\n"
+               "  python -m lfc wire --attack fig4 --filter none paper --pcap build/fig4.pcap\n"
+               "attacks: a name (fig4, fig4-weak, fig5, delay-2, drop, none) or a JSON file\n"
+               "holding a list of operations (lfc.wire.attacks).")
+    wr.add_argument("--protocol", choices=("modbus",), default="modbus")
+    wr.add_argument("--attack", default="fig4",
+                    help="a name of lfc.wire.attacks.ATTACKS or a JSON file (default fig4)")
+    wr.add_argument("--filter", nargs="+", choices=("none", "paper", "certified"),
+                    default=["none", "paper"], help="one run per filter (paper: alpha = 20)")
+    wr.add_argument("--duration", type=float, default=10.0, help="simulated time (s)")
+    wr.add_argument("--pcap", type=Path, help="write the last run's traffic here")
     rd = sub.add_parser("readme", help="copy figures/<name>.md into the README's "
                         "<!-- name:start --> sections (reproduce never edits the README)")
     rd.add_argument("--check", action="store_true",
@@ -137,6 +152,43 @@ def _batch(args) -> int:
     table.to_csv(args.out / "results.csv", index=False)
     print(f"{len(table)} scenarios, {int(table.tripped.sum())} tripped -> "
           f"{args.out / 'results.csv'}")
+    return 0
+
+
+def _wire(args) -> int:
+    import json
+
+    import pandas as pd
+
+    from lfc.filters import SafetyFilter
+    from lfc.model import LFCParams
+    from lfc.relays import RelaySettings
+    from lfc.wire import ATTACKS, run_wire
+    from lfc.wire.capture import write_pcap
+    attack = args.attack
+    if attack not in ATTACKS:
+        path = Path(attack)
+        if not path.is_file():
+            raise ValueError(f"--attack must be one of {sorted(ATTACKS)} or a JSON file, got "
+                             f"{attack!r}")
+        try:
+            attack = json.loads(path.read_text())
+        except json.JSONDecodeError as err:
+            raise ValueError(f"cannot read the attack {path}: {err}") from err
+    params, relays = LFCParams(), RelaySettings()
+    filters = {"none": None, "paper": lambda: SafetyFilter(params, relays, alpha=20.0),
+               "certified": lambda: SafetyFilter(params, relays, method="certified")}
+    rows, run = [], None
+    for name in args.filter:
+        scc = filters[name]() if filters[name] else None
+        run = run_wire(params, duration=args.duration, attack=attack, scc=scc,
+                       protocol=args.protocol)
+        rows.append(run.table())
+    print(pd.concat(rows, ignore_index=True).to_string(index=False))
+    if args.pcap:
+        args.pcap.parent.mkdir(parents=True, exist_ok=True)
+        write_pcap(run.frames, args.pcap)
+        print(f"capture of the last run ({len(run.frames)} frames): {args.pcap}")
     return 0
 
 
@@ -192,6 +244,8 @@ def main(argv: list[str] | None = None) -> int:
             return _batch(args)
         if args.command == "readme":
             return _readme(args.check)
+        if args.command == "wire":
+            return _wire(args)
         if args.command == "book":
             from lfc.repro.book import build_book
             index = build_book(args.only, args.build_dir, args.figures_dir)

@@ -1,0 +1,159 @@
+"""Attacks on the wire: what the man in the middle does to each frame, as data.
+
+An attack is a list of operations (dicts, so a YAML or JSON file, or a red-team
+winner, is one), applied in order to every period's values.  Each names a
+``field``: a command field the control centre writes (``pc``, ``wref``,
+``ace``; :mod:`lfc.wire.registers`) or a report field it reads back
+(``dw_meas``, ``rocof_meas``, ``u_ref``, ``u``: the operator's view, and what the
+AGC integrates).  ``start`` and ``stop`` (s) bound every operation (default: the
+whole run).
+
+========  =========================================  ================================
+``op``    keys                                       effect on ``field`` in the window
+========  =========================================  ================================
+add       ``signal``: ``{"kind": "sinusoid" |        ``+= signal(t)`` (an attack of
+          "square" | "step" | "ramp" | "chirp",      :mod:`lfc.signals`, its own
+          ...its parameters}``                       window inside ``signal``)
+scale     ``factor``                                 ``*= factor``
+bias      ``value`` (pu)                             ``+= value``
+delay     ``periods`` (>= 1)                         the value sent ``periods`` earlier
+replay    ``record`` (s, < ``start``)                the value sent at ``record + (t -
+                                                     start)``: a recorded window replayed
+drop      (command fields only; ``field`` omitted)   the frame is not forwarded: the
+                                                     generator holds its last command
+                                                     and flags the link
+========  =========================================  ================================
+
+The paper's attacks on the wire: Fig. 4's sinusoid on the command is ``add`` on
+``pc``; Fig. 5's bias on the frequency reference is, across a network whose AGC
+runs at the control centre, a bias of the opposite sign on the frequency it is
+told (``add`` on ``dw_meas``): the AGC integrates ``wref - dw_meas`` either way,
+bit for bit (:data:`ATTACKS`).
+"""
+
+from __future__ import annotations
+
+import math
+
+from lfc import signals
+from lfc.wire.registers import COMMAND, REPORT
+
+OPS = ("add", "scale", "bias", "delay", "replay", "drop")
+SIGNALS = {"sinusoid": signals.Sinusoid, "square": signals.Square, "step": signals.Step,
+           "ramp": signals.Ramp, "chirp": signals.Chirp}
+ATTACKS = {
+    "none": [],
+    "fig4": [{"op": "add", "field": "pc",
+              "signal": {"kind": "sinusoid", "amplitude": 0.5, "freq_hz": 1.0, "start": 1.0}}],
+    "fig4-weak": [{"op": "add", "field": "pc",
+                   "signal": {"kind": "sinusoid", "amplitude": 0.1, "freq_hz": 1.0,
+                              "start": 1.0}}],
+    "fig5": [{"op": "add", "field": "dw_meas",
+              "signal": {"kind": "step", "value": -0.04, "start": 1.0}}],
+    "delay-2": [{"op": "delay", "field": "pc", "periods": 2, "start": 1.0}],
+    "drop": [{"op": "drop", "start": 1.0, "stop": 1.5}],
+}
+
+
+def signal_from_spec(spec: dict) -> signals.Signal:
+    """The :mod:`lfc.signals` attack a dict describes (``{"kind": ..., params}``)."""
+    if not isinstance(spec, dict) or spec.get("kind") not in SIGNALS:
+        raise ValueError(f"signal must be a dict with kind among {sorted(SIGNALS)}, got "
+                         f"{spec!r}")
+    params = {k: v for k, v in spec.items() if k != "kind"}
+    try:
+        return SIGNALS[spec["kind"]](**params)
+    except TypeError as err:
+        raise ValueError(f"signal {spec!r}: {err}") from err
+
+
+class WireAttack:
+    """A man in the middle's policy (module docstring), checked at construction.
+
+    Parameters
+    ----------
+    spec : list of dict or str
+        The operations, or the name of one of :data:`ATTACKS`.
+    """
+
+    def __init__(self, spec: list[dict] | str) -> None:
+        if isinstance(spec, str):
+            if spec not in ATTACKS:
+                raise ValueError(f"attack must be a list of operations or one of "
+                                 f"{sorted(ATTACKS)}, got {spec!r}")
+            spec = ATTACKS[spec]
+        if not isinstance(spec, list):
+            raise ValueError(f"attack must be a list of operations (dicts), got {spec!r}")
+        self.spec, self.ops = spec, [self._check(k, op) for k, op in enumerate(spec)]
+        self.sent: list[dict[str, float]] = []      # every period's command as sent
+
+    def __repr__(self) -> str:
+        return f"WireAttack({self.spec!r})"
+
+    @staticmethod
+    def _check(k: int, op: object) -> dict:
+        if not isinstance(op, dict) or op.get("op") not in OPS:
+            raise ValueError(f"attack[{k}] must be a dict with op among {OPS}, got {op!r}")
+        kind, field = op["op"], op.get("field")
+        fields = COMMAND if kind in ("delay", "replay") else COMMAND + REPORT
+        if kind == "drop":
+            if field is not None:
+                raise ValueError(f"attack[{k}]: drop takes no field (the whole frame)")
+        elif field not in fields:
+            raise ValueError(f"attack[{k}].field must be one of {fields} for {kind}, got "
+                             f"{field!r}")
+        out = dict(op, start=float(op.get("start", 0.0)), stop=float(op.get("stop", math.inf)))
+        if not out["stop"] > out["start"] >= 0.0:
+            raise ValueError(f"attack[{k}]: need 0 <= start < stop, got {op!r}")
+        if kind == "add":
+            out["signal"] = signal_from_spec(op.get("signal"))
+        elif kind in ("scale", "bias"):
+            key = "factor" if kind == "scale" else "value"
+            if not isinstance(op.get(key), (int, float)) or not math.isfinite(op[key]):
+                raise ValueError(f"attack[{k}].{key} must be a finite number, got "
+                                 f"{op.get(key)!r}")
+        elif kind == "delay":
+            if not isinstance(op.get("periods"), int) or op["periods"] < 1:
+                raise ValueError(f"attack[{k}].periods must be an int >= 1, got "
+                                 f"{op.get('periods')!r}")
+        elif kind == "replay":
+            if not 0.0 <= float(op.get("record", -1.0)) < out["start"]:
+                raise ValueError(f"attack[{k}].record must lie in [0, start), got "
+                                 f"{op.get('record')!r}")
+        return out
+
+    def command(self, j: int, t: float, period: float,
+                values: dict[str, float]) -> dict[str, float] | None:
+        """Period ``j``'s command (time ``t``, s) as forwarded, or None (dropped)."""
+        self.sent.append(dict(values))
+        out = dict(values)
+        for op in self.ops:
+            if not op["start"] <= t < op["stop"]:
+                continue
+            if op["op"] == "drop":
+                return None
+            if op["field"] in COMMAND:
+                out[op["field"]] = self._apply(op, j, t, period, out[op["field"]])
+        return out
+
+    def report(self, j: int, t: float, period: float,
+               values: dict[str, float]) -> dict[str, float]:
+        """Period ``j``'s report (time ``t``, s) as the control centre reads it."""
+        out = dict(values)
+        for op in self.ops:
+            if op["start"] <= t < op["stop"] and op.get("field") in REPORT:
+                out[op["field"]] = self._apply(op, j, t, period, out[op["field"]])
+        return out
+
+    def _apply(self, op: dict, j: int, t: float, period: float, value: float) -> float:
+        kind = op["op"]
+        if kind == "add":
+            return value + float(op["signal"](t))
+        if kind == "scale":
+            return value * op["factor"]
+        if kind == "bias":
+            return value + op["value"]
+        if kind == "delay":
+            return self.sent[max(j - op["periods"], 0)][op["field"]]
+        back = int(round((op["start"] - op["record"]) / period))     # replay
+        return self.sent[max(j - back, 0)][op["field"]]

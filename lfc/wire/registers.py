@@ -1,0 +1,77 @@
+"""The register map of the generator outstation, and how numbers travel in it.
+
+Modbus/TCP carries 16-bit registers.  Every quantity is an IEEE 754 binary64
+(float64) in four consecutive registers, most significant word first (each
+word big-endian, as Modbus sends every register): a pu value crosses the wire
+bit for bit, which is what lets a run over the wire equal ``lfc.simulate``.
+The period counter and the bit fields are one register each.
+
+=========  ====  ========  ======  =====================================================
+block      addr  count     type    meaning
+=========  ====  ========  ======  =====================================================
+holding    0     4         f64     ``pc``: the governor command channel (pu), added to
+                                   the local integrator's output (``pc_attack`` in
+                                   ``lfc.simulate``; the control centre sends 0)
+holding    4     4         f64     ``wref``: the frequency reference (pu) the local
+                                   integrator tracks (``wref_attack``; sent 0)
+holding    8     4         f64     ``ace``: added to the tie-line export the AGC reads
+                                   (pu; ``ace_attack``; sent 0; one area: unused)
+holding    12    1         u16     ``seq``: the control period's index, modulo 65536
+input      0     1         u16     ``seq``: the period the report belongs to
+input      1     4         f64     ``dw_meas``: measured frequency deviation (pu)
+input      5     4         f64     ``rocof_meas``: measured ROCOF (pu/s)
+input      9     4         f64     ``u_ref``: the command the filter received (pu)
+input      13    4         f64     ``u``: the command applied (pu)
+input      17    1         u16     ``flags``: the filter's flag bits (lfc.filters.base)
+input      18    1         u16     ``trips``: relays tripped in the period (bit 0 OF2,
+                                   1 UF2, 2 ROCOF)
+input      19    1         u16     ``link``: 1 if no command arrived for the period
+                                   (the generator held the last one)
+=========  ====  ========  ======  =====================================================
+"""
+
+from __future__ import annotations
+
+import struct
+
+COMMAND = ("pc", "wref", "ace")        # holding registers, four each from 0
+SEQ = 12                               # holding register of the period counter
+N_COMMAND = 13                         # registers written each period (FC16 at 0)
+REPORT = ("dw_meas", "rocof_meas", "u_ref", "u")   # input registers, four each from 1
+FLAGS, TRIPS, LINK = 17, 18, 19
+N_REPORT = 20                          # registers read each period (FC4 at 0)
+
+
+def encode(values: list[float]) -> list[int]:
+    """Each float as four 16-bit registers (binary64, most significant word first)."""
+    return list(struct.unpack(f">{4 * len(values)}H", struct.pack(f">{len(values)}d", *values)))
+
+
+def decode(registers: list[int]) -> list[float]:
+    """The floats of :func:`encode`'s registers (a multiple of four)."""
+    n = len(registers) // 4
+    return list(struct.unpack(f">{n}d", struct.pack(f">{4 * n}H", *registers[:4 * n])))
+
+
+def command_registers(values: dict[str, float], seq: int) -> list[int]:
+    """The 13 holding registers of one period's command."""
+    return encode([values[c] for c in COMMAND]) + [seq % 65536]
+
+
+def read_command(registers: list[int]) -> tuple[dict[str, float], int]:
+    """``(values, seq)`` of :func:`command_registers`'s registers."""
+    return dict(zip(COMMAND, decode(registers[:SEQ]))), registers[SEQ]
+
+
+def report_registers(seq: int, values: dict[str, float], flags: int, trips: int,
+                     link: int) -> list[int]:
+    """The 20 input registers of one period's report."""
+    return [seq % 65536] + encode([values[c] for c in REPORT]) + [flags & 0xFFFF, trips, link]
+
+
+def read_report(registers: list[int]) -> dict:
+    """The fields of :func:`report_registers`'s registers."""
+    out = dict(zip(REPORT, decode(registers[1:FLAGS])))
+    out.update(seq=registers[0], flags=registers[FLAGS], trips=registers[TRIPS],
+               link=registers[LINK])
+    return out

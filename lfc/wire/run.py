@@ -1,0 +1,238 @@
+"""One run over the wire, in lockstep: control centre, man in the middle and
+generator exchanging Modbus/TCP frames on loopback, one command per control
+period.
+
+Who does what (the paper's setting, section II: the control centre's SCADA
+runs the AGC; the command travels over an insecure network; the filter sits at
+the generator):
+
+* the **control centre** runs the AGC integrator (:func:`lfc.engine.agc_step`,
+  the engine's own code) on the frequency the generator reports, writes the
+  command every period, reads the report back and keeps the operator's alarm
+  log;
+* the **man in the middle** (:class:`lfc.wire.modbus.Relay`) forwards every
+  frame and applies the attack (:class:`lfc.wire.attacks.WireAttack`);
+* the **generator** receives the command, runs its safety filter in the
+  engine's generator side (:class:`lfc.engine.GeneratorSide`, ``network=True``:
+  the same compiled code as :func:`lfc.simulate`), holds the command on the
+  plant for one control period, watches its relays and publishes its report.
+
+*Lockstep*: the plant advances one control period per exchanged command, so a
+run over the wire reproduces :func:`lfc.simulate` of the same attack (the
+command channel's sum, the reference's difference, the integrator's update and
+the plant's step are the same operations; ``tests/test_wire.py`` checks 1e-9
+pu).  The measured time of every exchange (write and read, round trip through
+the relay) is in the result.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from lfc.engine import CTRL_COLUMNS, GeneratorSide, agc_step, sample_signal
+from lfc.filters.base import ACTIVE, ALARM_BITS, binding_names
+from lfc.model import STATES, LFCParams
+from lfc.multiarea import as_grid, discretize_grid
+from lfc.relays import RELAY_NAMES, relay_sample, relays_or_default
+from lfc.simulate import SimResult, check_timing, result
+from lfc.filters import SafetyFilter
+from lfc.wire.attacks import WireAttack
+from lfc.wire.registers import (command_registers, read_command, read_report,
+                                report_registers)
+
+PROTOCOLS = ("modbus",)
+
+
+@dataclass
+class WireResult:
+    """Outcome of a run over the wire.
+
+    Attributes
+    ----------
+    sim : SimResult
+        The generator's side as :func:`lfc.simulate` reports it (trace, controls,
+        trips, the filter's alarms).
+    exchanges : DataFrame
+        One row per control period: ``t`` (s), ``sent`` (the command the centre
+        wrote, pu), ``received`` (what the generator got, pu), ``applied`` (pu),
+        ``link`` (1: no command arrived, the last one was held),
+        ``write_ms`` and ``read_ms`` (round trips through the relay, wall clock).
+    alarm_log : DataFrame
+        The operator's view, one row per period whose report carries an alarm:
+        ``t``, ``sent``, ``reported_received``, ``reported_applied``,
+        ``binding`` (the filter's binding constraints), ``link``.
+    frames : list of (float, str, bytes)
+        Every Modbus/TCP frame on both legs (:attr:`lfc.wire.modbus.Relay.log`).
+    settings : dict
+    """
+
+    sim: SimResult
+    exchanges: pd.DataFrame
+    alarm_log: pd.DataFrame
+    frames: list
+    settings: dict
+
+    @property
+    def tripped(self) -> bool:
+        return not self.sim.trips.empty
+
+    def table(self) -> pd.DataFrame:
+        """The outcome in one row: trips, alarms, largest |Δω| and ROCOF, the
+        exchanges' median and 99th-percentile round trips (ms)."""
+        tr, ex = self.sim.trace, self.exchanges
+        return pd.DataFrame([{
+            "protocol": self.settings["protocol"], "attack": self.settings["attack_name"],
+            "filter": self.settings["filter"], "tripped": self.tripped,
+            "first_trip": ("" if self.sim.trips.empty else
+                           f"{self.sim.trips.relay.iat[0]} at {self.sim.trips.t.iat[0]:.2f} s"),
+            "alarms": len(self.alarm_log), "link_lost": int(ex.link.sum()),
+            "max |dw| (pu)": float(tr.dw_meas.abs().max()),
+            "max |rocof| (pu/s)": float(tr.rocof_meas.abs().max()),
+            "write median (ms)": float(ex.write_ms.median()),
+            "read median (ms)": float(ex.read_ms.median()),
+            "write p99 (ms)": float(ex.write_ms.quantile(0.99))}])
+
+
+def run_wire(params: LFCParams, *, duration: float, attack: list | str = "none",
+             scc: SafetyFilter | None = None, protocol: str = "modbus", load=None,
+             noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0, dt: float = 0.001,
+             control_period: float = 0.01, relays=None,
+             anti_windup: bool = False) -> WireResult:
+    """Run one area over the wire in lockstep (module docstring).
+
+    Parameters
+    ----------
+    params : LFCParams
+        The area (plant and design model).
+    duration : float
+        Simulated time (s).
+    attack : list of dict or str
+        The man in the middle's operations, or a name of
+        :data:`lfc.wire.attacks.ATTACKS` (``"fig4"``, ``"fig5"``, ...).
+    scc : SafetyFilter or None
+        The generator's filter.
+    protocol : str
+        ``"modbus"`` (Modbus/TCP).
+    load, noise_std, seed, dt, control_period, relays, anti_windup
+        As in :func:`lfc.simulate` (``anti_windup``: the control centre's AGC
+        does not integrate while the generator's filter holds against it).
+
+    Returns
+    -------
+    WireResult
+    """
+    if not isinstance(params, LFCParams):
+        raise ValueError(f"params must be an LFCParams (one area), got {type(params).__name__}")
+    if protocol not in PROTOCOLS:
+        raise ValueError(f"protocol must be one of {PROTOCOLS}, got {protocol!r}")
+    ratio = check_timing(duration, dt, control_period)
+    relays = relays_or_default(relays)
+    name = attack if isinstance(attack, str) else "custom"
+    policy = WireAttack(attack)
+    n_steps = int(round(duration / dt))
+    n_ctrl = -(-n_steps // ratio)
+    period = ratio * dt
+    t = np.arange(n_steps + 1) * dt
+    tc = np.arange(n_ctrl) * period
+    gen = GeneratorSide(params, scc, None, noise_std, seed, tc, None, None, False, period,
+                        k_agc=(0.0, 0.0), network=True)
+    A, Bu, Bl = discretize_grid(as_grid(params), dt)
+    p = sample_signal(load, t, "load")
+    limits, delays = relays.arrays()
+    start, due = np.full(3, np.nan), np.zeros(3)
+    relay_sample(0.0, 0.0, 0.0, limits, delays, start, due)
+
+    from lfc.wire.modbus import Centre, EventLoop, Outstation, Relay
+    loop = EventLoop()
+    outstation = Outstation()
+    clock = {"j": -1}
+
+    def on_command(registers):
+        clock["j"] += 1
+        j = clock["j"]
+        values, seq = read_command(registers)
+        out = policy.command(j, (j * ratio) * dt, period, values)
+        return None if out is None else command_registers(out, seq)
+
+    def on_report(registers):
+        j = clock["j"]
+        rep = read_report(registers)
+        out = policy.report(j, (j * ratio) * dt, period, rep)
+        return report_registers(rep["seq"], out, rep["flags"], rep["trips"], rep["link"])
+
+    try:
+        port = loop.run(outstation.start())
+        relay = Relay(port, on_command, on_report)
+        centre = Centre(loop.run(relay.start()))
+        x = np.zeros(5)
+        xs = np.zeros((n_steps + 1, 5))
+        trips = np.zeros(n_steps + 1, np.int64)
+        g = np.zeros(1)                     # the control centre's AGC integrator (pu)
+        last = {"pc": 0.0, "wref": 0.0, "ace": 0.0}
+        rows, log = [], []
+        u_col, flag_col = CTRL_COLUMNS.index("u_ref"), CTRL_COLUMNS.index("flags")
+        for j in range(n_ctrl):
+            k0 = j * ratio
+            sent = g[0]
+            t0 = _now()
+            centre.send(command_registers({"pc": sent, "wref": 0.0, "ace": 0.0}, j))
+            write_ms = 1e3 * (_now() - t0)
+            got = outstation.take()
+            link = 1
+            if got is not None:
+                values, seq = read_command(got[0])
+                if seq == j % 65536:
+                    last, link = values, 0
+            gen.receive(j, last["pc"], last["wref"], last["ace"])
+            y0, y1 = x[3] + gen.noise[j, 0], x[4] + gen.noise[j, 1]
+            u = gen.step(j, x, float(p[k0]))
+            flags, u_ref = int(gen.ctrl[j, flag_col]), float(gen.ctrl[j, u_col])
+            bits = 0
+            for k in range(k0, min(k0 + ratio, n_steps)):
+                x = A @ x + Bu[:, 0] * u + Bl[:, 0] * p[k]
+                xs[k + 1] = x
+                trips[k + 1] = relay_sample((k + 1) * dt, x[3], x[4], limits, delays, start,
+                                            due)
+                bits |= int(trips[k + 1])
+            outstation.publish(report_registers(j, {"dw_meas": y0, "rocof_meas": y1,
+                                                    "u_ref": u_ref, "u": u}, flags, bits, link))
+            t0 = _now()
+            rep = read_report(centre.poll())
+            read_ms = 1e3 * (_now() - t0)
+            agc_step(g, params.k_i * period, 0.0, rep["dw_meas"], 0.0, 0.0, anti_windup,
+                     rep["u_ref"], rep["u"])
+            rows.append((tc[j], sent, last["pc"], u, link, write_ms, read_ms))
+            if rep["flags"] & ALARM_BITS or rep["link"]:
+                log.append((tc[j], sent, rep["u_ref"], rep["u"],
+                            ";".join(binding_names(rep["flags"]))
+                            if rep["flags"] & ACTIVE else "", rep["link"]))
+        centre.close()
+        loop.run(relay.stop())
+        loop.run(outstation.stop())
+    finally:
+        loop.close()
+    trace = pd.DataFrame({"t": t})
+    for i, state in enumerate(STATES):
+        trace[state] = xs[:, i]
+    trace["p_load"] = p
+    trip_rows = pd.DataFrame([(RELAY_NAMES[r], float(t[k])) for k in np.flatnonzero(trips)
+                              for r in range(3) if trips[k] >> r & 1], columns=["relay", "t"])
+    settings = {"params": vars(params), "relays": vars(relays), "duration": duration, "dt": dt,
+                "control_period": control_period, "seed": seed, "noise_std": list(noise_std),
+                "scc": repr(scc), "protocol": protocol, "attack": repr(policy.spec),
+                "attack_name": name, "filter": "none" if scc is None else scc.method,
+                "load": repr(load), "anti_windup": anti_windup}
+    sim = result(trace, tc, gen.ctrl, trip_rows, scc, settings)
+    exchanges = pd.DataFrame(rows, columns=["t", "sent", "received", "applied", "link",
+                                            "write_ms", "read_ms"])
+    alarm_log = pd.DataFrame(log, columns=["t", "sent", "reported_received",
+                                           "reported_applied", "binding", "link"])
+    return WireResult(sim, exchanges, alarm_log, relay.log, settings)
+
+
+def _now() -> float:
+    import time
+    return time.perf_counter()
