@@ -176,3 +176,27 @@ def coupled_claims(runs: dict, kundur: dict[str, tuple[int, int, int]]) -> dict[
         "Kundur: the coupled filters trip nothing and never flag outside":
             kundur["coupled"][1:] == (0, 0),
     })
+
+
+def wire_claims(wire: dict, sim: dict, estimate: dict, truth: dict) -> dict[str, bool]:
+    """The wire chapter (notebook 11).  ``wire`` and ``sim`` map ``"no_scc"`` and
+    ``"scc"`` to the run over Modbus/TCP (:class:`lfc.wire.WireResult`) and to
+    :func:`lfc.simulate` of the same attack; ``estimate`` is the operator's
+    forensic estimate from the filtered run's alarm log, ``truth`` the attack's
+    ``amplitude`` (pu) and ``freq_hz``."""
+    columns = ["dPg", "dPm", "dw", "dw_meas", "rocof_meas", "pc"]
+
+    def same(key: str) -> bool:
+        a, b = wire[key].sim.trace[columns], sim[key].trace[columns]
+        return bool(abs(a.to_numpy() - b.to_numpy()).max() < 1e-9)
+
+    return _bools({
+        "over the wire equals lfc.simulate to 1e-9 pu, without and with the filter":
+            same("no_scc") and same("scc"),
+        "the attack in the frames trips a relay without the filter": wire["no_scc"].tripped,
+        "the filter at the generator rides it (no trip)": not wire["scc"].tripped,
+        "the operator's estimate from the alarms: the family, amplitude to 1 %, frequency":
+            estimate["family"] == "sinusoid"
+            and abs(estimate["amplitude"] - truth["amplitude"]) <= 0.01 * truth["amplitude"]
+            and abs(estimate["freq_hz"] - truth["freq_hz"]) < 1e-9,
+    })

@@ -94,6 +94,9 @@ CHAPTERS = (
     Chapter("coupled", "10_coupled_certificate.ipynb",
             "Beyond the paper: one certificate for a whole grid", ("linear",),
             ("coupled_certificate",), {"duration": 10.0, "kundur_instants": [3.37]}),
+    Chapter("wire", "11_wire.ipynb",
+            "Beyond the paper: the attack on a real industrial protocol (Modbus/TCP)",
+            ("linear",), ("wire",), {"duration": 4.0, "forensic_draws": 1}),
 )
 
 

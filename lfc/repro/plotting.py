@@ -432,3 +432,23 @@ def areas_figure(runs: dict, labels: dict[str, str], relays: RelaySettings, titl
         ax.set_ylabel(ylabel[panel])
     _finish(axes, title)
     return fig
+
+
+def latency_figure(exchanges: dict, title: str) -> Figure:
+    """Histograms of the round trips through the relay (ms, log count) of each run's
+    command writes and report reads (``exchanges``: label -> DataFrame with
+    ``write_ms`` and ``read_ms``, :attr:`lfc.wire.run.WireResult.exchanges`)."""
+    fig, axes = plt.subplots(1, 2, sharey=True, figsize=(10, 3.6), layout="constrained")
+    for ax, column, what in zip(axes, ("write_ms", "read_ms"),
+                                ("command write (function 16)", "report read (function 4)")):
+        top = max(float(ex[column].quantile(0.999)) for ex in exchanges.values())
+        bins = np.linspace(0.0, top, 60)
+        for label, ex in exchanges.items():
+            ax.hist(ex[column].clip(upper=top), bins=bins, alpha=0.6, label=label)
+        ax.set_yscale("log")
+        ax.set_xlabel(f"Round trip of a {what} (ms)")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("Control periods")
+    axes[1].legend(fontsize=8, loc="upper right")
+    fig.suptitle(title)
+    return fig

@@ -79,6 +79,13 @@ class WireResult:
     def tripped(self) -> bool:
         return not self.sim.trips.empty
 
+    def forensics(self) -> dict:
+        """The operator's estimate of the attack from the alarm log
+        (:func:`lfc.wire.forensics.estimate_attack`)."""
+        from lfc.wire.forensics import estimate_attack
+        return estimate_attack(self.alarm_log, self.exchanges.sent.to_numpy(),
+                               self.settings["control_period"])
+
     def table(self) -> pd.DataFrame:
         """The outcome in one row: trips, alarms, largest |Δω| and ROCOF, the
         exchanges' median and 99th-percentile round trips (ms)."""
