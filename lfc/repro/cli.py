@@ -103,14 +103,14 @@ def _parser() -> argparse.ArgumentParser:
     bk.add_argument("--figures-dir", type=_folder, default=runner.ROOT / "figures")
     bk.add_argument("--build-dir", type=_folder, default=runner.ROOT / "build")
     wr = sub.add_parser(
-        "wire", help="one run over Modbus/TCP on loopback: control centre, man in the "
-        "middle, generator", formatter_class=argparse.RawDescriptionHelpFormatter,
+        "wire", help="runs over Modbus/TCP or DNP3 on loopback: control centre, man in "
+        "the middle, generator", formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="example: Fig. 4's attack injected in the frames, with and without the\n"
                "paper's filter, and the traffic as a capture Wireshark decodes\n"
                "  python -m lfc wire --attack fig4 --filter none paper --pcap build/fig4.pcap\n"
                "attacks: a name (fig4, fig4-weak, fig5, delay-2, drop, none) or a JSON file\n"
                "holding a list of operations (lfc.wire.attacks).")
-    wr.add_argument("--protocol", choices=("modbus",), default="modbus")
+    wr.add_argument("--protocol", choices=("modbus", "dnp3"), default="modbus")
     wr.add_argument("--attack", default="fig4",
                     help="a name of lfc.wire.attacks.ATTACKS or a JSON file (default fig4)")
     wr.add_argument("--filter", nargs="+", choices=("none", "paper", "certified"),
@@ -187,7 +187,7 @@ def _wire(args) -> int:
     print(pd.concat(rows, ignore_index=True).to_string(index=False))
     if args.pcap:
         args.pcap.parent.mkdir(parents=True, exist_ok=True)
-        write_pcap(run.frames, args.pcap)
+        write_pcap(run.frames, args.pcap, args.protocol)
         print(f"capture of the last run ({len(run.frames)} frames): {args.pcap}")
     return 0
 

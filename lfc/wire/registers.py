@@ -66,7 +66,8 @@ def read_command(registers: list[int]) -> tuple[dict[str, float], int]:
 def report_registers(seq: int, values: dict[str, float], flags: int, trips: int,
                      link: int) -> list[int]:
     """The 20 input registers of one period's report."""
-    return [seq % 65536] + encode([values[c] for c in REPORT]) + [flags & 0xFFFF, trips, link]
+    return [seq % 65536] + encode([values[c] for c in REPORT]) + [int(flags) & 0xFFFF,
+                                                                   int(trips), int(link)]
 
 
 def read_report(registers: list[int]) -> dict:

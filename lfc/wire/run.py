@@ -40,10 +40,18 @@ from lfc.relays import RELAY_NAMES, relay_sample, relays_or_default
 from lfc.simulate import SimResult, check_timing, result
 from lfc.filters import SafetyFilter
 from lfc.wire.attacks import WireAttack
-from lfc.wire.registers import (command_registers, read_command, read_report,
-                                report_registers)
+PROTOCOLS = ("modbus", "dnp3")
 
-PROTOCOLS = ("modbus",)
+
+def _transport(protocol: str):
+    """The module of ``protocol``: each has ``Outstation``, ``Codec`` and ``Centre``
+    with one interface (:mod:`lfc.wire.modbus`), and the shared ``EventLoop`` and
+    ``Relay`` (:mod:`lfc.wire.relay`)."""
+    if protocol == "modbus":
+        from lfc.wire import modbus
+        return modbus
+    from lfc.wire import dnp3
+    return dnp3
 
 
 @dataclass
@@ -152,28 +160,25 @@ def run_wire(params: LFCParams, *, duration: float, attack: list | str = "none",
     start, due = np.full(3, np.nan), np.zeros(3)
     relay_sample(0.0, 0.0, 0.0, limits, delays, start, due)
 
-    from lfc.wire.modbus import Centre, EventLoop, Outstation, Relay
-    loop = EventLoop()
-    outstation = Outstation()
+    transport = _transport(protocol)
+    loop = transport.EventLoop()
+    outstation = transport.Outstation()
     clock = {"j": -1}
 
-    def on_command(registers):
+    def on_command(values, seq):
         clock["j"] += 1
         j = clock["j"]
-        values, seq = read_command(registers)
         out = policy.command(j, (j * ratio) * dt, period, values)
-        return None if out is None else command_registers(out, seq)
+        return None if out is None else (out, seq)
 
-    def on_report(registers):
+    def on_report(report):
         j = clock["j"]
-        rep = read_report(registers)
-        out = policy.report(j, (j * ratio) * dt, period, rep)
-        return report_registers(rep["seq"], out, rep["flags"], rep["trips"], rep["link"])
+        return {**report, **policy.report(j, (j * ratio) * dt, period, report)}
 
     try:
         port = loop.run(outstation.start())
-        relay = Relay(port, on_command, on_report)
-        centre = Centre(loop.run(relay.start()))
+        relay = transport.Relay(port, transport.Codec, on_command, on_report)
+        centre = transport.Centre(loop.run(relay.start()), loop)
         x = np.zeros(5)
         xs = np.zeros((n_steps + 1, 5))
         trips = np.zeros(n_steps + 1, np.int64)
@@ -185,14 +190,12 @@ def run_wire(params: LFCParams, *, duration: float, attack: list | str = "none",
             k0 = j * ratio
             sent = g[0]
             t0 = _now()
-            centre.send(command_registers({"pc": sent, "wref": 0.0, "ace": 0.0}, j))
+            centre.send({"pc": sent, "wref": 0.0, "ace": 0.0}, j)
             write_ms = 1e3 * (_now() - t0)
             got = outstation.take()
             link = 1
-            if got is not None:
-                values, seq = read_command(got[0])
-                if seq == j % 65536:
-                    last, link = values, 0
+            if got is not None and got[1] == j % 65536:
+                last, link = got[0], 0
             gen.receive(j, last["pc"], last["wref"], last["ace"])
             y0, y1 = x[3] + gen.noise[j, 0], x[4] + gen.noise[j, 1]
             u = gen.step(j, x, float(p[k0]))
@@ -204,10 +207,11 @@ def run_wire(params: LFCParams, *, duration: float, attack: list | str = "none",
                 trips[k + 1] = relay_sample((k + 1) * dt, x[3], x[4], limits, delays, start,
                                             due)
                 bits |= int(trips[k + 1])
-            outstation.publish(report_registers(j, {"dw_meas": y0, "rocof_meas": y1,
-                                                    "u_ref": u_ref, "u": u}, flags, bits, link))
+            outstation.publish({"seq": j % 65536, "dw_meas": y0, "rocof_meas": y1,
+                                "u_ref": u_ref, "u": u, "flags": flags, "trips": bits,
+                                "link": link})
             t0 = _now()
-            rep = read_report(centre.poll())
+            rep = centre.poll()
             read_ms = 1e3 * (_now() - t0)
             agc_step(g, params.k_i * period, 0.0, rep["dw_meas"], 0.0, 0.0, anti_windup,
                      rep["u_ref"], rep["u"])

@@ -1,0 +1,260 @@
+"""DNP3 (IEEE 1815) on loopback: the generator outstation, the frame codec of the
+man in the middle (:class:`lfc.wire.relay.Relay`) and the control centre's master
+(``dnp3py`` 0.6, pure Python), on real sockets (127.0.0.1, ports the kernel
+chooses).
+
+The point list:
+
+========================  =====  ======================  ================================
+object                    index  field                   encoding
+========================  =====  ======================  ================================
+analog output (g41v4)     0      ``pc`` (pu)             binary64: bit for bit
+direct operate            1      ``wref`` (pu)           binary64
+                          2      ``ace`` (pu)            binary64
+                          3      ``seq``                 binary64 of the period's index
+analog input (g30v1,      0      ``dw_meas``             int32 counts of 3e-11 pu (±0.064)
+static, read by a         1      ``rocof_meas``          counts of 1e-9 pu/s (±2.1)
+range poll of 0-7)        2      ``u_ref``               counts of 1e-8 pu (±21)
+                          3      ``u``                   counts of 1e-8 pu (±21)
+                          4-7    ``flags``, ``trips``,   counts of 1
+                                 ``link``, ``seq``
+========================  =====  ======================  ================================
+
+The commands travel as double-precision analog outputs, exactly; the reports as
+the 32-bit integers a DNP3 outstation serves for static analog inputs (dnp3py
+serves g30v1 only), scaled as above: the frequency the control centre's AGC
+integrates is rounded to 1.5e-11 pu, so a run over DNP3 equals the simulation to
+about 1e-10 pu, not bit for bit (``tests/test_wire.py``).  The frequency's range,
+±0.064 pu (±3.8 Hz), holds both relay settings (OF2 +0.03, UF2 −0.058 pu); a
+value beyond a point's range saturates at it.
+
+The relay cuts the byte stream into DNP3 link frames (``05 64``, the length
+byte, a CRC after the header and after every 16 bytes of data); a command is a
+DIRECT_OPERATE request of g41v4, a report a RESPONSE carrying g30v1; a rewritten
+frame gets new CRCs; a dropped command is answered with a forged RESPONSE
+echoing it with status SUCCESS.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import struct
+import threading
+import time
+
+from lfc.wire.relay import EventLoop, Relay  # noqa: F401  (this protocol's transport)
+
+NAME, PORT = "DNP3", 20000
+COMMAND_POINTS = ("pc", "wref", "ace", "seq")
+REPORT_POINTS = (("dw_meas", 3e-11), ("rocof_meas", 1e-9), ("u_ref", 1e-8), ("u", 1e-8),
+                 ("flags", 1.0), ("trips", 1.0), ("link", 1.0), ("seq", 1.0))
+DIRECT_OPERATE, RESPONSE = 5, 0x81
+INT32 = 2 ** 31 - 1
+
+
+def counts(report: dict) -> list[int]:
+    """The report's fields as the int32 counts of the point list (saturated)."""
+    return [max(-INT32, min(INT32, int(round(report[name] / scale))))
+            for name, scale in REPORT_POINTS]
+
+
+def from_counts(values: list[float]) -> dict:
+    """The report of :func:`counts`'s counts."""
+    out = {name: float(v) * scale for (name, scale), v in zip(REPORT_POINTS, values)}
+    for name in ("flags", "trips", "link", "seq"):
+        out[name] = int(out[name])
+    return out
+
+
+def _ao_block(values: dict[str, float], seq: int) -> bytes:
+    """The g41v4 object block of a command (qualifier 0x17: 1-byte count and indices)."""
+    data = bytes([41, 4, 0x17, 4])
+    for i, name in enumerate(COMMAND_POINTS):
+        data += bytes([i]) + struct.pack("<d", float(seq if name == "seq" else values[name])) \
+            + b"\x00"
+    return data
+
+
+def _user_data(frame: bytes) -> bytes:
+    from dnp3.datalink.frame import DataLinkFrame
+    return DataLinkFrame.from_bytes(frame).user_data
+
+
+def _with_user_data(frame: bytes, user_data: bytes) -> bytes:
+    from dnp3.datalink.frame import DataLinkFrame
+    old = DataLinkFrame.from_bytes(frame)
+    return DataLinkFrame(header=old.header, user_data=user_data).to_bytes()
+
+
+class Codec:
+    """DNP3 link frames for :class:`lfc.wire.relay.Relay` (its docstring)."""
+
+    @staticmethod
+    def cut(buffer: bytearray) -> list[bytes]:
+        out = []
+        while len(buffer) >= 10:
+            if buffer[0] != 0x05 or buffer[1] != 0x64:
+                raise ValueError("not a DNP3 link frame (start bytes 05 64 expected)")
+            n = buffer[2] - 5                                   # user data bytes
+            size = 10 + n + 2 * math.ceil(n / 16)
+            if len(buffer) < size:
+                break
+            out.append(bytes(buffer[:size]))
+            del buffer[:size]
+        return out
+
+    @staticmethod
+    def command(frame: bytes) -> tuple[dict[str, float], int] | None:
+        data = _user_data(frame)
+        # transport byte, application control, function, then g41v4 with 4 points
+        if len(data) < 7 or data[2] != DIRECT_OPERATE or tuple(data[3:6]) != (41, 4, 0x17):
+            return None
+        values = {}
+        for k in range(data[6]):
+            o = 7 + 10 * k
+            values[COMMAND_POINTS[data[o]]] = struct.unpack("<d", data[o + 1:o + 9])[0]
+        seq = int(values.pop("seq"))
+        return values, seq
+
+    @staticmethod
+    def with_command(frame: bytes, values: dict[str, float], seq: int) -> bytes:
+        data = _user_data(frame)
+        return _with_user_data(frame, data[:3] + _ao_block(values, seq))
+
+    @staticmethod
+    def ack(frame: bytes) -> bytes:
+        from dnp3.datalink.builder import build_unconfirmed_user_data
+        from dnp3.datalink.frame import DataLinkFrame
+        request = DataLinkFrame.from_bytes(frame)
+        data = request.user_data
+        app = bytes([0xC0 | (data[1] & 0x0F), RESPONSE, 0, 0]) + data[3:]
+        reply = build_unconfirmed_user_data(destination=request.header.source,
+                                            source=request.header.destination,
+                                            dir_from_master=False,
+                                            user_data=bytes([0xC0]) + app)
+        return reply.to_bytes()
+
+    @staticmethod
+    def _g30(data: bytes) -> int | None:
+        """Offset of the g30v1 block's first point in a response's user data."""
+        if len(data) < 8 or data[2] != RESPONSE or tuple(data[5:7]) != (30, 1):
+            return None
+        return 10 if data[7] == 0x00 else None        # qualifier 0x00: 1-byte start, stop
+
+    @staticmethod
+    def report(frame: bytes) -> dict | None:
+        data = _user_data(frame)
+        o = Codec._g30(data)
+        if o is None:
+            return None
+        n = data[9] - data[8] + 1
+        return from_counts([struct.unpack("<i", data[o + 5 * k + 1:o + 5 * k + 5])[0]
+                            for k in range(n)])
+
+    @staticmethod
+    def with_report(frame: bytes, report: dict) -> bytes:
+        data = bytearray(_user_data(frame))
+        o = Codec._g30(bytes(data))
+        for k, c in enumerate(counts(report)):
+            data[o + 5 * k + 1:o + 5 * k + 5] = struct.pack("<i", c)
+        return _with_user_data(frame, bytes(data))
+
+
+class Outstation:
+    """The generator's DNP3 outstation (address 1): the point list above."""
+
+    def __init__(self) -> None:
+        self.inbox: tuple[dict, int, float] | None = None
+        self.lock = threading.Lock()
+        self.runner, self.task, self.loop, self.database = None, None, None, None
+
+    def _handler(self):
+        from dnp3.outstation.handler import CommandResult, DefaultCommandHandler
+        station, pending = self, {}
+
+        class Handler(DefaultCommandHandler):
+            def direct_operate_analog_output(self, index: int, value: float):
+                pending[COMMAND_POINTS[index]] = value
+                if COMMAND_POINTS[index] == "seq":
+                    values = dict(pending)
+                    seq = int(values.pop("seq"))
+                    with station.lock:
+                        station.inbox = (values, seq, time.perf_counter())
+                    pending.clear()
+                return CommandResult.success()
+        return Handler()
+
+    async def start(self) -> int:
+        """Listen on 127.0.0.1 (a port the kernel chooses); return the port."""
+        from dnp3.database import AnalogInputConfig, Database
+        from dnp3.database.point import EventClass
+        from dnp3.outstation import Outstation as Station
+        from dnp3.outstation import OutstationConfig, OutstationTcpRunner
+        self.loop = asyncio.get_running_loop()
+        self.database = Database()
+        for i in range(len(REPORT_POINTS)):
+            self.database.add_analog_input(i, AnalogInputConfig(event_class=EventClass.NONE))
+        station = Station(database=self.database, config=OutstationConfig(address=1),
+                          handler=self._handler())
+        self.runner = OutstationTcpRunner(outstation=station, host="127.0.0.1", port=0)
+        self.task = asyncio.create_task(self.runner.run())
+        for _ in range(500):
+            if self.runner.local_address is not None:
+                return self.runner.local_address[1]
+            await asyncio.sleep(0.002)
+        raise ConnectionError("the DNP3 outstation did not start listening")
+
+    async def stop(self) -> None:
+        if self.runner is not None:
+            await self.runner.stop()
+            self.task.cancel()
+
+    def take(self) -> tuple[dict[str, float], int] | None:
+        """The command that arrived since the last call, ``(values, seq)``, or None."""
+        with self.lock:
+            got, self.inbox = self.inbox, None
+        return None if got is None else got[:2]
+
+    def publish(self, report: dict) -> None:
+        """The report the next poll returns (its fields as the point list's counts)."""
+        async def update():
+            for i, c in enumerate(counts(report)):
+                self.database.update_analog_input(i, value=c)
+        asyncio.run_coroutine_threadsafe(update(), self.loop).result(5.0)
+
+
+class Centre:
+    """The control centre's DNP3 master (address 2), connected to ``port`` through
+    ``loop`` (an :class:`~lfc.wire.relay.EventLoop`)."""
+
+    def __init__(self, port: int, loop: EventLoop, timeout: float = 2.0) -> None:
+        from dnp3.master import DefaultSOEHandler, Master, MasterConfig, MasterTcpRunner
+        self.loop, self.handler = loop, DefaultSOEHandler()
+        self.master = Master(handler=self.handler,
+                             config=MasterConfig(address=2, outstation_address=1))
+        self.runner = MasterTcpRunner(master=self.master, host="127.0.0.1", port=port,
+                                      response_timeout=timeout)
+        loop.run(self.runner.open())
+
+    def send(self, values: dict[str, float], seq: int) -> None:
+        """DIRECT_OPERATE the four analog outputs (g41v4)."""
+        from dnp3.application.builder import build_direct_operate_request
+        from dnp3.application.fragment import ObjectBlock
+        from dnp3.application.qualifiers import ObjectHeader
+        block = _ao_block(values, seq)
+        request = build_direct_operate_request(
+            objects=(ObjectBlock(header=ObjectHeader(group=41, variation=4, qualifier=0x17),
+                                 data=block[3:]),),
+            seq=self.master.next_request_sequence())
+        self.loop.run(self.runner.request(request))
+
+    def poll(self) -> dict:
+        """Read the report (a range poll of g30v1, points 0-7)."""
+        self.loop.run(self.runner.request(
+            self.master.build_range_poll(30, 1, 0, len(REPORT_POINTS) - 1)))
+        points = self.handler.analog_inputs
+        return from_counts([points[i].value for i in range(len(REPORT_POINTS))])
+
+    def close(self) -> None:
+        self.loop.run(self.runner.close())
