@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 import lfc
 from lfc.repro.cli import main
 from lfc.wire import WireAttack, run_wire
+from lfc.wire.attacks import from_simulate
 from lfc.wire.capture import read_commands, write_pcap
 from lfc.wire.registers import decode, encode
 
@@ -28,34 +29,40 @@ def paper(alpha: float):
     return lfc.SafetyFilter(PARAMS, RELAYS, alpha=alpha)
 
 
-CASES = {   # name: (wire attack, lfc.simulate's attack, filter, duration)
-    "fig4 none": ("fig4", {"pc_attack": FIG4}, lambda: None, 10.0),
-    "fig4 a3": ("fig4", {"pc_attack": FIG4}, lambda: paper(3.0), 10.0),
-    "fig4 a20": ("fig4", {"pc_attack": FIG4}, lambda: paper(20.0), 10.0),
-    "fig4 weak": ("fig4-weak", {"pc_attack": lfc.Sinusoid(0.1, 1.0, start=1.0)},
-                  lambda: paper(20.0), 10.0),
-    "fig4 certified": ("fig4", {"pc_attack": FIG4},
+FIG5 = lfc.Step(0.04, start=1.0)
+CASES = {   # name: (lfc.simulate's attack, filter, duration)
+    "fig4 none": ({"pc_attack": FIG4}, lambda: None, 10.0),
+    "fig4 a3": ({"pc_attack": FIG4}, lambda: paper(3.0), 10.0),
+    "fig4 a20": ({"pc_attack": FIG4}, lambda: paper(20.0), 10.0),
+    "fig4 weak": ({"pc_attack": lfc.Sinusoid(0.1, 1.0, start=1.0)}, lambda: paper(20.0), 10.0),
+    "fig4 certified": ({"pc_attack": FIG4},
                        lambda: lfc.SafetyFilter(PARAMS, RELAYS, method="certified"), 10.0),
-    "fig5 none": ("fig5", {"wref_attack": lfc.Step(0.04, start=1.0)}, lambda: None, 30.0),
-    "fig5 a20": ("fig5", {"wref_attack": lfc.Step(0.04, start=1.0)}, lambda: paper(20.0), 30.0),
+    "fig5 none": ({"wref_attack": FIG5}, lambda: None, 30.0),
+    "fig5 a20": ({"wref_attack": FIG5}, lambda: paper(20.0), 30.0),
 }
 
 
+@pytest.mark.parametrize("agc", ["generator", "centre"])
 @pytest.mark.parametrize("protocol", ["modbus", "dnp3"])
 @pytest.mark.parametrize("case", list(CASES))
-def test_lockstep_over_the_wire_equals_simulate(case, protocol):
+def test_lockstep_over_the_wire_equals_simulate(case, protocol, agc):
     """Every attack of Figs. 4 and 5, injected in the frames by the man in the
-    middle (Fig. 5's bias on the reference as the opposite bias on the frequency
-    the control centre's AGC is told), with and without each filter, over
-    Modbus/TCP and DNP3: the trace equals ``lfc.simulate``'s to 1e-9 pu
-    (measured: 1e-14 over Modbus, whose registers carry binary64; up to 8e-10 over
-    DNP3, whose reports are scaled 32-bit integers), the same relays trip at the
-    same instants, and the filter raises the same alarms."""
-    attack, kwargs, make, duration = CASES[case]
-    wire = run_wire(PARAMS, duration=duration, attack=attack, scc=make(), protocol=protocol)
+    middle, with and without each filter, over Modbus/TCP and DNP3, the integrator
+    at the generator (the paper's local controller; Fig. 5's bias on the
+    reference sent) or at the control centre (Fig. 5's as the opposite bias on the
+    frequency it is told): the trace equals ``lfc.simulate``'s to 1e-9 pu, the
+    same relays trip at the same instants, and the filter raises the same alarms.
+    Measured: bit for bit with the integrator at the generator (the commands
+    travel as binary64 over both protocols) and over Modbus; up to 8e-10 pu over
+    DNP3 with the AGC at the centre (its reports are scaled 32-bit integers)."""
+    kwargs, make, duration = CASES[case]
+    wire = run_wire(PARAMS, duration=duration, attack=from_simulate(**kwargs, agc=agc),
+                    scc=make(), protocol=protocol, agc=agc)
     sim = lfc.simulate(PARAMS, duration=duration, scc=make(), **kwargs)
     diff = np.abs(wire.sim.trace[PHYSICS].to_numpy() - sim.trace[PHYSICS].to_numpy())
     assert np.max(diff) < 1e-9
+    if agc == "generator" or protocol == "modbus":
+        assert np.max(diff) < 1e-12
     assert wire.sim.trips.equals(sim.trips)
     assert len(wire.sim.alarms) == len(sim.alarms)
     assert wire.exchanges.link.sum() == 0 and len(wire.exchanges) == int(duration / 0.01)
@@ -72,13 +79,13 @@ def test_each_operation_does_what_its_table_says():
     holds its last command and flags the link (the operator's log shows it);
     ``scale`` and ``bias`` act on the report the control centre reads."""
     load = lfc.Step(0.05, start=0.5)
-    ex = run_wire(PARAMS, duration=2.0, load=load, attack=[
+    ex = run_wire(PARAMS, duration=2.0, load=load, agc="centre", attack=[
         {"op": "delay", "field": "pc", "periods": 2, "start": 1.0, "stop": 1.2}]).exchanges
     k = (ex.t >= 1.0 - 1e-9) & (ex.t < 1.2 - 1e-9)
     idx = np.flatnonzero(k)
     np.testing.assert_array_equal(ex.received.to_numpy()[idx], ex.sent.to_numpy()[idx - 2])
     assert np.all(ex.sent.to_numpy()[idx] != ex.sent.to_numpy()[idx - 2])
-    ex = run_wire(PARAMS, duration=2.0, load=load, attack=[
+    ex = run_wire(PARAMS, duration=2.0, load=load, agc="centre", attack=[
         {"op": "replay", "field": "pc", "record": 0.6, "start": 1.0, "stop": 1.2}]).exchanges
     np.testing.assert_array_equal(ex.received.to_numpy()[idx], ex.sent.to_numpy()[idx - 40])
     run = run_wire(PARAMS, duration=2.0, load=load,
@@ -90,9 +97,9 @@ def test_each_operation_does_what_its_table_says():
     dnp3 = run_wire(PARAMS, duration=2.0, load=load, protocol="dnp3",
                     attack=[{"op": "drop", "start": 1.0, "stop": 1.2}])   # a forged response
     assert dnp3.exchanges.link.sum() == len(idx) and dnp3.forensics()["family"] == "drop"
-    bias = run_wire(PARAMS, duration=2.0, load=load,
+    bias = run_wire(PARAMS, duration=2.0, load=load, agc="centre",
                     attack=[{"op": "bias", "field": "dw_meas", "value": -0.01, "start": 1.0}])
-    base = run_wire(PARAMS, duration=2.0, load=load)
+    base = run_wire(PARAMS, duration=2.0, load=load, agc="centre")
     ahead = bias.exchanges.sent.to_numpy()[-1] - base.exchanges.sent.to_numpy()[-1]
     assert ahead > 0        # told the frequency is lower, the AGC raises its command
 
@@ -114,6 +121,10 @@ def test_an_attack_spec_is_checked():
         run_wire(lfc.MultiAreaParams.two_area(), duration=1.0)
     with pytest.raises(ValueError, match="protocol"):
         run_wire(PARAMS, duration=1.0, protocol="iec104")
+    with pytest.raises(ValueError, match="no reference is sent"):
+        run_wire(PARAMS, duration=1.0, attack="fig5", agc="centre")
+    with pytest.raises(ValueError, match="agc"):
+        run_wire(PARAMS, duration=1.0, agc="substation")
 
 
 @given(st.lists(st.floats(allow_nan=False), min_size=1, max_size=5))
@@ -177,11 +188,40 @@ def test_what_the_alarms_cannot_see():
     command intact, so the alarms it causes point at the reports (``"reports or
     reference"``); a dropped link shows as link alarms (``"drop"``)."""
     step = lfc.Step(0.1, start=0.5)
-    delay = run_wire(PARAMS, duration=10.0, load=step, scc=paper(20.0),
+    delay = run_wire(PARAMS, duration=10.0, load=step, scc=paper(20.0), agc="centre",
                      attack=[{"op": "delay", "field": "pc", "periods": 2, "start": 1.0}])
     assert delay.forensics()["family"] == "none" and not delay.tripped
-    told = run_wire(PARAMS, duration=10.0, scc=paper(20.0),
+    told = run_wire(PARAMS, duration=10.0, scc=paper(20.0), agc="centre",
                     attack=[{"op": "bias", "field": "dw_meas", "value": -0.06, "start": 1.0}])
     assert told.forensics()["family"] == "reports or reference"
     drop = run_wire(PARAMS, duration=3.0, attack=[{"op": "drop", "start": 1.0, "stop": 1.5}])
     assert drop.forensics() == {"family": "drop", "start": 1.0, "samples": 50}
+
+
+@pytest.mark.parametrize("family", ["square on P_c", "chirp on P_c", "square on ω_ref"])
+def test_red_team_winners_replay_over_the_wire(family):
+    """Three winners of the red team's search against the paper's filter (a short
+    search: 2 generations of 4), replayed over the wire (``from_simulate`` of
+    ``redteam.replay``): over both protocols with the integrator at the generator,
+    and over Modbus with the AGC at the centre, the run equals the simulation to
+    1e-9 pu and trips where it trips.  Findings, pinned, over DNP3 with the AGC at
+    the centre (its frequency reports are 32-bit counts of 3e-11 pu): on a command
+    attack that trips, the rounding grows to 9e-9 pu (measured on the square
+    wave); a reference attack becomes a falsified frequency report that leaves
+    the point's range (±0.064 pu) and saturates there — the attacker's protocol,
+    not the plant, bounds it — so the runs differ."""
+    from lfc.experiments.redteam import Defender, family_search, replay
+    found = family_search(PARAMS, Defender("paper"), family, duration=10.0, maxiter=2,
+                          popsize=4)
+    kwargs = replay(found, 10.0)
+    sim = lfc.simulate(PARAMS, duration=10.0, scc=paper(20.0), **kwargs)
+    for protocol, agc in (("modbus", "generator"), ("dnp3", "generator"), ("modbus", "centre"),
+                          ("dnp3", "centre")):
+        wire = run_wire(PARAMS, duration=10.0, scc=paper(20.0), protocol=protocol, agc=agc,
+                        attack=from_simulate(**kwargs, agc=agc))
+        diff = np.max(np.abs(wire.sim.trace[PHYSICS].to_numpy() - sim.trace[PHYSICS].to_numpy()))
+        if protocol == "dnp3" and agc == "centre":
+            assert diff > 1e-3 if "ω_ref" in family else diff < 1e-7
+        else:
+            assert diff < 1e-9, (protocol, agc)
+            assert wire.tripped == (not sim.trips.empty)

@@ -108,14 +108,18 @@ def _parser() -> argparse.ArgumentParser:
         epilog="example: Fig. 4's attack injected in the frames, with and without the\n"
                "paper's filter, and the traffic as a capture Wireshark decodes\n"
                "  python -m lfc wire --attack fig4 --filter none paper --pcap build/fig4.pcap\n"
-               "attacks: a name (fig4, fig4-weak, fig5, delay-2, drop, none) or a JSON file\n"
-               "holding a list of operations (lfc.wire.attacks).")
+               "attacks: a name (fig4, fig4-weak, fig5, fig5-told, delay-2, drop, none) or a\n"
+               "JSON file holding a list of operations (lfc.wire.attacks); fig5-told and\n"
+               "delay-2 act with --agc centre.")
     wr.add_argument("--protocol", choices=("modbus", "dnp3"), default="modbus")
     wr.add_argument("--attack", default="fig4",
                     help="a name of lfc.wire.attacks.ATTACKS or a JSON file (default fig4)")
     wr.add_argument("--filter", nargs="+", choices=("none", "paper", "certified"),
                     default=["none", "paper"], help="one run per filter (paper: alpha = 20)")
     wr.add_argument("--duration", type=float, default=10.0, help="simulated time (s)")
+    wr.add_argument("--agc", choices=("generator", "centre"), default="generator",
+                    help="where the integrator runs: at the generator (the paper's local "
+                         "controller; default) or the control centre's AGC")
     wr.add_argument("--pcap", type=Path, help="write the last run's traffic here")
     rd = sub.add_parser("readme", help="copy figures/<name>.md into the README's "
                         "<!-- name:start --> sections (reproduce never edits the README)")
@@ -182,7 +186,7 @@ def _wire(args) -> int:
     for name in args.filter:
         scc = filters[name]() if filters[name] else None
         run = run_wire(params, duration=args.duration, attack=attack, scc=scc,
-                       protocol=args.protocol)
+                       protocol=args.protocol, agc=args.agc)
         rows.append(run.table())
     print(pd.concat(rows, ignore_index=True).to_string(index=False))
     if args.pcap:

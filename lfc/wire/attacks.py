@@ -4,7 +4,7 @@ An attack is a list of operations (dicts, so a YAML or JSON file, or a red-team
 winner, is one), applied in order to every period's values.  Each names a
 ``field``: a command field the control centre writes (``pc``, ``wref``,
 ``ace``; :mod:`lfc.wire.registers`) or a report field it reads back
-(``dw_meas``, ``rocof_meas``, ``u_ref``, ``u``: the operator's view, and what the
+(``dw_meas``, ``rocof_meas``, ``pc_received``, ``u_ref``, ``u``: the operator's view, and what the
 AGC integrates).  ``start`` and ``stop`` (s) bound every operation (default: the
 whole run).
 
@@ -25,10 +25,12 @@ drop      (command fields only; ``field`` omitted)   the frame is not forwarded:
 ========  =========================================  ================================
 
 The paper's attacks on the wire: Fig. 4's sinusoid on the command is ``add`` on
-``pc``; Fig. 5's bias on the frequency reference is, across a network whose AGC
-runs at the control centre, a bias of the opposite sign on the frequency it is
-told (``add`` on ``dw_meas``): the AGC integrates ``wref - dw_meas`` either way,
-bit for bit (:data:`ATTACKS`).
+``pc``; Fig. 5's bias on the frequency reference is ``add`` on ``wref`` where the
+integrator runs at the generator (``run_wire(agc="generator")``, the paper's
+local controller), and, where the AGC runs at the control centre and no
+reference is sent, a bias of the opposite sign on the frequency it is told
+(``add`` on ``dw_meas``): the integrator sees ``wref - dw_meas`` either way, bit
+for bit (:data:`ATTACKS`, :func:`from_simulate`).
 """
 
 from __future__ import annotations
@@ -40,7 +42,9 @@ from lfc.wire.registers import COMMAND, REPORT
 
 OPS = ("add", "scale", "bias", "delay", "replay", "drop")
 SIGNALS = {"sinusoid": signals.Sinusoid, "square": signals.Square, "step": signals.Step,
-           "ramp": signals.Ramp, "chirp": signals.Chirp}
+           "ramp": signals.Ramp, "chirp": signals.Chirp, "samples": signals.Samples}
+SCALE = {"sinusoid": "amplitude", "square": "amplitude", "step": "value", "ramp": "slope",
+         "chirp": "amplitude", "samples": "values"}     # the parameter a signal scales with
 ATTACKS = {
     "none": [],
     "fig4": [{"op": "add", "field": "pc",
@@ -48,11 +52,49 @@ ATTACKS = {
     "fig4-weak": [{"op": "add", "field": "pc",
                    "signal": {"kind": "sinusoid", "amplitude": 0.1, "freq_hz": 1.0,
                               "start": 1.0}}],
-    "fig5": [{"op": "add", "field": "dw_meas",
-              "signal": {"kind": "step", "value": -0.04, "start": 1.0}}],
+    "fig5": [{"op": "add", "field": "wref",
+              "signal": {"kind": "step", "value": 0.04, "start": 1.0}}],
+    "fig5-told": [{"op": "add", "field": "dw_meas",
+                   "signal": {"kind": "step", "value": -0.04, "start": 1.0}}],
     "delay-2": [{"op": "delay", "field": "pc", "periods": 2, "start": 1.0}],
     "drop": [{"op": "drop", "start": 1.0, "stop": 1.5}],
 }
+
+
+def signal_spec(signal: signals.Signal, sign: float = 1.0) -> dict:
+    """The dict of an :mod:`lfc.signals` attack (:func:`signal_from_spec` inverts
+    it), times ``sign`` (±1: negation is exact in floating point)."""
+    import dataclasses
+    kind = next((k for k, cls in SIGNALS.items() if type(signal) is cls), None)
+    if kind is None:
+        raise ValueError(f"signal must be one of {sorted(SIGNALS)} of lfc.signals, got "
+                         f"{signal!r:.80}")
+    out = {"kind": kind}
+    for f in dataclasses.fields(signal):
+        v = getattr(signal, f.name)
+        out[f.name] = [float(x) for x in v] if hasattr(v, "__len__") else float(v)
+    key = SCALE[kind]
+    out[key] = ([sign * x for x in out[key]] if isinstance(out[key], list)
+                else sign * out[key])
+    return out
+
+
+def from_simulate(pc_attack: signals.Signal | None = None,
+                  wref_attack: signals.Signal | None = None,
+                  agc: str = "generator") -> list[dict]:
+    """The wire attack that reproduces :func:`lfc.simulate`'s ``pc_attack`` and
+    ``wref_attack`` (e.g. a red-team winner, :func:`lfc.experiments.redteam.replay`)
+    for ``run_wire(agc=agc)``: the first added to the command in the frames, the
+    second to the reference sent (``agc="generator"``) or, negated, to the
+    frequency the control centre's AGC is told (``agc="centre"``)."""
+    ops = []
+    if pc_attack is not None:
+        ops.append({"op": "add", "field": "pc", "signal": signal_spec(pc_attack)})
+    if wref_attack is not None:
+        ops.append({"op": "add", "field": "wref", "signal": signal_spec(wref_attack)}
+                   if agc == "generator" else
+                   {"op": "add", "field": "dw_meas", "signal": signal_spec(wref_attack, -1.0)})
+    return ops
 
 
 def signal_from_spec(spec: dict) -> signals.Signal:

@@ -169,11 +169,11 @@ def random_attack(family: str, rng: np.random.Generator) -> tuple[list[dict], di
         n = int(rng.integers(1, 6))
         from lfc.signals import Step
         return [{"op": "delay", "field": "pc", "periods": n, "start": start}], \
-            {"periods": n, "start": start}, {"load": Step(0.1, start=0.5)}
+            {"periods": n, "start": start}, {"load": Step(0.1, start=0.5), "agc": "centre"}
     if family == "reports or reference":
         amp = -float(rng.uniform(0.02, 0.06))
         return ([{"op": "bias", "field": "dw_meas", "value": amp, "start": start}],
-                {"amplitude": amp, "start": start}, {})
+                {"amplitude": amp, "start": start}, {"agc": "centre"})
     raise ValueError(f"family must be one of {FAMILIES[3:] + ('reports or reference',)}, "
                      f"got {family!r}")
 
@@ -186,9 +186,10 @@ def accuracy(params, scc, *, draws: int = 5, seed: int = 0,
     """How well :func:`estimate_attack` recovers attacks over the wire: ``draws``
     random attacks of each family of ``ATTACKED`` (sinusoid 0.3-1 pu at 0.2-2
     Hz, square 0.2-0.6 pu at 0.2-1 Hz, bias ±0.2-0.6 pu, ramp 0.05-0.3 pu/s on the
-    command; a delay of 1-5 periods during a 0.1 pu load step; a bias of
-    0.02-0.06 pu on the frequency reported; each starting in 0.5-2 s), run
-    against ``scc``.
+    command; a delay of 1-5 periods of the AGC's commands during a 0.1 pu load
+    step and a bias of 0.02-0.06 pu on the frequency the AGC is told, both with
+    the AGC at the control centre (``run_wire(agc="centre")``, where they act);
+    each starting in 0.5-2 s), run against ``scc``.
 
     Returns
     -------

@@ -9,23 +9,28 @@ The period counter and the bit fields are one register each.
 =========  ====  ========  ======  =====================================================
 block      addr  count     type    meaning
 =========  ====  ========  ======  =====================================================
-holding    0     4         f64     ``pc``: the governor command channel (pu), added to
-                                   the local integrator's output (``pc_attack`` in
-                                   ``lfc.simulate``; the control centre sends 0)
+holding    0     4         f64     ``pc``: the governor command (pu): the AGC's output
+                                   (``agc="centre"``) or a supplement added to the local
+                                   integrator's (``agc="generator"``; sent 0; the
+                                   channel of ``pc_attack`` in ``lfc.simulate``)
 holding    4     4         f64     ``wref``: the frequency reference (pu) the local
-                                   integrator tracks (``wref_attack``; sent 0)
+                                   integrator tracks (``agc="generator"``: the channel
+                                   of ``wref_attack``; sent 0)
 holding    8     4         f64     ``ace``: added to the tie-line export the AGC reads
                                    (pu; ``ace_attack``; sent 0; one area: unused)
 holding    12    1         u16     ``seq``: the control period's index, modulo 65536
 input      0     1         u16     ``seq``: the period the report belongs to
 input      1     4         f64     ``dw_meas``: measured frequency deviation (pu)
 input      5     4         f64     ``rocof_meas``: measured ROCOF (pu/s)
-input      9     4         f64     ``u_ref``: the command the filter received (pu)
-input      13    4         f64     ``u``: the command applied (pu)
-input      17    1         u16     ``flags``: the filter's flag bits (lfc.filters.base)
-input      18    1         u16     ``trips``: relays tripped in the period (bit 0 OF2,
+input      9     4         f64     ``pc_received``: ``pc`` as it arrived (pu)
+input      13    4         f64     ``u_ref``: the command the filter received (pu; with
+                                   ``agc="generator"`` the local integrator's output
+                                   plus ``pc``)
+input      17    4         f64     ``u``: the command applied (pu)
+input      21    1         u16     ``flags``: the filter's flag bits (lfc.filters.base)
+input      22    1         u16     ``trips``: relays tripped in the period (bit 0 OF2,
                                    1 UF2, 2 ROCOF)
-input      19    1         u16     ``link``: 1 if no command arrived for the period
+input      23    1         u16     ``link``: 1 if no command arrived for the period
                                    (the generator held the last one)
 =========  ====  ========  ======  =====================================================
 """
@@ -37,9 +42,9 @@ import struct
 COMMAND = ("pc", "wref", "ace")        # holding registers, four each from 0
 SEQ = 12                               # holding register of the period counter
 N_COMMAND = 13                         # registers written each period (FC16 at 0)
-REPORT = ("dw_meas", "rocof_meas", "u_ref", "u")   # input registers, four each from 1
-FLAGS, TRIPS, LINK = 17, 18, 19
-N_REPORT = 20                          # registers read each period (FC4 at 0)
+REPORT = ("dw_meas", "rocof_meas", "pc_received", "u_ref", "u")   # input registers, four each from 1
+FLAGS, TRIPS, LINK = 21, 22, 23
+N_REPORT = 24                          # registers read each period (FC4 at 0)
 
 
 def encode(values: list[float]) -> list[int]:
@@ -65,7 +70,7 @@ def read_command(registers: list[int]) -> tuple[dict[str, float], int]:
 
 def report_registers(seq: int, values: dict[str, float], flags: int, trips: int,
                      link: int) -> list[int]:
-    """The 20 input registers of one period's report."""
+    """The 24 input registers of one period's report."""
     return [seq % 65536] + encode([values[c] for c in REPORT]) + [int(flags) & 0xFFFF,
                                                                    int(trips), int(link)]
 

@@ -1,16 +1,20 @@
 """One run over the wire, in lockstep: control centre, man in the middle and
-generator exchanging Modbus/TCP frames on loopback, one command per control
-period.
+generator exchanging Modbus/TCP or DNP3 frames on loopback, one command per
+control period.
 
-Who does what (the paper's setting, section II: the control centre's SCADA
-runs the AGC; the command travels over an insecure network; the filter sits at
-the generator):
+Who does what (the paper, section II: the control centre sets the frequency
+reference and runs the AGC; the signals travel over an insecure network; the
+filter sits at the generator):
 
-* the **control centre** runs the AGC integrator (:func:`lfc.engine.agc_step`,
-  the engine's own code) on the frequency the generator reports, writes the
-  command every period, reads the report back and keeps the operator's alarm
-  log;
-* the **man in the middle** (:class:`lfc.wire.modbus.Relay`) forwards every
+* the **control centre** writes the command every period, reads the report
+  back and keeps the operator's alarm log.  Where the integrator runs is a
+  choice the paper leaves open, and both readings are here: ``agc="generator"``
+  (the paper's eq. 2, a *local* controller ``dPc' = k (dw_ref - dw_meas)`` at
+  the generator; the centre sends the reference ``wref`` and a command
+  supplement ``pc``, both 0) and ``agc="centre"`` (the centre's AGC integrates
+  the frequency the generator reports, with the engine's own
+  :func:`lfc.engine.agc_step`, and sends its output as ``pc``);
+* the **man in the middle** (:class:`lfc.wire.relay.Relay`) forwards every
   frame and applies the attack (:class:`lfc.wire.attacks.WireAttack`);
 * the **generator** receives the command, runs its safety filter in the
   engine's generator side (:class:`lfc.engine.GeneratorSide`, ``network=True``:
@@ -18,11 +22,14 @@ the generator):
   plant for one control period, watches its relays and publishes its report.
 
 *Lockstep*: the plant advances one control period per exchanged command, so a
-run over the wire reproduces :func:`lfc.simulate` of the same attack (the
+run over the wire reproduces :func:`lfc.simulate` of the same attack: the
 command channel's sum, the reference's difference, the integrator's update and
-the plant's step are the same operations; ``tests/test_wire.py`` checks 1e-9
-pu).  The measured time of every exchange (write and read, round trip through
-the relay) is in the result.
+the plant's step are the same operations (``tests/test_wire.py`` checks 1e-9
+pu).  A reference attack is, with ``agc="generator"``, an attack on the
+``wref`` field; with ``agc="centre"``, where no reference is sent, the opposite
+attack on the frequency the centre is told (:func:`lfc.wire.attacks.from_simulate`).
+The measured time of every exchange (write and read, round trip through the
+relay) is in the result.
 """
 
 from __future__ import annotations
@@ -41,6 +48,7 @@ from lfc.simulate import SimResult, check_timing, result
 from lfc.filters import SafetyFilter
 from lfc.wire.attacks import WireAttack
 PROTOCOLS = ("modbus", "dnp3")
+AGC = ("generator", "centre")
 
 
 def _transport(protocol: str):
@@ -70,7 +78,8 @@ class WireResult:
         ``write_ms`` and ``read_ms`` (round trips through the relay, wall clock).
     alarm_log : DataFrame
         The operator's view, one row per period whose report carries an alarm:
-        ``t``, ``sent``, ``reported_received``, ``reported_applied``,
+        ``t``, ``sent`` (the command field ``pc`` it wrote), ``reported_received``
+        (that field as the generator reports it arrived), ``reported_applied``,
         ``binding`` (the filter's binding constraints), ``link``.
     frames : list of (float, str, bytes)
         Every Modbus/TCP frame on both legs (:attr:`lfc.wire.modbus.Relay.log`).
@@ -99,7 +108,8 @@ class WireResult:
         exchanges' median and 99th-percentile round trips (ms)."""
         tr, ex = self.sim.trace, self.exchanges
         return pd.DataFrame([{
-            "protocol": self.settings["protocol"], "attack": self.settings["attack_name"],
+            "protocol": self.settings["protocol"], "agc": self.settings["agc"],
+            "attack": self.settings["attack_name"],
             "filter": self.settings["filter"], "tripped": self.tripped,
             "first_trip": ("" if self.sim.trips.empty else
                            f"{self.sim.trips.relay.iat[0]} at {self.sim.trips.t.iat[0]:.2f} s"),
@@ -114,8 +124,8 @@ class WireResult:
 def run_wire(params: LFCParams, *, duration: float, attack: list | str = "none",
              scc: SafetyFilter | None = None, protocol: str = "modbus", load=None,
              noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0, dt: float = 0.001,
-             control_period: float = 0.01, relays=None,
-             anti_windup: bool = False) -> WireResult:
+             control_period: float = 0.01, relays=None, anti_windup: bool = False,
+             agc: str = "generator") -> WireResult:
     """Run one area over the wire in lockstep (module docstring).
 
     Parameters
@@ -130,10 +140,13 @@ def run_wire(params: LFCParams, *, duration: float, attack: list | str = "none",
     scc : SafetyFilter or None
         The generator's filter.
     protocol : str
-        ``"modbus"`` (Modbus/TCP).
+        ``"modbus"`` (Modbus/TCP) or ``"dnp3"``.
     load, noise_std, seed, dt, control_period, relays, anti_windup
-        As in :func:`lfc.simulate` (``anti_windup``: the control centre's AGC
-        does not integrate while the generator's filter holds against it).
+        As in :func:`lfc.simulate` (``anti_windup``: the integrator, wherever it
+        runs, does not integrate while the generator's filter holds against it).
+    agc : str
+        Where the integrator runs: ``"generator"`` (default, the paper's local
+        controller) or ``"centre"`` (module docstring).
 
     Returns
     -------
@@ -147,13 +160,21 @@ def run_wire(params: LFCParams, *, duration: float, attack: list | str = "none",
     relays = relays_or_default(relays)
     name = attack if isinstance(attack, str) else "custom"
     policy = WireAttack(attack)
+    if agc not in AGC:
+        raise ValueError(f"agc must be one of {AGC}, got {agc!r}")
+    if agc == "centre" and any(op.get("field") == "wref" for op in policy.ops):
+        raise ValueError("attack: with agc='centre' no reference is sent (the centre's AGC "
+                         "integrates the frequency it is told): attack dw_meas instead "
+                         "(lfc.wire.attacks.from_simulate(..., agc='centre'))")
+    local = agc == "generator"
     n_steps = int(round(duration / dt))
     n_ctrl = -(-n_steps // ratio)
     period = ratio * dt
     t = np.arange(n_steps + 1) * dt
     tc = np.arange(n_ctrl) * period
     gen = GeneratorSide(params, scc, None, noise_std, seed, tc, None, None, False, period,
-                        k_agc=(0.0, 0.0), network=True)
+                        k_agc=None if local else (0.0, 0.0), network=True,
+                        anti_windup=anti_windup and local)
     A, Bu, Bl = discretize_grid(as_grid(params), dt)
     p = sample_signal(load, t, "load")
     limits, delays = relays.arrays()
@@ -182,7 +203,7 @@ def run_wire(params: LFCParams, *, duration: float, attack: list | str = "none",
         x = np.zeros(5)
         xs = np.zeros((n_steps + 1, 5))
         trips = np.zeros(n_steps + 1, np.int64)
-        g = np.zeros(1)                     # the control centre's AGC integrator (pu)
+        g = np.zeros(1)          # the control centre's AGC integrator (pu; agc="centre")
         last = {"pc": 0.0, "wref": 0.0, "ace": 0.0}
         rows, log = [], []
         u_col, flag_col = CTRL_COLUMNS.index("u_ref"), CTRL_COLUMNS.index("flags")
@@ -208,16 +229,17 @@ def run_wire(params: LFCParams, *, duration: float, attack: list | str = "none",
                                             due)
                 bits |= int(trips[k + 1])
             outstation.publish({"seq": j % 65536, "dw_meas": y0, "rocof_meas": y1,
-                                "u_ref": u_ref, "u": u, "flags": flags, "trips": bits,
-                                "link": link})
+                                "pc_received": last["pc"], "u_ref": u_ref, "u": u, "flags": flags,
+                                "trips": bits, "link": link})
             t0 = _now()
             rep = centre.poll()
             read_ms = 1e3 * (_now() - t0)
-            agc_step(g, params.k_i * period, 0.0, rep["dw_meas"], 0.0, 0.0, anti_windup,
-                     rep["u_ref"], rep["u"])
+            if not local:
+                agc_step(g, params.k_i * period, 0.0, rep["dw_meas"], 0.0, 0.0, anti_windup,
+                         rep["u_ref"], rep["u"])
             rows.append((tc[j], sent, last["pc"], u, link, write_ms, read_ms))
             if rep["flags"] & ALARM_BITS or rep["link"]:
-                log.append((tc[j], sent, rep["u_ref"], rep["u"],
+                log.append((tc[j], sent, rep["pc_received"], rep["u"],
                             ";".join(binding_names(rep["flags"]))
                             if rep["flags"] & ACTIVE else "", rep["link"]))
         centre.close()
@@ -235,7 +257,7 @@ def run_wire(params: LFCParams, *, duration: float, attack: list | str = "none",
                 "control_period": control_period, "seed": seed, "noise_std": list(noise_std),
                 "scc": repr(scc), "protocol": protocol, "attack": repr(policy.spec),
                 "attack_name": name, "filter": "none" if scc is None else scc.method,
-                "load": repr(load), "anti_windup": anti_windup}
+                "load": repr(load), "anti_windup": anti_windup, "agc": agc}
     sim = result(trace, tc, gen.ctrl, trip_rows, scc, settings)
     exchanges = pd.DataFrame(rows, columns=["t", "sent", "received", "applied", "link",
                                             "write_ms", "read_ms"])
