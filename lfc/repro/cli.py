@@ -120,6 +120,9 @@ def _parser() -> argparse.ArgumentParser:
     wr.add_argument("--agc", choices=("generator", "centre"), default="generator",
                     help="where the integrator runs: at the generator (the paper's local "
                          "controller; default) or the control centre's AGC")
+    wr.add_argument("--realtime", action="store_true",
+                    help="the plant at the wall clock (default: lockstep, one control period "
+                         "per exchanged command)")
     wr.add_argument("--pcap", type=Path, help="write the last run's traffic here")
     rd = sub.add_parser("readme", help="copy figures/<name>.md into the README's "
                         "<!-- name:start --> sections (reproduce never edits the README)")
@@ -186,7 +189,8 @@ def _wire(args) -> int:
     for name in args.filter:
         scc = filters[name]() if filters[name] else None
         run = run_wire(params, duration=args.duration, attack=attack, scc=scc,
-                       protocol=args.protocol, agc=args.agc)
+                       protocol=args.protocol, agc=args.agc,
+                       mode="realtime" if args.realtime else "lockstep")
         rows.append(run.table())
     print(pd.concat(rows, ignore_index=True).to_string(index=False))
     if args.pcap:

@@ -215,6 +215,7 @@ class Outstation:
         if self.runner is not None:
             await self.runner.stop()
             self.task.cancel()
+            await asyncio.gather(self.task, return_exceptions=True)
 
     def take(self) -> tuple[dict[str, float], int] | None:
         """The command that arrived since the last call, ``(values, seq)``, or None."""

@@ -34,6 +34,9 @@ relay) is in the result.
 
 from __future__ import annotations
 
+import math
+import threading
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,6 +52,7 @@ from lfc.filters import SafetyFilter
 from lfc.wire.attacks import WireAttack
 PROTOCOLS = ("modbus", "dnp3")
 AGC = ("generator", "centre")
+MODES = ("lockstep", "realtime")
 
 
 def _transport(protocol: str):
@@ -75,7 +79,8 @@ class WireResult:
         One row per control period: ``t`` (s), ``sent`` (the command the centre
         wrote, pu), ``received`` (what the generator got, pu), ``applied`` (pu),
         ``link`` (1: no command arrived, the last one was held),
-        ``write_ms`` and ``read_ms`` (round trips through the relay, wall clock).
+        ``write_ms`` and ``read_ms`` (round trips through the relay, wall clock),
+        ``late_ms`` (real time: how late the generator's tick woke up).
     alarm_log : DataFrame
         The operator's view, one row per period whose report carries an alarm:
         ``t``, ``sent`` (the command field ``pc`` it wrote), ``reported_received``
@@ -105,7 +110,8 @@ class WireResult:
 
     def table(self) -> pd.DataFrame:
         """The outcome in one row: trips, alarms, largest |Δω| and ROCOF, the
-        exchanges' median and 99th-percentile round trips (ms)."""
+        exchanges' median and 99th-percentile round trips and the generator's
+        99th-percentile lateness (ms, real time)."""
         tr, ex = self.sim.trace, self.exchanges
         return pd.DataFrame([{
             "protocol": self.settings["protocol"], "agc": self.settings["agc"],
@@ -118,14 +124,15 @@ class WireResult:
             "max |rocof| (pu/s)": float(tr.rocof_meas.abs().max()),
             "write median (ms)": float(ex.write_ms.median()),
             "read median (ms)": float(ex.read_ms.median()),
-            "write p99 (ms)": float(ex.write_ms.quantile(0.99))}])
+            "write p99 (ms)": float(ex.write_ms.quantile(0.99)),
+            "late p99 (ms)": float(ex.late_ms.quantile(0.99))}])
 
 
 def run_wire(params: LFCParams, *, duration: float, attack: list | str = "none",
              scc: SafetyFilter | None = None, protocol: str = "modbus", load=None,
              noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0, dt: float = 0.001,
              control_period: float = 0.01, relays=None, anti_windup: bool = False,
-             agc: str = "generator") -> WireResult:
+             agc: str = "generator", mode: str = "lockstep") -> WireResult:
     """Run one area over the wire in lockstep (module docstring).
 
     Parameters
@@ -147,6 +154,11 @@ def run_wire(params: LFCParams, *, duration: float, attack: list | str = "none",
     agc : str
         Where the integrator runs: ``"generator"`` (default, the paper's local
         controller) or ``"centre"`` (module docstring).
+    mode : str
+        ``"lockstep"`` (default: the plant advances one control period per
+        exchanged command) or ``"realtime"`` (the plant at the wall clock: the
+        generator ticks every control period whatever has arrived, the centre
+        reads and writes half a period before; a run takes ``duration`` s).
 
     Returns
     -------
@@ -167,6 +179,8 @@ def run_wire(params: LFCParams, *, duration: float, attack: list | str = "none",
                          "integrates the frequency it is told): attack dw_meas instead "
                          "(lfc.wire.attacks.from_simulate(..., agc='centre'))")
     local = agc == "generator"
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
     n_steps = int(round(duration / dt))
     n_ctrl = -(-n_steps // ratio)
     period = ratio * dt
@@ -196,57 +210,73 @@ def run_wire(params: LFCParams, *, duration: float, attack: list | str = "none",
         j = clock["j"]
         return {**report, **policy.report(j, (j * ratio) * dt, period, report)}
 
+    state = {"x": np.zeros(5), "last": {"pc": 0.0, "wref": 0.0, "ace": 0.0}}
+    xs = np.zeros((n_steps + 1, 5))
+    trips = np.zeros(n_steps + 1, np.int64)
+    g = np.zeros(1)          # the control centre's AGC integrator (pu; agc="centre")
+    side, centre_rows, log = {}, {}, []
+    u_col, flag_col = CTRL_COLUMNS.index("u_ref"), CTRL_COLUMNS.index("flags")
+
+    def generate(j: int, lateness: float) -> None:
+        """The generator at control sample j: take the command, filter, hold it on
+        the plant for one period, watch the relays, publish the report."""
+        x, k0 = state["x"], j * ratio
+        got = outstation.take()
+        link = 1
+        if got is not None and got[1] == j % 65536:
+            state["last"], link = got[0], 0
+        last = state["last"]
+        gen.receive(j, last["pc"], last["wref"], last["ace"])
+        y0, y1 = x[3] + gen.noise[j, 0], x[4] + gen.noise[j, 1]
+        u = gen.step(j, x, float(p[k0]))
+        flags, u_ref = int(gen.ctrl[j, flag_col]), float(gen.ctrl[j, u_col])
+        bits = 0
+        for k in range(k0, min(k0 + ratio, n_steps)):
+            x = A @ x + Bu[:, 0] * u + Bl[:, 0] * p[k]
+            xs[k + 1] = x
+            trips[k + 1] = relay_sample((k + 1) * dt, x[3], x[4], limits, delays, start, due)
+            bits |= int(trips[k + 1])
+        state["x"] = x
+        outstation.publish({"seq": j % 65536, "dw_meas": y0, "rocof_meas": y1,
+                            "pc_received": last["pc"], "u_ref": u_ref, "u": u, "flags": flags,
+                            "trips": bits, "link": link})
+        side[j] = (last["pc"], u, link, 1e3 * lateness)
+
+    def send(j: int) -> None:
+        t0 = _now()
+        centre.send({"pc": g[0], "wref": 0.0, "ace": 0.0}, j)
+        centre_rows[j] = [g[0], 1e3 * (_now() - t0), math.nan]
+
+    def read(j: int) -> None:
+        t0 = _now()
+        rep = centre.poll()
+        centre_rows[j][2] = 1e3 * (_now() - t0)
+        if not local:
+            agc_step(g, params.k_i * period, 0.0, rep["dw_meas"], 0.0, 0.0, anti_windup,
+                     rep["u_ref"], rep["u"])
+        if rep["flags"] & ALARM_BITS or rep["link"]:
+            log.append((tc[j], centre_rows[j][0], rep["pc_received"], rep["u"],
+                        ";".join(binding_names(rep["flags"])) if rep["flags"] & ACTIVE else "",
+                        rep["link"]))
+
     try:
         port = loop.run(outstation.start())
         relay = transport.Relay(port, transport.Codec, on_command, on_report)
         centre = transport.Centre(loop.run(relay.start()), loop)
-        x = np.zeros(5)
-        xs = np.zeros((n_steps + 1, 5))
-        trips = np.zeros(n_steps + 1, np.int64)
-        g = np.zeros(1)          # the control centre's AGC integrator (pu; agc="centre")
-        last = {"pc": 0.0, "wref": 0.0, "ace": 0.0}
-        rows, log = [], []
-        u_col, flag_col = CTRL_COLUMNS.index("u_ref"), CTRL_COLUMNS.index("flags")
-        for j in range(n_ctrl):
-            k0 = j * ratio
-            sent = g[0]
-            t0 = _now()
-            centre.send({"pc": sent, "wref": 0.0, "ace": 0.0}, j)
-            write_ms = 1e3 * (_now() - t0)
-            got = outstation.take()
-            link = 1
-            if got is not None and got[1] == j % 65536:
-                last, link = got[0], 0
-            gen.receive(j, last["pc"], last["wref"], last["ace"])
-            y0, y1 = x[3] + gen.noise[j, 0], x[4] + gen.noise[j, 1]
-            u = gen.step(j, x, float(p[k0]))
-            flags, u_ref = int(gen.ctrl[j, flag_col]), float(gen.ctrl[j, u_col])
-            bits = 0
-            for k in range(k0, min(k0 + ratio, n_steps)):
-                x = A @ x + Bu[:, 0] * u + Bl[:, 0] * p[k]
-                xs[k + 1] = x
-                trips[k + 1] = relay_sample((k + 1) * dt, x[3], x[4], limits, delays, start,
-                                            due)
-                bits |= int(trips[k + 1])
-            outstation.publish({"seq": j % 65536, "dw_meas": y0, "rocof_meas": y1,
-                                "pc_received": last["pc"], "u_ref": u_ref, "u": u, "flags": flags,
-                                "trips": bits, "link": link})
-            t0 = _now()
-            rep = centre.poll()
-            read_ms = 1e3 * (_now() - t0)
-            if not local:
-                agc_step(g, params.k_i * period, 0.0, rep["dw_meas"], 0.0, 0.0, anti_windup,
-                         rep["u_ref"], rep["u"])
-            rows.append((tc[j], sent, last["pc"], u, link, write_ms, read_ms))
-            if rep["flags"] & ALARM_BITS or rep["link"]:
-                log.append((tc[j], sent, rep["pc_received"], rep["u"],
-                            ";".join(binding_names(rep["flags"]))
-                            if rep["flags"] & ACTIVE else "", rep["link"]))
+        if mode == "lockstep":
+            for j in range(n_ctrl):
+                send(j)
+                generate(j, 0.0)
+                read(j)
+        else:
+            _realtime(n_ctrl, period, send, generate, read)
         centre.close()
         loop.run(relay.stop())
         loop.run(outstation.stop())
     finally:
         loop.close()
+    rows = [(tc[j], centre_rows[j][0], *side[j][:3], centre_rows[j][1], centre_rows[j][2],
+             side[j][3]) for j in range(n_ctrl)]
     trace = pd.DataFrame({"t": t})
     for i, state in enumerate(STATES):
         trace[state] = xs[:, i]
@@ -257,15 +287,50 @@ def run_wire(params: LFCParams, *, duration: float, attack: list | str = "none",
                 "control_period": control_period, "seed": seed, "noise_std": list(noise_std),
                 "scc": repr(scc), "protocol": protocol, "attack": repr(policy.spec),
                 "attack_name": name, "filter": "none" if scc is None else scc.method,
-                "load": repr(load), "anti_windup": anti_windup, "agc": agc}
+                "load": repr(load), "anti_windup": anti_windup, "agc": agc, "mode": mode}
     sim = result(trace, tc, gen.ctrl, trip_rows, scc, settings)
     exchanges = pd.DataFrame(rows, columns=["t", "sent", "received", "applied", "link",
-                                            "write_ms", "read_ms"])
+                                            "write_ms", "read_ms", "late_ms"])
     alarm_log = pd.DataFrame(log, columns=["t", "sent", "reported_received",
                                            "reported_applied", "binding", "link"])
     return WireResult(sim, exchanges, alarm_log, relay.log, settings)
 
 
 def _now() -> float:
-    import time
     return time.perf_counter()
+
+
+def _realtime(n_ctrl: int, period: float, send, generate, read) -> None:
+    """The two sides on the wall clock: the generator (a thread) at ``t0 + j
+    period``, the control centre half a period before, reading the last report
+    and then sending the next command; a side that wakes up late does its work
+    late (the lateness is recorded), a command that has not arrived is not
+    waited for (the generator holds)."""
+    t0 = _now() + 0.05
+    failed: list[BaseException] = []
+
+    def generator() -> None:
+        try:
+            for j in range(n_ctrl):
+                _sleep_until(t0 + j * period)
+                generate(j, _now() - (t0 + j * period))
+        except BaseException as err:          # reported in the caller's thread
+            failed.append(err)
+
+    thread = threading.Thread(target=generator, name="lfc-wire-generator")
+    thread.start()
+    for j in range(n_ctrl):
+        _sleep_until(t0 + (j - 0.5) * period)
+        if j > 0:
+            read(j - 1)
+        send(j)
+    thread.join()
+    if failed:
+        raise failed[0]
+    read(n_ctrl - 1)
+
+
+def _sleep_until(when: float) -> None:
+    delay = when - _now()
+    if delay > 0:
+        time.sleep(delay)
