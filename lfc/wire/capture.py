@@ -10,8 +10,11 @@ recognise it; the run itself used ports the kernel chose on 127.0.0.1):
 leg                 from                        to
 ==================  ==========================  ============================
 centre - relay      control centre 10.0.0.1     relay 10.0.0.2:PORT
-relay - generator   relay 10.0.0.2              generator 10.0.0.3:PORT
+relay - generator   relay 10.0.0.2              generator 10.0.0.(3 + area):PORT
 ==================  ==========================  ============================
+
+(client ports 40001 + 2 area and 40002 + 2 area: one conversation per area and
+leg).
 
 Every frame is one TCP segment (sequence and acknowledgement numbers follow the
 bytes sent), stamped with the wall-clock time it crossed the relay.  Written
@@ -22,17 +25,19 @@ from __future__ import annotations
 
 from pathlib import Path
 
-CENTRE, RELAY, GENERATOR = "10.0.0.1", "10.0.0.2", "10.0.0.3"
-CLIENT_PORTS = {"centre>relay": 40001, "relay>generator": 40002}
+CENTRE, RELAY = "10.0.0.1", "10.0.0.2"
 BACK = {"centre>relay": "relay>centre", "relay>centre": "centre>relay",
         "relay>generator": "generator>relay", "generator>relay": "relay>generator"}
 
 
-def _legs(port: int) -> dict[str, tuple[str, str, int, int]]:
-    return {"centre>relay": (CENTRE, RELAY, 40001, port),
-            "relay>centre": (RELAY, CENTRE, port, 40001),
-            "relay>generator": (RELAY, GENERATOR, 40002, port),
-            "generator>relay": (GENERATOR, RELAY, port, 40002)}
+def generator_address(area: int) -> str:
+    return f"10.0.0.{3 + area}"
+
+
+def _legs(port: int, area: int) -> dict[str, tuple[str, str, int, int]]:
+    gen, c, r = generator_address(area), 40001 + 2 * area, 40002 + 2 * area
+    return {"centre>relay": (CENTRE, RELAY, c, port), "relay>centre": (RELAY, CENTRE, port, c),
+            "relay>generator": (RELAY, gen, r, port), "generator>relay": (gen, RELAY, port, r)}
 
 
 def _protocol(protocol: str):
@@ -40,37 +45,39 @@ def _protocol(protocol: str):
     return _transport(protocol)
 
 
-def write_pcap(frames: list[tuple[float, str, bytes]], path: str | Path,
+def write_pcap(frames: list[tuple[float, str, bytes, int]], path: str | Path,
                protocol: str = "modbus", epoch: float = 0.0) -> Path:
-    """Write ``frames`` (time s, leg, bytes) of a run over ``protocol`` to ``path``
-    (pcap); times are offset so the first frame is at ``epoch`` s.  Returns the
-    path."""
+    """Write ``frames`` (time s, leg, bytes, area: :attr:`lfc.wire.run.WireResult.frames`)
+    of a run over ``protocol`` to ``path`` (pcap); times are offset so the first
+    frame is at ``epoch`` s.  Returns the path."""
     from scapy.layers.inet import IP, TCP
     from scapy.layers.l2 import Ether
     from scapy.utils import wrpcap
 
     if not frames:
         raise ValueError("no frames to capture")
-    legs = _legs(_protocol(protocol).PORT)
+    port = _protocol(protocol).PORT
     t0 = frames[0][0]
-    seq = {leg: 1000 for leg in legs}
+    seq: dict[tuple[str, int], int] = {}
     packets = []
-    for t, leg, data in frames:
-        src, dst, sport, dport = legs[leg]
+    for t, leg, data, area in frames:
+        src, dst, sport, dport = _legs(port, area)[leg]
+        mine, theirs = seq.setdefault((leg, area), 1000), seq.setdefault((BACK[leg], area), 1000)
         pkt = (Ether() / IP(src=src, dst=dst) /
-               TCP(sport=sport, dport=dport, flags="PA", seq=seq[leg], ack=seq[BACK[leg]]) / data)
+               TCP(sport=sport, dport=dport, flags="PA", seq=mine, ack=theirs) / data)
         pkt.time = epoch + (t - t0)
-        seq[leg] += len(data)
+        seq[leg, area] = mine + len(data)
         packets.append(pkt)
     path = Path(path)
     wrpcap(str(path), packets)
     return path
 
 
-def read_commands(path: str | Path, protocol: str = "modbus") -> list[tuple[dict, int]]:
-    """Every command the generator received, ``(values, seq)``, read back from a
-    capture: Modbus/TCP with scapy's own dissector (function-16 writes), DNP3 with
-    dnp3py's link-frame parser (the frame's CRCs checked)."""
+def read_commands(path: str | Path, protocol: str = "modbus",
+                  area: int = 0) -> list[tuple[dict, int]]:
+    """Every command ``area``'s generator received, ``(values, seq)``, read back
+    from a capture: Modbus/TCP with scapy's own dissector (function-16 writes),
+    DNP3 with dnp3py's link-frame parser (the frame's CRCs checked)."""
     from scapy.layers.inet import IP, TCP
     from scapy.utils import rdpcap
 
@@ -81,7 +88,8 @@ def read_commands(path: str | Path, protocol: str = "modbus") -> list[tuple[dict
         from lfc.wire.registers import read_command
     out = []
     for pkt in rdpcap(str(path)):
-        if TCP in pkt and pkt[IP].dst == GENERATOR and pkt[TCP].dport == transport.PORT:
+        if TCP in pkt and pkt[IP].dst == generator_address(area) \
+                and pkt[TCP].dport == transport.PORT:
             if protocol == "modbus":
                 layer = pkt[TCP].payload.payload          # the ADU's PDU
                 if getattr(layer, "funcCode", None) == 16:

@@ -42,13 +42,15 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from lfc.engine import CTRL_COLUMNS, GeneratorSide, agc_step, sample_signal
+from lfc.engine import CTRL_COLUMNS, GeneratorSide, agc_step, check_area_keys, sample_signal
+from lfc.filters import SafetyFilter
 from lfc.filters.base import ACTIVE, ALARM_BITS, binding_names
+from lfc.filters.coupled import CoupledFilter
 from lfc.model import STATES, LFCParams
-from lfc.multiarea import as_grid, discretize_grid
+from lfc.multiarea import N_AREA_STATES, MultiAreaParams, as_grid, discretize_grid
 from lfc.relays import RELAY_NAMES, relay_sample, relays_or_default
 from lfc.simulate import SimResult, check_timing, result
-from lfc.filters import SafetyFilter
+from lfc.simulate_multiarea import MultiAreaResult, area_filter, multiarea_result
 from lfc.wire.attacks import WireAttack
 PROTOCOLS = ("modbus", "dnp3")
 AGC = ("generator", "centre")
@@ -72,26 +74,28 @@ class WireResult:
 
     Attributes
     ----------
-    sim : SimResult
-        The generator's side as :func:`lfc.simulate` reports it (trace, controls,
-        trips, the filter's alarms).
+    sim : SimResult or MultiAreaResult
+        The generator side(s) as :func:`lfc.simulate` reports them (trace,
+        controls, trips, the filter's alarms).
     exchanges : DataFrame
-        One row per control period: ``t`` (s), ``sent`` (the command the centre
-        wrote, pu), ``received`` (what the generator got, pu), ``applied`` (pu),
-        ``link`` (1: no command arrived, the last one was held),
+        One row per control period and area: ``t`` (s), ``area``, ``sent`` (the
+        command the centre wrote, pu), ``received`` (what the generator got, pu),
+        ``applied`` (pu), ``link`` (1: no command arrived, the last one was held),
         ``write_ms`` and ``read_ms`` (round trips through the relay, wall clock),
         ``late_ms`` (real time: how late the generator's tick woke up).
     alarm_log : DataFrame
-        The operator's view, one row per period whose report carries an alarm:
-        ``t``, ``sent`` (the command field ``pc`` it wrote), ``reported_received``
-        (that field as the generator reports it arrived), ``reported_applied``,
-        ``binding`` (the filter's binding constraints), ``link``.
-    frames : list of (float, str, bytes)
-        Every Modbus/TCP frame on both legs (:attr:`lfc.wire.modbus.Relay.log`).
+        The operator's view, one row per period and area whose report carries an
+        alarm: ``t``, ``area``, ``sent`` (the command field ``pc`` it wrote),
+        ``reported_received`` (that field as the generator reports it arrived),
+        ``reported_applied``, ``binding`` (the filter's binding constraints),
+        ``link``.
+    frames : list of (float, str, bytes, int)
+        Every frame on both legs of every area's relay: wall-clock time (s), leg
+        (:attr:`lfc.wire.relay.Relay.log`), bytes, area.
     settings : dict
     """
 
-    sim: SimResult
+    sim: SimResult | MultiAreaResult
     exchanges: pd.DataFrame
     alarm_log: pd.DataFrame
     frames: list
@@ -99,170 +103,229 @@ class WireResult:
 
     @property
     def tripped(self) -> bool:
-        return not self.sim.trips.empty
+        return self.sim.tripped if isinstance(self.sim, MultiAreaResult) else \
+            not self.sim.trips.empty
 
-    def forensics(self) -> dict:
-        """The operator's estimate of the attack from the alarm log
+    def forensics(self, area: int = 0) -> dict:
+        """The operator's estimate of the attack on ``area`` from the alarm log
         (:func:`lfc.wire.forensics.estimate_attack`)."""
         from lfc.wire.forensics import estimate_attack
-        return estimate_attack(self.alarm_log, self.exchanges.sent.to_numpy(),
+        return estimate_attack(self.alarm_log[self.alarm_log.area == area],
+                               self.exchanges[self.exchanges.area == area].sent.to_numpy(),
                                self.settings["control_period"])
 
     def table(self) -> pd.DataFrame:
-        """The outcome in one row: trips, alarms, largest |Δω| and ROCOF, the
-        exchanges' median and 99th-percentile round trips and the generator's
-        99th-percentile lateness (ms, real time)."""
-        tr, ex = self.sim.trace, self.exchanges
+        """The outcome in one row: trips, alarms, largest |Δω| and ROCOF (over the
+        areas), the exchanges' median and 99th-percentile round trips and the
+        generator's 99th-percentile lateness (ms, real time)."""
+        ex = self.exchanges
+        areas = self.sim.areas if isinstance(self.sim, MultiAreaResult) else (self.sim,)
+        trips = pd.concat([a.trips for a in areas]).sort_values("t")
         return pd.DataFrame([{
             "protocol": self.settings["protocol"], "agc": self.settings["agc"],
             "attack": self.settings["attack_name"],
             "filter": self.settings["filter"], "tripped": self.tripped,
-            "first_trip": ("" if self.sim.trips.empty else
-                           f"{self.sim.trips.relay.iat[0]} at {self.sim.trips.t.iat[0]:.2f} s"),
+            "first_trip": "" if trips.empty else
+            f"{trips.relay.iat[0]} at {trips.t.iat[0]:.2f} s",
             "alarms": len(self.alarm_log), "link_lost": int(ex.link.sum()),
-            "max |dw| (pu)": float(tr.dw_meas.abs().max()),
-            "max |rocof| (pu/s)": float(tr.rocof_meas.abs().max()),
+            "max |dw| (pu)": max(float(a.trace.dw_meas.abs().max()) for a in areas),
+            "max |rocof| (pu/s)": max(float(a.trace.rocof_meas.abs().max()) for a in areas),
             "write median (ms)": float(ex.write_ms.median()),
             "read median (ms)": float(ex.read_ms.median()),
             "write p99 (ms)": float(ex.write_ms.quantile(0.99)),
             "late p99 (ms)": float(ex.late_ms.quantile(0.99))}])
 
 
-def run_wire(params: LFCParams, *, duration: float, attack: list | str = "none",
-             scc: SafetyFilter | None = None, protocol: str = "modbus", load=None,
-             noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0, dt: float = 0.001,
-             control_period: float = 0.01, relays=None, anti_windup: bool = False,
-             agc: str = "generator", mode: str = "lockstep") -> WireResult:
-    """Run one area over the wire in lockstep (module docstring).
+def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
+             attack: list | str | dict = "none", scc=None, protocol: str = "modbus",
+             load=None, noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0,
+             dt: float = 0.001, control_period: float = 0.01, relays=None,
+             anti_windup: bool = False, agc: str = "generator", mode: str = "lockstep",
+             feedforward: bool | None = None) -> WireResult:
+    """Run one area, or every area of a grid, over the wire (module docstring).
 
     Parameters
     ----------
-    params : LFCParams
-        The area (plant and design model).
+    params : LFCParams or MultiAreaParams
+        The area, or the grid (plant and design model): one outstation, relay and
+        control-centre connection per area.
     duration : float
         Simulated time (s).
-    attack : list of dict or str
+    attack : list of dict, str or dict
         The man in the middle's operations, or a name of
-        :data:`lfc.wire.attacks.ATTACKS` (``"fig4"``, ``"fig5"``, ...).
-    scc : SafetyFilter or None
-        The generator's filter.
+        :data:`lfc.wire.attacks.ATTACKS` (``"fig4"``, ``"fig5"``, ...); for a grid
+        ``{area: operations}`` (a list or a name alone attacks area 0).
+    scc : SafetyFilter, None or dict
+        The generator's filter; for a grid ``{area: "paper" | "certified" |
+        filter}`` (:func:`lfc.simulate_multiarea.area_filter`; the coupled
+        certificate reads the whole grid and does not travel over one area's link).
     protocol : str
         ``"modbus"`` (Modbus/TCP) or ``"dnp3"``.
     load, noise_std, seed, dt, control_period, relays, anti_windup
-        As in :func:`lfc.simulate` (``anti_windup``: the integrator, wherever it
-        runs, does not integrate while the generator's filter holds against it).
+        As in :func:`lfc.simulate` (``load``: ``{area: signal}`` for a grid;
+        ``anti_windup``: the integrator, wherever it runs, does not integrate
+        while the generator's filter holds against it).
     agc : str
         Where the integrator runs: ``"generator"`` (default, the paper's local
-        controller) or ``"centre"`` (module docstring).
+        controller; a grid's area AGC, on its metered tie-line export) or
+        ``"centre"`` (one area only; module docstring).
     mode : str
         ``"lockstep"`` (default: the plant advances one control period per
         exchanged command) or ``"realtime"`` (the plant at the wall clock: the
         generator ticks every control period whatever has arrived, the centre
         reads and writes half a period before; a run takes ``duration`` s).
+    feedforward : bool, optional
+        Give each filter its area's true net disturbance (load plus tie-line
+        export), as :func:`lfc.simulate` does by default for a grid (True) and not
+        for one area (False): the default follows it.
 
     Returns
     -------
     WireResult
     """
-    if not isinstance(params, LFCParams):
-        raise ValueError(f"params must be an LFCParams (one area), got {type(params).__name__}")
+    if not isinstance(params, (LFCParams, MultiAreaParams)):
+        raise ValueError(f"params must be an LFCParams (one area) or a MultiAreaParams, got "
+                         f"{type(params).__name__}")
     if protocol not in PROTOCOLS:
         raise ValueError(f"protocol must be one of {PROTOCOLS}, got {protocol!r}")
-    ratio = check_timing(duration, dt, control_period)
-    relays = relays_or_default(relays)
-    name = attack if isinstance(attack, str) else "custom"
-    policy = WireAttack(attack)
     if agc not in AGC:
         raise ValueError(f"agc must be one of {AGC}, got {agc!r}")
-    if agc == "centre" and any(op.get("field") == "wref" for op in policy.ops):
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+    single = isinstance(params, LFCParams)
+    grid = as_grid(params)
+    n_a = grid.n_areas
+    if not single and agc == "centre":
+        raise ValueError("agc='centre' is for one area: a grid's AGC integrates its area's "
+                         "tie-line export, metered at the generator side (agc='generator')")
+    ratio = check_timing(duration, dt, control_period)
+    relays = relays_or_default(relays)
+    period = ratio * dt
+    attacks = attack if isinstance(attack, dict) else {0: attack}
+    check_area_keys(attacks, n_a, "attack")
+    policies = [WireAttack(attacks.get(a, [])) for a in range(n_a)]
+    local = agc == "generator"
+    if not local and any(op.get("field") == "wref" for op in policies[0].ops):
         raise ValueError("attack: with agc='centre' no reference is sent (the centre's AGC "
                          "integrates the frequency it is told): attack dw_meas instead "
                          "(lfc.wire.attacks.from_simulate(..., agc='centre'))")
-    local = agc == "generator"
-    if mode not in MODES:
-        raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+    if single:
+        filters = {0: scc}
+        if scc is not None and not isinstance(scc, SafetyFilter):
+            raise ValueError(f"scc must be a SafetyFilter or None, got {scc!r}")
+        loads = {0: load}
+    else:
+        filters = {a: area_filter(grid, a, f, relays, period)
+                   for a, f in check_area_keys(scc, n_a, "scc").items()}
+        if any(isinstance(f, CoupledFilter) for f in filters.values()):
+            raise ValueError("scc: the coupled certificate reads the whole grid's state, not "
+                             "what one area's link carries; give per-area filters")
+        loads = check_area_keys(load, n_a, "load")
     n_steps = int(round(duration / dt))
     n_ctrl = -(-n_steps // ratio)
-    period = ratio * dt
     t = np.arange(n_steps + 1) * dt
     tc = np.arange(n_ctrl) * period
-    gen = GeneratorSide(params, scc, None, noise_std, seed, tc, None, None, False, period,
-                        k_agc=None if local else (0.0, 0.0), network=True,
-                        anti_windup=anti_windup and local)
-    A, Bu, Bl = discretize_grid(as_grid(params), dt)
-    p = sample_signal(load, t, "load")
+    k_freq, k_tie = grid.agc_gains()
+    feedforward = (not single) if feedforward is None else feedforward
+    gens = [GeneratorSide(grid.areas[a], filters.get(a), None, noise_std,
+                          seed if a == 0 else (seed, a), tc, None, None,
+                          feedforward and filters.get(a) is not None, period,
+                          k_agc=(k_freq[a], k_tie[a]) if local else (0.0, 0.0), network=True,
+                          anti_windup=anti_windup and local)
+            for a in range(n_a)]
+    A, Bu, Bl = discretize_grid(grid, dt)
+    inc, m = grid.incidence(), N_AREA_STATES
+    p = np.column_stack([sample_signal(loads.get(a), t, f"load[{a}]") for a in range(n_a)])
     limits, delays = relays.arrays()
-    start, due = np.full(3, np.nan), np.zeros(3)
-    relay_sample(0.0, 0.0, 0.0, limits, delays, start, due)
+    start, due = np.full((n_a, 3), np.nan), np.zeros((n_a, 3))
+    for a in range(n_a):
+        relay_sample(0.0, 0.0, 0.0, limits, delays, start[a], due[a])
 
     transport = _transport(protocol)
     loop = transport.EventLoop()
-    outstation = transport.Outstation()
-    clock = {"j": -1}
+    stations = [transport.Outstation() for _ in range(n_a)]
+    clocks = [-1] * n_a
 
-    def on_command(values, seq):
-        clock["j"] += 1
-        j = clock["j"]
-        out = policy.command(j, (j * ratio) * dt, period, values)
-        return None if out is None else (out, seq)
+    def hooks(a: int):
+        def on_command(values, seq):
+            clocks[a] += 1
+            j = clocks[a]
+            out = policies[a].command(j, (j * ratio) * dt, period, values)
+            return None if out is None else (out, seq)
 
-    def on_report(report):
-        j = clock["j"]
-        return {**report, **policy.report(j, (j * ratio) * dt, period, report)}
+        def on_report(report):
+            j = clocks[a]
+            return {**report, **policies[a].report(j, (j * ratio) * dt, period, report)}
+        return on_command, on_report
 
-    state = {"x": np.zeros(5), "last": {"pc": 0.0, "wref": 0.0, "ace": 0.0}}
-    xs = np.zeros((n_steps + 1, 5))
-    trips = np.zeros(n_steps + 1, np.int64)
+    state = {"x": np.zeros(A.shape[0]),
+             "last": [{"pc": 0.0, "wref": 0.0, "ace": 0.0} for _ in range(n_a)]}
+    xs = np.zeros((n_steps + 1, A.shape[0]))
+    trips = np.zeros((n_steps + 1, n_a), np.int64)
     g = np.zeros(1)          # the control centre's AGC integrator (pu; agc="centre")
     side, centre_rows, log = {}, {}, []
     u_col, flag_col = CTRL_COLUMNS.index("u_ref"), CTRL_COLUMNS.index("flags")
 
     def generate(j: int, lateness: float) -> None:
-        """The generator at control sample j: take the command, filter, hold it on
-        the plant for one period, watch the relays, publish the report."""
+        """Every generator at control sample j: take the command, filter, then the
+        grid holds every command for one period; relays watched, reports published."""
         x, k0 = state["x"], j * ratio
-        got = outstation.take()
-        link = 1
-        if got is not None and got[1] == j % 65536:
-            state["last"], link = got[0], 0
-        last = state["last"]
-        gen.receive(j, last["pc"], last["wref"], last["ace"])
-        y0, y1 = x[3] + gen.noise[j, 0], x[4] + gen.noise[j, 1]
-        u = gen.step(j, x, float(p[k0]))
-        flags, u_ref = int(gen.ctrl[j, flag_col]), float(gen.ctrl[j, u_col])
-        bits = 0
+        u, reports = np.zeros(n_a), []
+        for a, gen in enumerate(gens):
+            got = stations[a].take()
+            link = 1
+            if got is not None and got[1] == j % 65536:
+                state["last"][a], link = got[0], 0
+            last = state["last"][a]
+            gen.receive(j, last["pc"], last["wref"], last["ace"])
+            tie = 0.0
+            for line in range(inc.shape[1]):
+                tie += inc[a, line] * x[m * n_a + line]
+            x_a = x[m * a:m * (a + 1)]
+            y0, y1 = x_a[3] + gen.noise[j, 0], x_a[4] + gen.noise[j, 1]
+            u[a] = gen.step(j, x_a, float(p[k0, a] + tie), tie)
+            reports.append({"seq": j % 65536, "dw_meas": y0, "rocof_meas": y1,
+                            "pc_received": last["pc"], "u_ref": float(gen.ctrl[j, u_col]),
+                            "u": u[a], "flags": int(gen.ctrl[j, flag_col]), "link": link})
+            side[j, a] = (last["pc"], u[a], link, 1e3 * lateness)
+        bits = np.zeros(n_a, np.int64)
         for k in range(k0, min(k0 + ratio, n_steps)):
-            x = A @ x + Bu[:, 0] * u + Bl[:, 0] * p[k]
+            x = A @ x + Bu @ u + Bl @ p[k]
             xs[k + 1] = x
-            trips[k + 1] = relay_sample((k + 1) * dt, x[3], x[4], limits, delays, start, due)
-            bits |= int(trips[k + 1])
+            for a in range(n_a):
+                trips[k + 1, a] = relay_sample((k + 1) * dt, x[m * a + 3], x[m * a + 4], limits,
+                                               delays, start[a], due[a])
+                bits[a] |= trips[k + 1, a]
         state["x"] = x
-        outstation.publish({"seq": j % 65536, "dw_meas": y0, "rocof_meas": y1,
-                            "pc_received": last["pc"], "u_ref": u_ref, "u": u, "flags": flags,
-                            "trips": bits, "link": link})
-        side[j] = (last["pc"], u, link, 1e3 * lateness)
+        for a, report in enumerate(reports):
+            stations[a].publish({**report, "trips": int(bits[a])})
 
     def send(j: int) -> None:
-        t0 = _now()
-        centre.send({"pc": g[0], "wref": 0.0, "ace": 0.0}, j)
-        centre_rows[j] = [g[0], 1e3 * (_now() - t0), math.nan]
+        for a, centre in enumerate(centres):
+            t0 = _now()
+            sent = g[0] if not local else 0.0
+            centre.send({"pc": sent, "wref": 0.0, "ace": 0.0}, j)
+            centre_rows[j, a] = [sent, 1e3 * (_now() - t0), math.nan]
 
     def read(j: int) -> None:
-        t0 = _now()
-        rep = centre.poll()
-        centre_rows[j][2] = 1e3 * (_now() - t0)
-        if not local:
-            agc_step(g, params.k_i * period, 0.0, rep["dw_meas"], 0.0, 0.0, anti_windup,
-                     rep["u_ref"], rep["u"])
-        if rep["flags"] & ALARM_BITS or rep["link"]:
-            log.append((tc[j], centre_rows[j][0], rep["pc_received"], rep["u"],
-                        ";".join(binding_names(rep["flags"])) if rep["flags"] & ACTIVE else "",
-                        rep["link"]))
+        for a, centre in enumerate(centres):
+            t0 = _now()
+            rep = centre.poll()
+            centre_rows[j, a][2] = 1e3 * (_now() - t0)
+            if not local:
+                agc_step(g, k_freq[0] * period, 0.0, rep["dw_meas"], 0.0, 0.0, anti_windup,
+                         rep["u_ref"], rep["u"])
+            if rep["flags"] & ALARM_BITS or rep["link"]:
+                log.append((tc[j], a, centre_rows[j, a][0], rep["pc_received"], rep["u"],
+                            ";".join(binding_names(rep["flags"])) if rep["flags"] & ACTIVE
+                            else "", rep["link"]))
 
+    relays_, centres = [], []
     try:
-        port = loop.run(outstation.start())
-        relay = transport.Relay(port, transport.Codec, on_command, on_report)
-        centre = transport.Centre(loop.run(relay.start()), loop)
+        for a in range(n_a):
+            port = loop.run(stations[a].start())
+            relays_.append(transport.Relay(port, transport.Codec, *hooks(a)))
+            centres.append(transport.Centre(loop.run(relays_[a].start()), loop))
         if mode == "lockstep":
             for j in range(n_ctrl):
                 send(j)
@@ -270,30 +333,44 @@ def run_wire(params: LFCParams, *, duration: float, attack: list | str = "none",
                 read(j)
         else:
             _realtime(n_ctrl, period, send, generate, read)
-        centre.close()
-        loop.run(relay.stop())
-        loop.run(outstation.stop())
+        for centre in centres:
+            centre.close()
+        for relay, station in zip(relays_, stations):
+            loop.run(relay.stop())
+            loop.run(station.stop())
     finally:
         loop.close()
-    rows = [(tc[j], centre_rows[j][0], *side[j][:3], centre_rows[j][1], centre_rows[j][2],
-             side[j][3]) for j in range(n_ctrl)]
-    trace = pd.DataFrame({"t": t})
-    for i, state in enumerate(STATES):
-        trace[state] = xs[:, i]
-    trace["p_load"] = p
-    trip_rows = pd.DataFrame([(RELAY_NAMES[r], float(t[k])) for k in np.flatnonzero(trips)
-                              for r in range(3) if trips[k] >> r & 1], columns=["relay", "t"])
-    settings = {"params": vars(params), "relays": vars(relays), "duration": duration, "dt": dt,
-                "control_period": control_period, "seed": seed, "noise_std": list(noise_std),
-                "scc": repr(scc), "protocol": protocol, "attack": repr(policy.spec),
-                "attack_name": name, "filter": "none" if scc is None else scc.method,
-                "load": repr(load), "anti_windup": anti_windup, "agc": agc, "mode": mode}
-    sim = result(trace, tc, gen.ctrl, trip_rows, scc, settings)
-    exchanges = pd.DataFrame(rows, columns=["t", "sent", "received", "applied", "link",
+    rows = [(tc[j], a, centre_rows[j, a][0], *side[j, a][:3], centre_rows[j, a][1],
+             centre_rows[j, a][2], side[j, a][3]) for j in range(n_ctrl) for a in range(n_a)]
+    trip_rows = [pd.DataFrame([(RELAY_NAMES[r], float(t[k])) for k in np.flatnonzero(trips[:, a])
+                               for r in range(3) if trips[k, a] >> r & 1],
+                              columns=["relay", "t"]) for a in range(n_a)]
+    settings = {"params": repr(params), "relays": vars(relays), "duration": duration,
+                "dt": dt, "control_period": control_period, "seed": seed,
+                "noise_std": list(noise_std), "protocol": protocol,
+                "attack": repr([pol.spec for pol in policies]),
+                "attack_name": attack if isinstance(attack, str) else "custom",
+                "filter": ",".join("none" if filters.get(a) is None else
+                                   getattr(filters[a], "method", "?") for a in range(n_a)),
+                "scc": repr(filters), "load": repr(loads), "anti_windup": anti_windup,
+                "agc": agc, "mode": mode, "feedforward": feedforward}
+    states = xs[:, :m * n_a].reshape(n_steps + 1, n_a, m)
+    if single:
+        trace = pd.DataFrame({"t": t})
+        for i, name in enumerate(STATES):
+            trace[name] = states[:, 0, i]
+        trace["p_load"] = p[:, 0]
+        sim = result(trace, tc, gens[0].ctrl, trip_rows[0], scc, settings)
+    else:
+        sim = multiarea_result(grid, t, states, p, xs[:, m * n_a:] @ inc.T, trip_rows, tc,
+                               [gen.ctrl for gen in gens], filters, settings)
+    exchanges = pd.DataFrame(rows, columns=["t", "area", "sent", "received", "applied", "link",
                                             "write_ms", "read_ms", "late_ms"])
-    alarm_log = pd.DataFrame(log, columns=["t", "sent", "reported_received",
+    alarm_log = pd.DataFrame(log, columns=["t", "area", "sent", "reported_received",
                                            "reported_applied", "binding", "link"])
-    return WireResult(sim, exchanges, alarm_log, relay.log, settings)
+    frames = sorted((f + (a,) for a, relay in enumerate(relays_) for f in relay.log),
+                    key=lambda f: f[0])
+    return WireResult(sim, exchanges, alarm_log, frames, settings)
 
 
 def _now() -> float:
