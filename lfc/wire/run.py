@@ -34,7 +34,6 @@ relay) is in the result.
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 from dataclasses import dataclass
@@ -42,9 +41,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from lfc.engine import CTRL_COLUMNS, GeneratorSide, agc_step, check_area_keys, sample_signal
+from lfc.engine import GeneratorSide, check_area_keys, sample_signal
 from lfc.filters import SafetyFilter
-from lfc.filters.base import ACTIVE, ALARM_BITS, binding_names
 from lfc.filters.coupled import CoupledFilter
 from lfc.model import STATES, LFCParams
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams, as_grid, discretize_grid
@@ -52,6 +50,7 @@ from lfc.relays import RELAY_NAMES, relay_sample, relays_or_default
 from lfc.simulate import SimResult, check_timing, result
 from lfc.simulate_multiarea import MultiAreaResult, area_filter, multiarea_result
 from lfc.wire.attacks import WireAttack
+from lfc.wire.link import Link
 PROTOCOLS = ("modbus", "dnp3")
 AGC = ("generator", "centre")
 MODES = ("lockstep", "realtime")
@@ -241,54 +240,24 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
     for a in range(n_a):
         relay_sample(0.0, 0.0, 0.0, limits, delays, start[a], due[a])
 
-    transport = _transport(protocol)
-    loop = transport.EventLoop()
-    stations = [transport.Outstation() for _ in range(n_a)]
-    clocks = [-1] * n_a
-
-    def hooks(a: int):
-        def on_command(values, seq):
-            clocks[a] += 1
-            j = clocks[a]
-            out = policies[a].command(j, (j * ratio) * dt, period, values)
-            return None if out is None else (out, seq)
-
-        def on_report(report):
-            j = clocks[a]
-            return {**report, **policies[a].report(j, (j * ratio) * dt, period, report)}
-        return on_command, on_report
-
-    state = {"x": np.zeros(A.shape[0]),
-             "last": [{"pc": 0.0, "wref": 0.0, "ace": 0.0} for _ in range(n_a)]}
+    link = Link(n_a, _transport(protocol), policies, np.arange(n_ctrl) * ratio * dt, period,
+                None if local else k_freq[0] * period, anti_windup)
+    state = {"x": np.zeros(A.shape[0])}
     xs = np.zeros((n_steps + 1, A.shape[0]))
     trips = np.zeros((n_steps + 1, n_a), np.int64)
-    g = np.zeros(1)          # the control centre's AGC integrator (pu; agc="centre")
-    side, centre_rows, log = {}, {}, []
-    u_col, flag_col = CTRL_COLUMNS.index("u_ref"), CTRL_COLUMNS.index("flags")
 
     def generate(j: int, lateness: float) -> None:
         """Every generator at control sample j: take the command, filter, then the
         grid holds every command for one period; relays watched, reports published."""
         x, k0 = state["x"], j * ratio
-        u, reports = np.zeros(n_a), []
+        links = link.deliver(j, gens)
+        u = np.zeros(n_a)
         for a, gen in enumerate(gens):
-            got = stations[a].take()
-            link = 1
-            if got is not None and got[1] == j % 65536:
-                state["last"][a], link = got[0], 0
-            last = state["last"][a]
-            gen.receive(j, last["pc"], last["wref"], last["ace"])
             tie = 0.0
             for line in range(inc.shape[1]):
                 tie += inc[a, line] * x[m * n_a + line]
-            x_a = x[m * a:m * (a + 1)]
-            y0, y1 = x_a[3] + gen.noise[j, 0], x_a[4] + gen.noise[j, 1]
-            u[a] = gen.step(j, x_a, float(p[k0, a] + tie), tie)
-            reports.append({"seq": j % 65536, "dw_meas": y0, "rocof_meas": y1,
-                            "pc_received": last["pc"], "u_ref": float(gen.ctrl[j, u_col]),
-                            "u": u[a], "flags": int(gen.ctrl[j, flag_col]), "link": link})
-            side[j, a] = (last["pc"], u[a], link, 1e3 * lateness)
-        bits = np.zeros(n_a, np.int64)
+            u[a] = gen.step(j, x[m * a:m * (a + 1)], float(p[k0, a] + tie), tie)
+        bits, x_j = np.zeros(n_a, np.int64), x
         for k in range(k0, min(k0 + ratio, n_steps)):
             x = A @ x + Bu @ u + Bl @ p[k]
             xs[k + 1] = x
@@ -297,51 +266,20 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
                                                delays, start[a], due[a])
                 bits[a] |= trips[k + 1, a]
         state["x"] = x
-        for a, report in enumerate(reports):
-            stations[a].publish({**report, "trips": int(bits[a])})
+        for a, gen in enumerate(gens):   # what each measured at the sample
+            link.publish(j, a, gen, x_j[m * a:m * (a + 1)], links[a], bits[a], lateness)
 
-    def send(j: int) -> None:
-        for a, centre in enumerate(centres):
-            t0 = _now()
-            sent = g[0] if not local else 0.0
-            centre.send({"pc": sent, "wref": 0.0, "ace": 0.0}, j)
-            centre_rows[j, a] = [sent, 1e3 * (_now() - t0), math.nan]
-
-    def read(j: int) -> None:
-        for a, centre in enumerate(centres):
-            t0 = _now()
-            rep = centre.poll()
-            centre_rows[j, a][2] = 1e3 * (_now() - t0)
-            if not local:
-                agc_step(g, k_freq[0] * period, 0.0, rep["dw_meas"], 0.0, 0.0, anti_windup,
-                         rep["u_ref"], rep["u"])
-            if rep["flags"] & ALARM_BITS or rep["link"]:
-                log.append((tc[j], a, centre_rows[j, a][0], rep["pc_received"], rep["u"],
-                            ";".join(binding_names(rep["flags"])) if rep["flags"] & ACTIVE
-                            else "", rep["link"]))
-
-    relays_, centres = [], []
     try:
-        for a in range(n_a):
-            port = loop.run(stations[a].start())
-            relays_.append(transport.Relay(port, transport.Codec, *hooks(a)))
-            centres.append(transport.Centre(loop.run(relays_[a].start()), loop))
+        link.open()
         if mode == "lockstep":
             for j in range(n_ctrl):
-                send(j)
+                link.send(j)
                 generate(j, 0.0)
-                read(j)
+                link.read(j)
         else:
-            _realtime(n_ctrl, period, send, generate, read)
-        for centre in centres:
-            centre.close()
-        for relay, station in zip(relays_, stations):
-            loop.run(relay.stop())
-            loop.run(station.stop())
+            _realtime(n_ctrl, period, link.send, generate, link.read)
     finally:
-        loop.close()
-    rows = [(tc[j], a, centre_rows[j, a][0], *side[j, a][:3], centre_rows[j, a][1],
-             centre_rows[j, a][2], side[j, a][3]) for j in range(n_ctrl) for a in range(n_a)]
+        link.close()
     trip_rows = [pd.DataFrame([(RELAY_NAMES[r], float(t[k])) for k in np.flatnonzero(trips[:, a])
                                for r in range(3) if trips[k, a] >> r & 1],
                               columns=["relay", "t"]) for a in range(n_a)]
@@ -364,13 +302,7 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
     else:
         sim = multiarea_result(grid, t, states, p, xs[:, m * n_a:] @ inc.T, trip_rows, tc,
                                [gen.ctrl for gen in gens], filters, settings)
-    exchanges = pd.DataFrame(rows, columns=["t", "area", "sent", "received", "applied", "link",
-                                            "write_ms", "read_ms", "late_ms"])
-    alarm_log = pd.DataFrame(log, columns=["t", "area", "sent", "reported_received",
-                                           "reported_applied", "binding", "link"])
-    frames = sorted((f + (a,) for a, relay in enumerate(relays_) for f in relay.log),
-                    key=lambda f: f[0])
-    return WireResult(sim, exchanges, alarm_log, frames, settings)
+    return WireResult(sim, *link.outcome(n_ctrl), settings)
 
 
 def _now() -> float:
