@@ -60,7 +60,7 @@ def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
                         seed: int = 0, control_period: float = 0.01, step: float = 0.005,
                         stop_on_trip: bool = False, feedforward: bool = True,
                         anti_windup: bool = False, case: GridCase | None = None,
-                        plant: AndesPlant | None = None
+                        plant: AndesPlant | None = None, network=None
                         ) -> MultiAreaResult:
     """Simulate an interconnected grid on ANDES with AGC and filters; the
     arguments and result of :func:`lfc.simulate` (a grid), plus the ones below.
@@ -82,6 +82,9 @@ def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
     plant : AndesPlant, optional
         Instead of ``case``: any ANDES plant (:class:`lfc.testbed.loop.AndesPlant`)
         of ``params.n_areas`` areas; ``loads`` go to its ``set_load``.
+    network : lfc.wire.link.Link, optional
+        Every area's command channels arrive over a network
+        (:func:`lfc.wire.run_wire`; no ``attacks``: the man in the middle attacks).
 
     Returns
     -------
@@ -125,9 +128,10 @@ def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
     gens = [GeneratorSide(area, built.get(a), estimator, noise_std, seed if a == 0 else (seed, a),
                           tc, attacks.get(a, {}).get("pc"), attacks.get(a, {}).get("wref"),
                           feedforward, control_period, ace_attack=attacks.get(a, {}).get("ace"),
-                          k_agc=(float(k_freq[a]), float(k_tie[a])), anti_windup=anti_windup)
+                          k_agc=(float(k_freq[a]), float(k_tie[a])), anti_windup=anti_windup,
+                          network=network is not None)
             for a, area in enumerate(params.areas)]
-    loop = AndesLoop(plant, loads, gens, relays, stop_on_trip)
+    loop = AndesLoop(plant, loads, gens, relays, stop_on_trip, network)
     loop.run(duration, step)
     rows = np.array(loop.rows)
     t = rows[:, 0].round(9)              # ANDES accumulates its time in floating point

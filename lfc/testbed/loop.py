@@ -120,6 +120,11 @@ class AndesLoop:
     stop_on_trip : bool
         End the run at the first trip (:attr:`stopped`); else the relays are
         applied to the logged trace afterwards (:meth:`trips`).
+    network : lfc.wire.link.Link, optional
+        The commands arrive over a network (:mod:`lfc.wire`): at each control
+        sample the control centre writes them, each generator side (built with
+        ``network=True``) receives what arrived, and the reports go back (their
+        trip bits 0: on ANDES the relays are applied to the logged trace).
 
     Attributes
     ----------
@@ -132,8 +137,9 @@ class AndesLoop:
     """
 
     def __init__(self, plant: AndesPlant, loads: dict, gens: list[GeneratorSide],
-                 relays: RelaySettings, stop_on_trip: bool) -> None:
+                 relays: RelaySettings, stop_on_trip: bool, network=None) -> None:
         self.plant, self.loads, self.gens, self.relays = plant, loads, gens, relays
+        self.network = network
         self.bank = (RelayBank(relays, plant.n_areas)
                      if check_flag("stop_on_trip", stop_on_trip) else None)
         self.ss = plant.build()
@@ -206,12 +212,20 @@ class AndesLoop:
             if coupled is not None:     # the grid's state as its design model sees it
                 grid = [0, coupled.grid_state(state[:, :5], state[:, 6]), self.commands,
                         state[:, 5]]
+            net, j = self.network, self.next_j
+            if net is not None:
+                net.send(j)
+                links = net.deliver(j, self.gens)
             for a, gen in enumerate(self.gens):
                 if grid is not None:
                     grid[0] = a
-                u = gen.step(self.next_j, state[a, :5], state[a, 7], state[a, 6], grid)
+                u = gen.step(j, state[a, :5], state[a, 7], state[a, 6], grid)
                 self.commands[a] = u
                 self.plant.actuate(self.ss, a, u)
+            if net is not None:
+                for a, gen in enumerate(self.gens):
+                    net.publish(j, a, gen, state[a, :5], links[a], 0)
+                net.read(j)
             self.next_j += 1
 
 

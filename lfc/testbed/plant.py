@@ -77,7 +77,8 @@ def simulate_microgrid(params: LFCParams, *, duration: float,
                        control_period: float = 0.01, step: float = 0.005,
                        stop_on_trip: bool = False, load_feedforward: bool = False,
                        anti_windup: bool = False, case: MicrogridCase | None = None,
-                       overcurrent: OvercurrentSettings | None = None) -> SimResult:
+                       overcurrent: OvercurrentSettings | None = None,
+                       network=None) -> SimResult:
     """Simulate the closed loop on the ANDES microgrid; the same arguments and
     :class:`~lfc.simulate.SimResult` as :func:`lfc.simulate`, plus the ones below.
 
@@ -98,6 +99,10 @@ def simulate_microgrid(params: LFCParams, *, duration: float,
         Network data; default ``MicrogridCase()``.
     overcurrent : OvercurrentSettings
         Relay of the protected line; default ``OvercurrentSettings()``.
+    network : lfc.wire.link.Link, optional
+        The command channels arrive over a network (:func:`lfc.wire.run_wire`):
+        no ``pc_attack`` or ``wref_attack`` (the man in the middle attacks), no
+        ``fault`` (its breaker's replay would run the network twice).
 
     Returns
     -------
@@ -115,6 +120,9 @@ def simulate_microgrid(params: LFCParams, *, duration: float,
         If ANDES does not converge (with the time and ANDES' reason).
     """
     case = case or MicrogridCase()
+    if network is not None and fault is not None:
+        raise ValueError("fault: not over a network (the breaker's opening is replayed in a "
+                         "second pass, which would run the network twice)")
     n_ctrl = _check_scenario(case, duration, step, control_period, fault, load)
     relays = relays_or_default(relays)
     oc = overcurrent or OvercurrentSettings()
@@ -123,10 +131,10 @@ def simulate_microgrid(params: LFCParams, *, duration: float,
     def run(open_t: float | None) -> tuple[AndesLoop, MicrogridPlant]:
         gen = GeneratorSide(params, scc, estimator, noise_std, seed, tc, pc_attack,
                             wref_attack, load_feedforward, control_period,
-                            anti_windup=anti_windup)
+                            anti_windup=anti_windup, network=network is not None)
         plant = MicrogridPlant(case, fault, OvercurrentRelay(oc), open_t)
         loop = AndesLoop(plant, {} if load is None else {0: load}, [gen], relays,
-                         stop_on_trip)
+                         stop_on_trip, network)
         return loop, plant
 
     loop, plant = run(None)

@@ -235,7 +235,7 @@ class Centre:
     """The control centre's DNP3 master (address 2), connected to ``port`` through
     ``loop`` (an :class:`~lfc.wire.relay.EventLoop`)."""
 
-    def __init__(self, port: int, loop: EventLoop, timeout: float = 2.0) -> None:
+    def __init__(self, port: int, loop: EventLoop, timeout: float = 10.0) -> None:
         from dnp3.master import DefaultSOEHandler, Master, MasterConfig, MasterTcpRunner
         self.loop, self.handler = loop, DefaultSOEHandler()
         self.master = Master(handler=self.handler,

@@ -158,7 +158,7 @@ class Centre:
     """The control centre's Modbus client (a connection to ``port``; ``loop`` is
     not used: the client is synchronous)."""
 
-    def __init__(self, port: int, loop: EventLoop | None = None, timeout: float = 2.0) -> None:
+    def __init__(self, port: int, loop: EventLoop | None = None, timeout: float = 10.0) -> None:
         from pymodbus.client import ModbusTcpClient
         self.client = ModbusTcpClient("127.0.0.1", port=port, timeout=timeout, retries=0)
         if not self.client.connect():

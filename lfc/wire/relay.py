@@ -34,7 +34,7 @@ class EventLoop:
                                        name="lfc-wire")
         self.thread.start()
 
-    def run(self, coro, timeout: float = 10.0):
+    def run(self, coro, timeout: float = 30.0):
         """Run ``coro`` on the loop and wait for its result."""
         return asyncio.run_coroutine_threadsafe(coro, self.loop).result(timeout)
 

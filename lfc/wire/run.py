@@ -45,6 +45,7 @@ from lfc.engine import GeneratorSide, check_area_keys, sample_signal
 from lfc.filters import SafetyFilter
 from lfc.filters.coupled import CoupledFilter
 from lfc.model import STATES, LFCParams
+from lfc.run import _testbed_kind
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams, as_grid, discretize_grid
 from lfc.relays import RELAY_NAMES, relay_sample, relays_or_default
 from lfc.simulate import SimResult, check_timing, result
@@ -182,15 +183,22 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
     -------
     WireResult
     """
-    if not isinstance(params, (LFCParams, MultiAreaParams)):
-        raise ValueError(f"params must be an LFCParams (one area) or a MultiAreaParams, got "
-                         f"{type(params).__name__}")
+    testbed = _testbed_kind(params)
+    if not isinstance(params, (LFCParams, MultiAreaParams)) and testbed not in ("microgrid",
+                                                                                  "grid"):
+        raise ValueError(f"params must be an LFCParams (one area), a MultiAreaParams, a "
+                         f"MicrogridCase or a GridCase, got {type(params).__name__}")
     if protocol not in PROTOCOLS:
         raise ValueError(f"protocol must be one of {PROTOCOLS}, got {protocol!r}")
     if agc not in AGC:
         raise ValueError(f"agc must be one of {AGC}, got {agc!r}")
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+    if testbed is not None:
+        return _on_andes(params, testbed, duration=duration, attack=attack, scc=scc,
+                         protocol=protocol, load=load, noise_std=noise_std, seed=seed,
+                         control_period=control_period, relays=relays,
+                         anti_windup=anti_windup, agc=agc, mode=mode)
     single = isinstance(params, LFCParams)
     grid = as_grid(params)
     n_a = grid.n_areas
@@ -302,6 +310,50 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
     else:
         sim = multiarea_result(grid, t, states, p, xs[:, m * n_a:] @ inc.T, trip_rows, tc,
                                [gen.ctrl for gen in gens], filters, settings)
+    return WireResult(sim, *link.outcome(n_ctrl), settings)
+
+
+def _on_andes(case, kind: str, *, duration: float, attack, scc, protocol: str, load,
+              noise_std, seed: int, control_period: float, relays, anti_windup: bool,
+              agc: str, mode: str) -> WireResult:
+    """:func:`run_wire` on an ANDES case: the microgrid (one area) or a grid (one
+    link per area), in lockstep, the integrator at the generators; the
+    generator sides and their attacks are :func:`lfc.simulate`'s on the case."""
+    if mode != "lockstep":
+        raise ValueError("mode: ANDES runs in lockstep only (it keeps its own time, not the "
+                         "wall clock's)")
+    if agc != "generator":
+        raise ValueError("agc: on ANDES the integrators run at the generators "
+                         "(agc='generator')")
+    from lfc.testbed.fit import design_model
+    from lfc.testbed.grid_fit import grid_design
+    from lfc.testbed.grid_plant import simulate_andes_grid
+    from lfc.testbed.plant import simulate_microgrid
+    n_a = 1 if kind == "microgrid" else case.n_areas
+    attacks = attack if isinstance(attack, dict) else {0: attack}
+    check_area_keys(attacks, n_a, "attack")
+    policies = [WireAttack(attacks.get(a, [])) for a in range(n_a)]
+    n_ctrl = int(np.ceil(duration / control_period - 1e-9))
+    link = Link(n_a, _transport(protocol), policies, np.arange(n_ctrl) * control_period,
+                control_period)
+    common = dict(duration=duration, relays=relays, noise_std=noise_std, seed=seed,
+                  control_period=control_period, anti_windup=anti_windup, case=case,
+                  network=link)
+    design = design_model(case) if kind == "microgrid" else grid_design(case)  # fitted first:
+    try:                                  # an idle connection may be closed by the server
+        link.open()
+        if kind == "microgrid":
+            sim = simulate_microgrid(design, scc=scc, load=load, **common)
+        else:
+            sim = simulate_andes_grid(design, filters=scc, loads=load, **common)
+    finally:
+        link.close()
+    settings = {"plant": repr(case), "duration": duration, "control_period": control_period,
+                "seed": seed, "noise_std": list(noise_std), "protocol": protocol,
+                "attack": repr([pol.spec for pol in policies]),
+                "attack_name": attack if isinstance(attack, str) else "custom",
+                "filter": repr(scc), "load": repr(load), "anti_windup": anti_windup,
+                "agc": agc, "mode": mode}
     return WireResult(sim, *link.outcome(n_ctrl), settings)
 
 
