@@ -305,9 +305,11 @@ def _check_unused(scenarios: pd.DataFrame) -> None:
 
 
 def run_chunk(params: LFCParams, scenarios: pd.DataFrame, duration: float,
-              relays: RelaySettings, dt: float, control_period: float) -> pd.DataFrame:
-    """Simulate every row of ``scenarios`` with the engine; return the metric
-    columns ``METRIC_KEYS`` with the same index."""
+              relays: RelaySettings, dt: float, control_period: float,
+              lanes: bool = True) -> pd.DataFrame:
+    """Simulate every row of ``scenarios`` with the engine (in SIMD lanes where
+    it can, with ``lanes``); return the metric columns ``METRIC_KEYS`` with the
+    same index."""
     check_timing(duration, dt, control_period)
     sc = Scenarios(params, duration=duration, dt=dt, control_period=control_period,
                    relays=relays)
@@ -321,7 +323,7 @@ def run_chunk(params: LFCParams, scenarios: pd.DataFrame, duration: float,
                anti_windup=bool(row.get("anti_windup", False)),
                attacks={0: {channel: signal}} if channel != "load" else None,
                loads={0: signal} if channel == "load" else None)
-    run = sc.run()
+    run = sc.run(lanes=lanes)
     return metrics_frame(run.metrics[:, 0], sc.n_ctrl, scenarios.index)
 
 
@@ -375,7 +377,7 @@ def simulate_table(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
                    relays: RelaySettings | None = None, dt: float = 1e-3,
                    control_period: float = 0.01, executor: Executor | None = None,
                    chunk_size: int = 1000, out: str | Path | None = None,
-                   progress: bool = True) -> pd.DataFrame:
+                   progress: bool = True, lanes: bool = True) -> pd.DataFrame:
     """Simulate every scenario of a table; the same metrics as :func:`lfc.simulate`.
 
     Parameters
@@ -417,6 +419,10 @@ def simulate_table(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
     executor : concurrent.futures.Executor, optional
         Runs the chunks; default a process pool with one worker per core
         (none for a single chunk).
+    lanes : bool
+        Run the rows that allow it in SIMD lanes (:meth:`lfc.engine.Scenarios.run`;
+        the same numbers bit for bit); False runs every row one at a time, the
+        reference the benchmark compares against.
     chunk_size : int
         Scenarios per chunk (vectorized together).
     out : path, optional
@@ -443,6 +449,7 @@ def simulate_table(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
         raise ValueError("out (chunk files) cannot hold 'samples' rows; run them without out")
     check_count("chunk_size", chunk_size)
     check_flag("progress", progress)
+    lanes = check_flag("lanes", lanes)
     late = (scenarios["waveform"] != "none") & (pd.to_numeric(scenarios["start"]) >= duration)
     if late.any():
         warnings.warn(f"{int(late.sum())} row(s) start their signal at or after the run's end "
@@ -453,7 +460,7 @@ def simulate_table(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
     if out is not None:
         check_folder("out", out)
     relays = relays_or_default(relays)
-    args = (params, duration, relays, dt, control_period)
+    args = (params, duration, relays, dt, control_period, lanes)
     chunks = [scenarios.iloc[i:i + chunk_size] for i in range(0, len(scenarios), chunk_size)]
     folder = Path(out) if out is not None else None
     if folder is not None:
@@ -487,13 +494,13 @@ def _execute(todo: list, args: tuple, executor: Executor | None):
             _write_chunk(path, metrics)
         return i, metrics
 
-    params, duration, relays, dt, cp = args
+    params, duration, relays, dt, cp, lanes = args
     if executor is None and len(todo) <= 1:
         for i, chunk, path in todo:
-            yield finish(i, run_chunk(params, chunk, duration, relays, dt, cp), path)
+            yield finish(i, run_chunk(params, chunk, duration, relays, dt, cp, lanes), path)
         return
     if executor is None:   # compiled code and filters once, before the workers fork
-        run_chunk(params, todo[0][1].iloc[:1], duration, relays, dt, cp)
+        run_chunk(params, todo[0][1].iloc[:1], duration, relays, dt, cp, lanes)
         for _, chunk, _ in todo:
             for row in chunk.drop_duplicates(
                     subset=[c for c in FILTER_COLUMNS if c in chunk]).to_dict("records"):
@@ -501,8 +508,8 @@ def _execute(todo: list, args: tuple, executor: Executor | None):
     pool = executor or ProcessPoolExecutor(max_workers=os.cpu_count() or 1)
     wait, futures = True, {}
     try:
-        futures = {pool.submit(run_chunk, params, chunk, duration, relays, dt, cp): (i, path)
-                   for i, chunk, path in todo}
+        futures = {pool.submit(run_chunk, params, chunk, duration, relays, dt, cp, lanes):
+                   (i, path) for i, chunk, path in todo}
         for fut in as_completed(futures):
             i, path = futures[fut]
             yield finish(i, fut.result(), path)

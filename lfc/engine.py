@@ -43,7 +43,7 @@ from lfc.filters.coupled import grid_estimate
 from lfc.filters.dispatch import decide
 from lfc.model import LFCParams
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams, as_grid, discretize_grid
-from lfc.relays import RelaySettings, relay_sample
+from lfc.relays import TIME_TOL, RelaySettings, relay_sample
 from lfc.signals import GRID, N_PARAMS, NONE, SAMPLES, STEP, Signal, value_at
 
 PC, WREF, LOAD, ACE = range(4)      # signal channels (ACE: an attack on the area control error)
@@ -402,6 +402,170 @@ def _lowest_bit(bits: int) -> int:
     return r
 
 
+# -- lanes: one area's scenarios, LANES at a time, the inner loop over scenarios --------
+LANES = 16      # scenarios advanced together: the inner loop's trip count, known to LLVM
+# the rows of a block's lane array z (row r of lane l at z[r * LANES + l])
+(Z_X, Z_START, Z_DUE, Z_PEAK_DW, Z_PEAK_RC, Z_FIRST_T, Z_FIRST_R, Z_ALIVE, Z_U, Z_LOAD,
+ Z_ON, Z_OFF, Z_END) = (0, 5, 8, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20)
+N_Z = 21
+
+
+@inline
+def _lane_steps(k_from: int, k_to: int, dt: float, A: np.ndarray, Bu: np.ndarray,
+                Bl: np.ndarray, z: np.ndarray, limits: np.ndarray, delays: np.ndarray,
+                stop_on_trip: bool) -> None:
+    """Plant steps ``k_from`` to ``k_to`` of the ``LANES`` scenarios in ``z``: the
+    single-area path of :func:`_run` (the plant update and :func:`_watch` without
+    relay noise) written without branches, so that LLVM advances the lanes in
+    SIMD registers.  Each lane computes the same sums in the same order as that
+    path, so its numbers are the same bit for bit; a lane whose ``Z_ALIVE`` is 0
+    (stopped at a trip, or padding) keeps its values."""
+    L = LANES
+    lim0, lim1, lim2 = limits[0], limits[1], limits[2]
+    e0, e1, e2 = delays[0] - TIME_TOL, delays[1] - TIME_TOL, delays[2] - TIME_TOL
+    a00, a01, a02, a03, a04 = A[0, 0], A[0, 1], A[0, 2], A[0, 3], A[0, 4]
+    a10, a11, a12, a13, a14 = A[1, 0], A[1, 1], A[1, 2], A[1, 3], A[1, 4]
+    a20, a21, a22, a23, a24 = A[2, 0], A[2, 1], A[2, 2], A[2, 3], A[2, 4]
+    a30, a31, a32, a33, a34 = A[3, 0], A[3, 1], A[3, 2], A[3, 3], A[3, 4]
+    a40, a41, a42, a43, a44 = A[4, 0], A[4, 1], A[4, 2], A[4, 3], A[4, 4]
+    b0, b1, b2, b3, b4 = Bu[0, 0], Bu[1, 0], Bu[2, 0], Bu[3, 0], Bu[4, 0]
+    l0, l1, l2, l3, l4 = Bl[0, 0], Bl[1, 0], Bl[2, 0], Bl[3, 0], Bl[4, 0]
+    nan = math.nan
+    for k in range(k_from, k_to):
+        t, tn, done = k * dt, (k + 1) * dt, float(k + 1)
+        for l in range(L):
+            x0, x1, x2 = z[Z_X * L + l], z[(Z_X + 1) * L + l], z[(Z_X + 2) * L + l]
+            x3, x4 = z[(Z_X + 3) * L + l], z[(Z_X + 4) * L + l]
+            ua = z[Z_U * L + l]
+            p0 = z[Z_LOAD * L + l] if z[Z_ON * L + l] <= t < z[Z_OFF * L + l] else 0.0
+            u0, u1, u2, u3, u4 = b0 * ua, b1 * ua, b2 * ua, b3 * ua, b4 * ua
+            n0 = a00 * x0 + a01 * x1 + a02 * x2 + a03 * x3 + a04 * x4 + u0 + l0 * p0
+            n1 = a10 * x0 + a11 * x1 + a12 * x2 + a13 * x3 + a14 * x4 + u1 + l1 * p0
+            n2 = a20 * x0 + a21 * x1 + a22 * x2 + a23 * x3 + a24 * x4 + u2 + l2 * p0
+            n3 = a30 * x0 + a31 * x1 + a32 * x2 + a33 * x3 + a34 * x4 + u3 + l3 * p0
+            n4 = a40 * x0 + a41 * x1 + a42 * x2 + a43 * x3 + a44 * x4 + u4 + l4 * p0
+            # the relays (relay_sample): a timer starts when beyond, trips after its delay
+            s0, s1, s2 = z[Z_START * L + l], z[(Z_START + 1) * L + l], z[(Z_START + 2) * L + l]
+            d0, d1, d2 = z[Z_DUE * L + l], z[(Z_DUE + 1) * L + l], z[(Z_DUE + 2) * L + l]
+            s0 = (s0 if s0 == s0 else tn) if n3 > lim0 else nan
+            s1 = (s1 if s1 == s1 else tn) if n3 < lim1 else nan
+            s2 = (s2 if s2 == s2 else tn) if abs(n4) > lim2 else nan
+            now0, now1, now2 = tn - s0 >= e0, tn - s1 >= e1, tn - s2 >= e2
+            trip0, trip1, trip2 = now0 and d0 == 0.0, now1 and d1 == 0.0, now2 and d2 == 0.0
+            trip = trip0 or trip1 or trip2
+            go = z[Z_ALIVE * L + l] != 0.0
+            first = go and trip and z[Z_FIRST_T * L + l] != z[Z_FIRST_T * L + l]
+            stop = go and trip and stop_on_trip
+            z[Z_X * L + l] = n0 if go else x0
+            z[(Z_X + 1) * L + l] = n1 if go else x1
+            z[(Z_X + 2) * L + l] = n2 if go else x2
+            z[(Z_X + 3) * L + l] = n3 if go else x3
+            z[(Z_X + 4) * L + l] = n4 if go else x4
+            z[Z_START * L + l] = s0 if go else z[Z_START * L + l]
+            z[(Z_START + 1) * L + l] = s1 if go else z[(Z_START + 1) * L + l]
+            z[(Z_START + 2) * L + l] = s2 if go else z[(Z_START + 2) * L + l]
+            z[Z_DUE * L + l] = (1.0 if now0 else 0.0) if go else d0
+            z[(Z_DUE + 1) * L + l] = (1.0 if now1 else 0.0) if go else d1
+            z[(Z_DUE + 2) * L + l] = (1.0 if now2 else 0.0) if go else d2
+            peak_dw, peak_rc = z[Z_PEAK_DW * L + l], z[Z_PEAK_RC * L + l]
+            z[Z_PEAK_DW * L + l] = max(peak_dw, abs(n3)) if go else peak_dw
+            z[Z_PEAK_RC * L + l] = max(peak_rc, abs(n4)) if go else peak_rc
+            z[Z_FIRST_T * L + l] = tn if first else z[Z_FIRST_T * L + l]
+            z[Z_FIRST_R * L + l] = ((0.0 if trip0 else (1.0 if trip1 else 2.0)) if first
+                                    else z[Z_FIRST_R * L + l])
+            z[Z_END * L + l] = done if stop else z[Z_END * L + l]
+            z[Z_ALIVE * L + l] = 0.0 if stop else z[Z_ALIVE * L + l]
+
+
+@kernel
+def _run_lanes(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarray,
+               bl: np.ndarray, k_freq: float, k_tie: float, plant_of: np.ndarray,
+               blocks: np.ndarray, index: np.ndarray, kinds: np.ndarray, params: np.ndarray,
+               offsets: np.ndarray, st: np.ndarray, sv: np.ndarray, noise: np.ndarray,
+               ka: np.ndarray, kb: np.ndarray, kc: np.ndarray, kg: np.ndarray,
+               kdim: np.ndarray, methods: np.ndarray, fdata: np.ndarray, foff: np.ndarray,
+               limits: np.ndarray, delays: np.ndarray, stop_on_trip: bool,
+               metrics: np.ndarray, ends: np.ndarray, z: np.ndarray, xs: np.ndarray,
+               x_hat: np.ndarray, mem: np.ndarray, gstate: np.ndarray, kstate: np.ndarray,
+               start: np.ndarray, due: np.ndarray, ctrl: np.ndarray, scratch: np.ndarray
+               ) -> None:
+    """:func:`_run` for single-area scenarios without relay noise whose load is a
+    step or none, ``LANES`` at a time: ``blocks`` (n_blocks, LANES) holds the
+    scenario numbers of each block, all on one plant (-1: an empty lane).  Each
+    control period runs every lane's generator side (:func:`generator_period`,
+    one lane after another), then :func:`_lane_steps` advances all lanes.
+    The metrics and ``ends`` equal :func:`_run`'s bit for bit (``tests/test_lanes.py``).
+    ``z`` (N_Z LANES,), ``mem`` (LANES, MEMORY), ``gstate`` (LANES, 1),
+    ``kstate`` (LANES, 2, N_KF) are the lanes' state, the rest scratch."""
+    L = LANES
+    n_ctrl = -(-n_steps // ratio)
+    empty = x_hat[:0]
+    relay_sample(0.0, 0.0, 0.0, limits, delays, start, due)   # the relays' state at t = 0
+    for b in range(blocks.shape[0]):
+        p_i = plant_of[blocks[b, 0]]
+        A, Bu, Bl = ad[p_i], bu[p_i], bl[p_i]
+        z[:], mem[:], gstate[:], kstate[:] = 0.0, 0.0, 0.0, 0.0
+        for l in range(L):
+            i = blocks[b, l]
+            for r in range(3):
+                z[(Z_START + r) * L + l], z[(Z_DUE + r) * L + l] = start[r], due[r]
+            z[Z_FIRST_T * L + l], z[Z_FIRST_R * L + l] = math.nan, -1.0
+            z[Z_END * L + l] = float(n_steps)
+            z[Z_ON * L + l], z[Z_OFF * L + l] = math.inf, math.inf
+            if i < 0:
+                continue
+            z[Z_ALIVE * L + l] = 1.0
+            if kinds[i, 0, LOAD] == STEP:
+                pa = params[i, 0, LOAD]
+                z[Z_LOAD * L + l], z[Z_ON * L + l], z[Z_OFF * L + l] = pa[0], pa[2], pa[3]
+            met = metrics[i]
+            met[:] = 0.0
+            met[:, 0], met[:, 1] = math.nan, -1.0
+        for j in range(n_ctrl):
+            k0 = j * ratio
+            t = k0 * dt
+            alive = False
+            for l in range(L):
+                i = blocks[b, l]
+                if i < 0 or z[Z_ALIVE * L + l] == 0.0:
+                    continue
+                alive = True
+                e_i, q_i, f_i = index[i, 0, 0], index[i, 0, 1], index[i, 0, 2]
+                ka_i, kb_i, kc_i, kg_i, method, fd = scenario_tables(
+                    e_i, f_i, ka, kb, kc, kg, kdim, methods, fdata, foff, empty)
+                for r in range(5):
+                    xs[r] = z[(Z_X + r) * L + l]
+                scratch[0] = _signal(LOAD, kinds[i, 0], params[i, 0], offsets[i, 0], st, sv,
+                                     t, k0)
+                ace = _signal(ACE, kinds[i, 0], params[i, 0], offsets[i, 0], st, sv, t, j)
+                ua, flags, mod = generator_period(
+                    j, t, xs, scratch[0] + 0.0, noise[q_i, j, 0] if q_i >= 0 else 0.0,
+                    noise[q_i, j, 1] if q_i >= 0 else 0.0, kinds[i, 0], params[i, 0],
+                    offsets[i, 0], st, sv, k_freq, e_i, ka_i, kb_i, kc_i, kg_i, kstate[l],
+                    index[i, 0, 3] == 1, method, fd, mem[l], gstate[l], x_hat, ctrl,
+                    0.0 + ace, k_tie, index[i, 0, 4] == 1,
+                    (0, xs, scratch, scratch, scratch, scratch, kstate[l]))
+                z[Z_U * L + l] = ua
+                met = metrics[i, 0]
+                met[4] += (flags & ACTIVE) != 0
+                met[5] += (flags & ALARM_BITS) != 0
+                met[8] += (flags & OUTSIDE) != 0
+                met[6] = max(met[6], mod)
+                met[7] += mod
+            if not alive:
+                break
+            _lane_steps(k0, min(k0 + ratio, n_steps), dt, A, Bu, Bl, z, limits, delays,
+                        stop_on_trip)
+        for l in range(L):
+            i = blocks[b, l]
+            if i < 0:
+                continue
+            met = metrics[i, 0]
+            met[0], met[1] = z[Z_FIRST_T * L + l], z[Z_FIRST_R * L + l]
+            met[2], met[3] = z[Z_PEAK_DW * L + l], z[Z_PEAK_RC * L + l]
+            met[9] = abs(z[(Z_X + 3) * L + l])
+            ends[i] = int(z[Z_END * L + l])
+
 
 # -- the Python side: scenario tables, a run, the testbed's generator side ---------------
 def check_noise(noise_std: tuple[float, float]) -> bool:
@@ -653,8 +817,15 @@ class Scenarios:
         self._relay_noise.append([(*(noise_std if relay_noise else (0.0, 0.0)), seed)] * n)
         return len(self._rows) - 1
 
-    def run(self, *, trace: bool = False, stop_on_trip: bool = False) -> Run:
+    def run(self, *, trace: bool = False, stop_on_trip: bool = False,
+            lanes: bool = True) -> Run:
         """Run every scenario added; ``trace`` keeps everything (one scenario only).
+
+        With ``lanes`` (untraced single-area runs), the scenarios that allow it
+        (no relay noise, a step load or none, not the coupled filter) run
+        ``LANES`` at a time in SIMD registers (:func:`_run_lanes`), the others
+        one at a time (:func:`_run`, the reference); the metrics are the same
+        bit for bit either way.
 
         Raises ``ValueError`` naming the scenarios whose state became non-finite
         (a signal that is finite as specified but not where it is evaluated);
@@ -676,15 +847,37 @@ class Scenarios:
         rows = (self.n_steps + 1) if trace else 0
         tx, tt = np.zeros((rows, n_s)), np.zeros((rows, n_a), np.int64)
         tc = np.full((self.n_ctrl if trace else 0, n_a, N_CTRL), np.nan)
-        _run(self.n_steps, self.ratio, self.dt, ad, bu, bl, grid.incidence(),
-             k_freq * self.period, k_tie * self.period, np.array(self._plant_of, np.int64),
-             np.array(self._rows, np.int64).reshape(n, n_a, 5), kinds, params, offsets, st,
-             sv, noise, ka, kb, kc, kg, kdim, methods, fdata, foff, limits, delays,
-             np.array(self._relay_noise, float).reshape(n, n_a, 3), stop_on_trip, metrics,
-             tx, tc, tt, ends, np.zeros(n_s), np.zeros(n_s), np.zeros(n_a), np.zeros(n_a),
-             np.zeros(N_AREA_STATES), np.zeros((n_a, MEMORY)), np.zeros((n_a, 1)),
-             np.zeros((n_a, 2, ka.shape[1])), np.zeros((n_a, 3)), np.zeros((n_a, 3)),
-             np.zeros(6 * n_a), np.zeros(n_s))
+        plant_of = np.array(self._plant_of, np.int64)
+        index = np.array(self._rows, np.int64).reshape(n, n_a, 5)
+        relay_noise = np.array(self._relay_noise, float).reshape(n, n_a, 3)
+        rest = np.arange(n)
+        if lanes and not trace and n_a == 1 and n_s == N_AREA_STATES:
+            f_i = index[:, 0, 2]
+            fit = ((relay_noise[:, 0, 0] == 0.0) & (relay_noise[:, 0, 1] == 0.0)
+                   & np.isin(kinds[:, 0, LOAD], (STEP, NONE))
+                   & ((f_i < 0) | (methods[np.maximum(f_i, 0)] != COUPLED)))
+            blocks = lane_blocks(plant_of, np.flatnonzero(fit))
+            _run_lanes(self.n_steps, self.ratio, self.dt, ad, bu, bl,
+                       k_freq[0] * self.period, k_tie[0] * self.period, plant_of, blocks,
+                       index, kinds, params, offsets, st, sv, noise, ka, kb, kc, kg, kdim,
+                       methods, fdata, foff, limits, delays, stop_on_trip, metrics, ends,
+                       np.zeros(N_Z * LANES), np.zeros(N_AREA_STATES),
+                       np.zeros(N_AREA_STATES), np.zeros((LANES, MEMORY)),
+                       np.zeros((LANES, 1)), np.zeros((LANES, 2, ka.shape[1])),
+                       np.zeros(3), np.zeros(3), np.zeros((0, N_CTRL)), np.zeros(1))
+            rest = np.flatnonzero(~fit)
+        if len(rest):
+            m_rest, e_rest = metrics[rest], ends[rest]
+            _run(self.n_steps, self.ratio, self.dt, ad, bu, bl, grid.incidence(),
+                 k_freq * self.period, k_tie * self.period, plant_of[rest], index[rest],
+                 kinds[rest], params[rest], offsets[rest], st, sv, noise, ka, kb, kc, kg,
+                 kdim, methods, fdata, foff, limits, delays, relay_noise[rest],
+                 stop_on_trip, m_rest, tx, tc, tt, e_rest, np.zeros(n_s), np.zeros(n_s),
+                 np.zeros(n_a), np.zeros(n_a), np.zeros(N_AREA_STATES),
+                 np.zeros((n_a, MEMORY)), np.zeros((n_a, 1)),
+                 np.zeros((n_a, 2, ka.shape[1])), np.zeros((n_a, 3)), np.zeros((n_a, 3)),
+                 np.zeros(6 * n_a), np.zeros(n_s))
+            metrics[rest], ends[rest] = m_rest, e_rest
         final = metrics[:, :, METRICS.index("final_abs_dw_meas")]
         bad = np.flatnonzero(~np.all(np.isfinite(final), axis=1))
         if len(bad):
@@ -695,6 +888,17 @@ class Scenarios:
                              f"or the plant itself diverges (gains such as k_agc or the bias "
                              f"so far apart that the discretized loop is unstable)")
         return Run(metrics, ends, tx, tc, tt)
+
+
+def lane_blocks(plant_of: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``rows`` (scenario numbers) grouped by plant into blocks of ``LANES``
+    (n_blocks, LANES), the last block of each plant padded with -1."""
+    blocks = []
+    for p in np.unique(plant_of[rows]):
+        mine = rows[plant_of[rows] == p]
+        pad = -len(mine) % LANES
+        blocks.append(np.concatenate([mine, np.full(pad, -1)]).reshape(-1, LANES))
+    return (np.concatenate(blocks) if blocks else np.zeros((0, LANES))).astype(np.int64)
 
 
 def check_coupled(filters: dict, grid: MultiAreaParams, estimator,
