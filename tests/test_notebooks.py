@@ -225,6 +225,44 @@ def test_reproduce_only_fig4(tmp_path, capsys):
     assert (tmp_path / "build" / "reproduce" / "fig4" / "02_fig4_rocof_attack.ipynb").exists()
 
 
+def test_reproduce_reads_an_unchanged_run_back_and_reruns_a_changed_or_damaged_one(
+        tmp_path, capsys):
+    args = ["reproduce", "--only", "fig4", "--plant", "linear", "--figures-dir",
+            str(tmp_path / "fig"), "--build-dir", str(tmp_path / "build")]
+    figure = tmp_path / "fig" / "fig4_rocof_attack.png"
+    assert main(args) == 0 and "executed" in capsys.readouterr().out
+    first = figure.read_bytes()
+    assert main(args) == 0                         # nothing changed: read back, says so
+    out = capsys.readouterr().out
+    assert "cached (unchanged)" in out and "1 of 1 unchanged since their last run" in out
+    assert "(a) attack trips ROCOF without SCC" in out and figure.read_bytes() == first
+    figure.write_bytes(b"damaged")                 # a damaged output: run again
+    assert main(args) == 0 and "executed" in capsys.readouterr().out
+    assert figure.read_bytes() == first            # byte-identical
+    assert main(args + ["--no-cache"]) == 0 and "executed" in capsys.readouterr().out
+    record = tmp_path / "build" / "reproduce" / "fig4" / runner.CACHE_FILE
+    record.write_text(record.read_text().replace('"key": "', '"key": "0'))   # stale
+    assert main(args) == 0 and "executed" in capsys.readouterr().out
+
+
+def test_the_run_key_covers_the_notebook_and_its_parameters(tmp_path):
+    nb = runner.NOTEBOOKS_DIR / runner.FIGURES["fig4"]
+    other = runner.NOTEBOOKS_DIR / runner.FIGURES["fig5"]
+    key = runner.run_key(nb, {"duration": 3.0})
+    assert key == runner.run_key(nb, {"duration": 3.0})
+    assert key != runner.run_key(nb, {"duration": 4.0}) != runner.run_key(other, {"duration": 3.0})
+
+
+def test_quick_writes_its_figures_under_build_never_into_figures(tmp_path):
+    figures = tmp_path / "fig"
+    outcome, = runner.reproduce(["tutorial"], quick=True, figures_dir=figures,
+                                build_dir=tmp_path / "build")
+    assert outcome.ok and not figures.exists()
+    assert (tmp_path / "build" / "quick" / "figures" / "tutorial_attack.png").exists()
+    with pytest.raises(ValueError, match="quick runs the linear model only"):
+        runner.reproduce(["fig4"], "testbed", quick=True, build_dir=tmp_path / "b")
+
+
 def test_sweep_table_and_resume(tmp_path):
     nb = runner.NOTEBOOKS_DIR / runner.FIGURES["fig4"]
     out = tmp_path / "sweep"

@@ -67,6 +67,13 @@ def _parser() -> argparse.ArgumentParser:
     rep.add_argument("--jobs", type=_jobs, default=2, help="notebooks run in parallel")
     rep.add_argument("--figures-dir", type=_folder, default=runner.ROOT / "figures")
     rep.add_argument("--build-dir", type=_folder, default=runner.ROOT / "build")
+    rep.add_argument("--quick", action="store_true",
+                     help="every chapter on the linear model with its short parameters, "
+                          "claims not checked, figures into BUILD_DIR/quick/figures "
+                          "(about a minute)")
+    rep.add_argument("--no-cache", dest="cache", action="store_false",
+                     help="run every notebook, even those unchanged since their last "
+                          "successful run (default: those are read back)")
     rep.add_argument("--compare-blas", metavar="CORE", type=_core,
                      help="then run the same notebooks again with OPENBLAS_CORETYPE=CORE "
                           "(e.g. Haswell) into BUILD_DIR/blas-CORE and list every claim "
@@ -227,10 +234,20 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "reproduce":
             t0 = time.perf_counter()
             outcomes = runner.reproduce(args.only, args.plant, args.jobs, args.figures_dir,
-                                        args.build_dir)
+                                        args.build_dir, cache=args.cache, quick=args.quick)
             wall = time.perf_counter() - t0
-            print(runner.summary_table(outcomes).to_string(index=False))
-            print(f"\nNotebooks ({wall:.0f} s wall on {args.jobs} jobs):")
+            if args.quick:
+                failed = [o.name for o in outcomes if not o.ok]
+                print(f"quick: {len(outcomes) - len(failed)} of {len(outcomes)} chapters ran "
+                      f"on the linear model with short parameters (claims not checked); "
+                      f"figures in {args.build_dir / 'quick' / 'figures'}"
+                      + (f"; failed: {', '.join(failed)}" if failed else ""))
+            else:
+                print(runner.summary_table(outcomes).to_string(index=False))
+            cached = sum(o.cached for o in outcomes)
+            print(f"\nNotebooks ({wall:.0f} s wall on {args.jobs} jobs"
+                  + (f"; {cached} of {len(outcomes)} unchanged since their last run, read "
+                     f"back from build/ — --no-cache reruns them" if cached else "") + "):")
             print(runner.times_table(outcomes).to_string(index=False))
             notes = runner.deviation_notes(outcomes)
             if notes:

@@ -10,12 +10,14 @@ own kernel process, so threads give real parallelism), ``jobs`` threads for
 from __future__ import annotations
 
 import ast
+import hashlib
 import itertools
 import json
 import os
 import re
 import shutil
 import signal
+import sys
 import tempfile
 import threading
 import time
@@ -53,6 +55,7 @@ class RunOutcome:
     claims: dict[str, bool]
     error: str = ""
     deviations: dict[str, str] = field(default_factory=dict)
+    cached: bool = False            # nothing changed since its last run: not executed
 
 
 _LIVE: set = set()                 # kernel managers whose kernel is running (stop_kernels)
@@ -170,17 +173,73 @@ def execute(notebook: Path, output: Path, parameters: dict) -> None:
 
 
 RESULT_FILES = ("claims.json", "deviations.json", "metrics.json")
+CACHE_FILE = "cache.json"     # in a run's results folder: its key and the files it wrote
 
 
-def _run_one(name: str, notebook: Path, results: Path, parameters: dict) -> RunOutcome:
+def run_key(notebook: Path, parameters: dict) -> str:
+    """SHA-256 of what a notebook run's outputs depend on: the notebook, its
+    parameters, every source file of the package, the pinned environment
+    (``environment.txt``), the Python version and the BLAS kernel asked for
+    (``OPENBLAS_CORETYPE``).  Its ANDES runs are among them: they depend on
+    nothing else."""
+    digest = hashlib.sha256(notebook.read_bytes())
+    digest.update(json.dumps(parameters, sort_keys=True, default=str).encode())
+    package = ROOT / "lfc"
+    for path in sorted(package.rglob("*.py")):
+        digest.update(path.relative_to(package).as_posix().encode() + path.read_bytes())
+    env = ROOT / "environment.txt"
+    digest.update(env.read_bytes() if env.exists() else b"")
+    digest.update(f"{sys.version}|{os.environ.get('OPENBLAS_CORETYPE', '')}".encode())
+    return digest.hexdigest()
+
+
+def _hash(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _written(folder: Path, since_ns: int) -> dict[str, str]:
+    """The files of ``folder`` modified at or after ``since_ns`` and their hashes."""
+    return {p.name: _hash(p) for p in sorted(folder.glob("*"))
+            if p.is_file() and p.stat().st_mtime_ns >= since_ns}
+
+
+def _from_cache(results: Path, key: str, figures: Path) -> bool:
+    """Whether the last run into ``results`` had this ``key``, succeeded, and every
+    file it wrote (figures, tables, results, the executed notebook) is still there
+    unchanged: a damaged or stale file means a run."""
+    try:
+        record = json.loads((results / CACHE_FILE).read_text())
+        return record["key"] == key and all(
+            (folder / name).is_file() and _hash(folder / name) == digest
+            for folder, files in ((figures, record["figures"]), (results, record["results"]))
+            for name, digest in files.items())
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
+
+
+def _run_one(name: str, notebook: Path, results: Path, parameters: dict,
+             cache: bool = True) -> RunOutcome:
     """Execute one notebook; its claims are read only from files this run wrote
     (under the results folder's lock: a concurrent run of the same notebook into
-    the same folder waits for this one, then runs on its own)."""
+    the same folder waits for this one, then runs on its own).
+
+    With ``cache``, a run whose :func:`run_key` equals the last successful run's
+    into the same folder, and whose files are all still there unchanged, is not
+    executed: its outcome is read back and marked ``cached``."""
     t0 = time.perf_counter()
+    figures = Path(parameters["figures_dir"])
+    key = run_key(notebook, parameters)
     with folder_lock(results):
+        if cache and _from_cache(results, key, figures):
+            claims = read_json(results / "claims.json")
+            deviations = read_json(results / "deviations.json")
+            return RunOutcome(name, True, time.perf_counter() - t0, claims, "", deviations,
+                              cached=True)
+        (results / CACHE_FILE).unlink(missing_ok=True)
         for stale in RESULT_FILES:  # never report a claim an earlier run computed
             (results / stale).unlink(missing_ok=True)
         error = ""
+        start = time.time_ns()
         try:
             execute(notebook, results / notebook.name, parameters)
             ok = True
@@ -188,7 +247,13 @@ def _run_one(name: str, notebook: Path, results: Path, parameters: dict) -> RunO
             ok, error = False, f"{err.ename}: {err.evalue}"
         claims = read_json(results / "claims.json")
         deviations = read_json(results / "deviations.json")
-    held = all(v or c in deviations for c, v in claims.items())
+        held = (not parameters.get("check_claims", True)        # a quick run: not checked
+                or all(v or c in deviations for c, v in claims.items()))
+        if ok and held:
+            files = [results / f for f in (*RESULT_FILES, notebook.name)]
+            record = {"key": key, "figures": _written(figures, start) if figures.is_dir()
+                      else {}, "results": {p.name: _hash(p) for p in files if p.is_file()}}
+            write_atomic(results / CACHE_FILE, json.dumps(record, indent=1))
     return RunOutcome(name, ok and held, time.perf_counter() - t0, claims, error, deviations)
 
 
@@ -217,13 +282,20 @@ def _progress(futures: dict, desc: str) -> list:
 
 def reproduce(only: list[str] | None = None, plant: str = "all", jobs: int = 2,
               figures_dir: Path = ROOT / "figures", build_dir: Path = ROOT / "build",
-              executor: Executor | None = None) -> list[RunOutcome]:
+              executor: Executor | None = None, *, cache: bool = True,
+              quick: bool = False) -> list[RunOutcome]:
     """Execute every figure notebook (or ``only`` those) with its claims checked,
     on ``plant`` (``"linear"``, ``"testbed"``, ``"ieee39"`` or ``"all"``: every
-    plant each notebook supports, ``FIGURE_PLANTS``).
+    plant each notebook supports, ``FIGURE_PLANTS``), ``jobs`` at a time.
 
     Figures go to ``figures_dir``; executed notebooks, ``metrics.json`` and
-    ``claims.json`` to ``build_dir/reproduce/<name>[_<plant>]/``.
+    ``claims.json`` to ``build_dir/reproduce/<name>[_<plant>]/``.  With
+    ``cache``, a notebook whose inputs and code are unchanged since its last
+    successful run, and whose outputs are intact, is not run again
+    (:func:`_run_one`).  ``quick`` runs every chapter on the linear model with
+    its short parameters (the tests' runs), claims not checked, into
+    ``build_dir/quick/`` (its figures in ``build_dir/quick/figures``, never
+    ``figures/``): a look at every figure in about a minute.
     """
     names = only or list(FIGURES)
     unknown = [n for n in names if n not in FIGURES]
@@ -232,6 +304,12 @@ def reproduce(only: list[str] | None = None, plant: str = "all", jobs: int = 2,
     if plant != "all":
         check_plant(plant, ALL_PLANTS)
     check_count("jobs", jobs)
+    if quick:
+        if plant not in ("all", "linear"):
+            raise ValueError(f"quick runs the linear model only; got plant={plant!r}")
+        plant, build_dir = "linear", Path(build_dir) / "quick"
+        figures_dir = build_dir / "figures"
+        Path(figures_dir).mkdir(parents=True, exist_ok=True)
     runs = [(n, p) for n in names for p in FIGURE_PLANTS[n] if plant in ("all", p)]
     if not runs:
         raise ValueError(f"none of {names} runs on plant {plant!r} (see FIGURE_PLANTS)")
@@ -240,13 +318,15 @@ def reproduce(only: list[str] | None = None, plant: str = "all", jobs: int = 2,
     pool = executor or ThreadPoolExecutor(max_workers=jobs)
     futures = {}
     labels = [figure_name(n, p) for n, p in runs]
+    short = {c.name: c.short for c in CHAPTERS}
     order = sorted(range(len(runs)), key=lambda i: runs[i][0] not in LONGEST_FIRST)
     for (name, run_plant), label in ((runs[i], labels[i]) for i in order):
         results = Path(build_dir).resolve() / "reproduce" / label
-        params = {"figures_dir": str(Path(figures_dir).resolve()), "results_dir": str(results),
-                  "plant": run_plant, "check_claims": True}
+        params = {**(short[name] if quick else {}),
+                  "figures_dir": str(Path(figures_dir).resolve()), "results_dir": str(results),
+                  "plant": run_plant, "check_claims": not quick}
         futures[pool.submit(_run_one, label, NOTEBOOKS_DIR / FIGURES[name], results,
-                            params)] = label
+                            params, cache)] = label
     outcomes = _progress(futures, "reproduce")
     if executor is None:
         pool.shutdown()
@@ -325,8 +405,10 @@ def summary_table(outcomes: list[RunOutcome]) -> pd.DataFrame:
 
 
 def times_table(outcomes: list[RunOutcome]) -> pd.DataFrame:
-    """Wall time of each notebook run (s), longest first."""
-    return (pd.DataFrame([{"notebook": o.name, "wall time (s)": round(o.seconds, 1)}
+    """Wall time of each notebook run (s), longest first, and whether it ran or
+    was read from the cache."""
+    return (pd.DataFrame([{"notebook": o.name, "wall time (s)": round(o.seconds, 1),
+                           "run": "cached (unchanged)" if o.cached else "executed"}
                           for o in outcomes])
             .sort_values("wall time (s)", ascending=False, ignore_index=True))
 
