@@ -41,3 +41,18 @@ def test_the_readmes_figures_are_the_manifests():
     written = {png for c in CHAPTERS for plant in c.plants for png in c.figure_files(plant)}
     assert shown == written
     assert all((runner.ROOT / "figures" / png).exists() for png in written)
+
+
+def test_the_timing_sections_are_a_runs_record_and_its_table_says_what_ran(tmp_path):
+    """``reproduce`` writes a full run's timing (build/reproduce/timing*.md) and
+    ``python -m lfc readme`` copies it; the check never compares it (times vary)."""
+    outcomes = [runner.RunOutcome("fig4", True, 12.34, {}),
+                runner.RunOutcome("redteam", True, 0.01, {}, cached=True)]
+    text = runner.timing_table(outcomes, wall=20.0, cpu=35.0, jobs=2)
+    assert "**20 s wall**, 35 s CPU; 1 notebook runs executed, 1 read back unchanged" in text
+    assert "| fig4 | 12.3 | executed |" in text
+    assert "| redteam | 0 | cached (unchanged) |" in text
+    readme = tmp_path / "README.md"
+    readme.write_text("<!-- timing:start -->\nold\n<!-- timing:end -->\n")
+    assert readme_mismatches(readme, tmp_path) == []
+    assert runner.TIMING_FILES == {False: "timing.md", True: "timing_rerun.md"}

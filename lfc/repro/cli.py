@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import re
+import resource
 import sys
 import time
 from pathlib import Path
@@ -132,7 +133,8 @@ def _parser() -> argparse.ArgumentParser:
                          "per exchanged command)")
     wr.add_argument("--pcap", type=Path, help="write the last run's traffic here")
     rd = sub.add_parser("readme", help="copy figures/<name>.md into the README's "
-                        "<!-- name:start --> sections (reproduce never edits the README)")
+                        "<!-- name:start --> sections, and the last full reproduce's timing "
+                        "(build/reproduce/timing*.md; reproduce never edits the README)")
     rd.add_argument("--check", action="store_true",
                     help="only report sections that differ (exit 1 if any)")
     return ap
@@ -208,8 +210,14 @@ def _wire(args) -> int:
 
 
 def _readme(check: bool) -> int:
-    from lfc.repro.notebook import readme_mismatches, sync_readme
+    from lfc.repro.notebook import readme_mismatches, sync_readme, update_markdown_section
     readme, tables = runner.ROOT / "README.md", runner.ROOT / "figures"
+    if not check:                        # the last full runs' timing, where measured
+        for name in runner.TIMING_FILES.values():
+            timing = runner.ROOT / "build" / "reproduce" / name
+            if timing.exists():
+                update_markdown_section(readme, name[:-3], timing.read_text())
+                print(f"README section {name[:-3]} from {timing}")
     if check:
         stale = readme_mismatches(readme, tables)
         print("README sections out of date: " + ", ".join(stale) if stale else
@@ -245,6 +253,14 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 print(runner.summary_table(outcomes).to_string(index=False))
             cached = sum(o.cached for o in outcomes)
+            if not (args.quick or args.only) and args.plant == "all":   # a full run
+                cpu = sum(getattr(resource.getrusage(who), f) for f in ("ru_utime", "ru_stime")
+                          for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
+                path = (args.build_dir / "reproduce"
+                        / runner.TIMING_FILES[cached == len(outcomes)])
+                path.parent.mkdir(parents=True, exist_ok=True)
+                path.write_text(runner.timing_table(outcomes, wall, cpu, args.jobs))
+                print(f"timing: {path} (python -m lfc readme copies it into the README)")
             print(f"\nNotebooks ({wall:.0f} s wall on {args.jobs} jobs"
                   + (f"; {cached} of {len(outcomes)} unchanged since their last run, read "
                      f"back from build/ — --no-cache reruns them" if cached else "") + "):")

@@ -35,7 +35,7 @@ from lfc._validate import check_count
 from lfc._files import folder_lock, write_atomic
 from lfc.experiments.scenarios import ALL_PLANTS
 from lfc.repro.manifest import CHAPTERS
-from lfc.repro.notebook import check_plant, check_type, figure_name
+from lfc.repro.notebook import check_plant, check_type, figure_name, markdown_table
 
 ROOT = Path(__file__).resolve().parents[2]
 NOTEBOOKS_DIR = ROOT / "notebooks"
@@ -411,6 +411,24 @@ def times_table(outcomes: list[RunOutcome]) -> pd.DataFrame:
                            "run": "cached (unchanged)" if o.cached else "executed"}
                           for o in outcomes])
             .sort_values("wall time (s)", ascending=False, ignore_index=True))
+
+
+TIMING_FILES = {False: "timing.md", True: "timing_rerun.md"}   # in build/reproduce/
+
+
+def timing_table(outcomes: list[RunOutcome], wall: float, cpu: float, jobs: int) -> str:
+    """A full run's timing as markdown, for the README's ``timing`` (a run that
+    executed notebooks) or ``timing_rerun`` section (every notebook read back):
+    the machine, the commit, wall and CPU time (s), each notebook's time."""
+    import subprocess
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
+                            capture_output=True, text=True).stdout.strip() or "unknown"
+    cached = sum(o.cached for o in outcomes)
+    head = (f"`python -m lfc reproduce --jobs {jobs}` at commit {commit} on "
+            f"{os.cpu_count()} cores, {time.strftime('%Y-%m-%d')}: **{wall:.0f} s wall**, "
+            f"{cpu:.0f} s CPU; {len(outcomes) - cached} notebook runs executed, {cached} read "
+            f"back unchanged.")
+    return head + "\n\n" + markdown_table(times_table(outcomes), digits=4) + "\n"
 
 
 def deviation_notes(outcomes: list[RunOutcome]) -> list[str]:
