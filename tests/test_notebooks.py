@@ -355,6 +355,8 @@ def test_each_chapter_reads_as_a_chapter(c):
     assert cells[0]["cell_type"] == "markdown"
     code = ["".join(x["source"]) for x in cells if x["cell_type"] == "code"]
     assert all(not x.get("outputs") for x in cells if x["cell_type"] == "code")   # committed clean
+    ids = [x.get("id") for x in cells]      # nbformat 4.5: a cell without one is a warning
+    assert None not in ids and len(set(ids)) == len(ids), c.name
     body = code[2:]                                  # after the parameters and the imports
     assert not any(line.startswith(("import ", "from ")) for cell in body
                    for line in cell.splitlines()), c.name
