@@ -16,8 +16,9 @@ this period, the others hold last period's).  A vector of commands is
 its relay limits in continuous time: checked at samples up to the horizon, each
 limit tightened by a proven bound on how far an output moves between samples
 (:func:`lfc.filters.certified._intersample` on the coupled model), and after the
-horizon by a Lyapunov ellipsoid of the coupled model around the vector's
-equilibrium.  Every condition is affine in ``u_k`` (the ellipsoid a convex
+horizon by an invariant ellipsoid of the coupled model around the vector's
+equilibrium (a Lyapunov one, or one shaped by a semidefinite program where the
+Lyapunov one leaves no room: ``terminal``, :func:`shaped_terminal`).  Every condition is affine in ``u_k`` (the ellipsoid a convex
 quadratic), so each area's admissible set is one interval and its command is
 ``u_ref`` clipped to it.  Two levels as in one area: a new command is
 certified with the limits tightened twice; if none is, the area holds its
@@ -98,6 +99,9 @@ DW, ROCOF = 3, 4       # an area's measured outputs among its five states
 EXPORT_STD = 1e-4    # pu: the grid Kalman filter's noise model of the metered tie-line exports
 
 
+TERMINALS = ("auto", "lyapunov", "sdp")
+
+
 @dataclass(frozen=True)
 class CoupledOptions:
     """Options of the coupled certificate (module docstring).
@@ -134,6 +138,12 @@ class CoupledOptions:
         Probability, in (0, 1), that the estimate's error lies in the ellipsoid
         the certificate covers (chi-square of the error covariance's dimension).
         Default 0.9999.  Only with ``noise_std``.
+    terminal : {"auto", "lyapunov", "sdp"}
+        The terminal ellipsoid: ``"lyapunov"`` solves ``A'P + PA = -W`` (W from
+        the relay limits); ``"sdp"`` shapes it (:func:`shaped_terminal`) so that a
+        load moves the state at the horizon as little as possible in its norm;
+        ``"auto"`` (default) takes the Lyapunov one and the shaped one where the
+        Lyapunov one leaves no room (a lightly damped area, chains of areas).
     """
 
     load_bound: float = 0.06
@@ -146,8 +156,11 @@ class CoupledOptions:
     control_period: float = 0.01
     noise_std: tuple[float, float] | None = None
     confidence: float = 0.9999
+    terminal: str = "auto"
 
     def __post_init__(self) -> None:
+        if self.terminal not in TERMINALS:
+            raise ValueError(f"terminal must be one of {TERMINALS}, got {self.terminal!r}")
         check_nonnegative("load_bound", self.load_bound)
         check_nonnegative("recheck_bound", self.recheck_bound)
         if self.recheck_bound > self.load_bound:
@@ -381,9 +394,6 @@ class CoupledSet:
         for a in range(n_a):
             scale[N_AREA_STATES * a + 2:N_AREA_STATES * a + 5] = (lim[2 * a], lim[2 * a],
                                                                   lim[2 * a + 1])
-        P = solve_continuous_lyapunov(A.T, -np.diag(scale ** -2.0))
-        K = np.linalg.cholesky(P)                                    # P = K K'
-        sigma = np.sqrt(np.einsum("ij,jk,ik->i", C, np.linalg.inv(P), C))
         Eh = expm(A * times[-1])
         dw_u, dw_p = (C @ qu)[0], (C @ ql)[0]      # every area's equilibrium frequency
         # the held level absorbs what the loads may have moved since the vector was
@@ -393,36 +403,50 @@ class CoupledSet:
         # (plus 1 %, as the load gains: a step of exactly that size lands the
         # equilibrium on the held level's boundary, where rounding would decide)
         spent = 1.01 * (o.load_bound - o.recheck_bound)
-        kappa = float(np.max(np.linalg.norm(K.T @ Eh @ ql, axis=0)))
         drift = spent * float(np.max(np.abs(dw_p)))
-        # the estimate's error at the horizon (ellipsoid's norm) and in dw_eq: the
-        # noise's part (err_*) comes off both levels' radii; the loads' part, per pu
-        # of total variation before the certification (g_t, g_eq), moves each output
-        # by at most g_eq + g_t sigma_o after the horizon, which shares load_bound
-        # with the loads after it (g_o): the new level's room takes the larger
-        err_t, err_eq, g_t, g_eq = 0.0, 0.0, 0.0, 0.0
-        if cov is not None:
-            m = K.T @ Eh @ np.hstack([np.eye(n_r), -ql])
-            err_t = kappa_e * math.sqrt(np.max(np.linalg.eigvalsh(m @ cov @ m.T)))
-            err_eq = kappa_e * math.sqrt(dw_p @ cov[n_r:, n_r:] @ dw_p)
-            g_t = 1.01 * float(np.max(np.linalg.norm(steps @ m.T, axis=1)))
-            g_eq = 1.01 * float(np.max(np.abs(steps[:, n_r:] @ dw_p)))
-        after = np.tile([g_eq, 0.0], n_a) + g_t * sigma         # per output, per pu
-        new = limits - o.load_bound * np.maximum(load, after) - 2 * t_max
         hold = held - t_max                                # room at each level, per output
-        free = hold[0::2] - spent * kappa * sigma[0::2] - drift   # the held level's, after it
-        r = float(min(np.min(0.5 * new[0::2] / sigma[0::2]), np.min(new[1::2] / sigma[1::2]),
-                      np.min(hold[1::2] / sigma[1::2]) - spent * kappa,
-                      np.min(0.5 * free / sigma[0::2])))
-        h = float(min(np.min(new[0::2] - r * sigma[0::2]),
-                      np.min(hold[0::2] - (r + spent * kappa) * sigma[0::2]) - drift))
+        shapes = ("lyapunov", "sdp") if o.terminal == "auto" else (o.terminal,)
+        for shape in shapes:
+            if shape == "lyapunov":
+                P = solve_continuous_lyapunov(A.T, -np.diag(scale ** -2.0))
+            else:
+                room = np.minimum(limits - o.load_bound * load - 2 * t_max, hold)
+                P = shaped_terminal(A, C, Eh @ ql, np.maximum(room, 1e-9 * limits))
+            K = np.linalg.cholesky(P)                                    # P = K K'
+            sigma = np.sqrt(np.einsum("ij,jk,ik->i", C, np.linalg.inv(P), C))
+            kappa = float(np.max(np.linalg.norm(K.T @ Eh @ ql, axis=0)))
+            # the estimate's error at the horizon (ellipsoid's norm) and in dw_eq: the
+            # noise's part (err_*) comes off both levels' radii; the loads' part, per
+            # pu of total variation before the certification (g_t, g_eq), moves each
+            # output by at most g_eq + g_t sigma_o after the horizon, which shares
+            # load_bound with the loads after it (g_o): the new level's room takes the
+            # larger
+            err_t, err_eq, g_t, g_eq = 0.0, 0.0, 0.0, 0.0
+            if cov is not None:
+                m = K.T @ Eh @ np.hstack([np.eye(n_r), -ql])
+                err_t = kappa_e * math.sqrt(np.max(np.linalg.eigvalsh(m @ cov @ m.T)))
+                err_eq = kappa_e * math.sqrt(dw_p @ cov[n_r:, n_r:] @ dw_p)
+                g_t = 1.01 * float(np.max(np.linalg.norm(steps @ m.T, axis=1)))
+                g_eq = 1.01 * float(np.max(np.abs(steps[:, n_r:] @ dw_p)))
+            after = np.tile([g_eq, 0.0], n_a) + g_t * sigma         # per output, per pu
+            new = limits - o.load_bound * np.maximum(load, after) - 2 * t_max
+            free = hold[0::2] - spent * kappa * sigma[0::2] - drift   # the held level's
+            r = float(min(np.min(0.5 * new[0::2] / sigma[0::2]),
+                          np.min(new[1::2] / sigma[1::2]),
+                          np.min(hold[1::2] / sigma[1::2]) - spent * kappa,
+                          np.min(0.5 * free / sigma[0::2])))
+            h = float(min(np.min(new[0::2] - r * sigma[0::2]),
+                          np.min(hold[0::2] - (r + spent * kappa) * sigma[0::2]) - drift))
+            if r > 0 and h > 0:
+                break
+        self.terminal = shape
         if r <= 0 or h <= 0:
             why = (f"; a held vector's re-check absorbs load_bound - recheck_bound = "
                    f"{o.load_bound - o.recheck_bound:g} pu of load moved since its "
                    f"certification, which moves its state at the horizon by up to "
                    f"{spent * kappa * np.max(sigma[0::2]):.3g} pu of frequency in the "
-                   f"terminal set's norm: lower load_bound - recheck_bound (0: no such "
-                   f"absorption, as on a lightly damped grid)" if spent > 0 else "")
+                   f"terminal set's norm (terminal={shape!r}): lower load_bound - "
+                   f"recheck_bound (0: no such absorption)" if spent > 0 else "")
             raise ValueError(f"the tightenings leave no room for the terminal set: "
                              f"{self._describe()}; lower load_bound or tightening{why}")
         rho = {"new": r - err_t, "held": r + spent * kappa - err_t}
@@ -448,6 +472,40 @@ class CoupledSet:
 
     def _describe(self) -> str:
         return ", ".join(f"{name} {v}" for name, v in self.budget.items())
+
+
+def shaped_terminal(A: np.ndarray, C: np.ndarray, loads: np.ndarray,
+                    room: np.ndarray) -> np.ndarray:
+    """The terminal ellipsoid ``{z: z' P z <= 1}`` shaped by a semidefinite program.
+
+    Minimises ``kappa^2 = max_j loads_j' P loads_j`` (how far a unit load in area
+    ``j``, ``loads[:, j]`` = its effect on the state at the horizon, moves it in
+    the ellipsoid's norm) subject to every output's reach over the ellipsoid
+    ``sqrt(c_i' P^-1 c_i) <= room_i`` (its room, pu or pu/s) and the norm
+    decreasing along ``e^{At}`` at a rate of at least a tenth of the slowest
+    mode's, ``A'P + PA <= -2 gamma P``: invariance, which the certificate's
+    proof needs, checked on the result in floating point (``ValueError`` if it
+    does not hold).  In ``Q = P^-1`` every condition is a linear matrix
+    inequality (cvxpy, Clarabel); ``P = Q^-1``.
+    """
+    import cvxpy as cp
+    n = len(A)
+    gamma = 0.1 * float(-np.max(np.linalg.eigvals(A).real))
+    Q, t = cp.Variable((n, n), symmetric=True), cp.Variable()
+    cons = [Q >> 1e-12 * np.eye(n), A @ Q + Q @ A.T + 2 * gamma * Q << 0]
+    cons += [cp.quad_form(c, Q) <= r ** 2 for c, r in zip(C, room)]
+    cons += [cp.bmat([[cp.reshape(t, (1, 1), order="C"), v[None]], [v[:, None], Q]]) >> 0
+             for v in loads.T]
+    cp.Problem(cp.Minimize(t), cons).solve(solver="CLARABEL")
+    if Q.value is None:
+        raise ValueError("the terminal ellipsoid's semidefinite program has no solution")
+    Qv = 0.5 * (Q.value + Q.value.T)
+    P = np.linalg.inv(Qv)
+    P = 0.5 * (P + P.T)
+    if np.max(np.linalg.eigvalsh(A.T @ P + P @ A)) >= 0 or np.min(np.linalg.eigvalsh(P)) <= 0:
+        raise ValueError("the shaped terminal ellipsoid is not invariant in floating point; "
+                         "use terminal='lyapunov'")
+    return P
 
 
 def _load_error_steps(kalman: GridKalman, A: np.ndarray, Bl: np.ndarray, period: float,
