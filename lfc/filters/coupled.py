@@ -478,9 +478,12 @@ def shaped_terminal(A: np.ndarray, C: np.ndarray, loads: np.ndarray,
                     room: np.ndarray) -> np.ndarray:
     """The terminal ellipsoid ``{z: z' P z <= 1}`` shaped by a semidefinite program.
 
-    Minimises ``kappa^2 = max_j loads_j' P loads_j`` (how far a unit load in area
-    ``j``, ``loads[:, j]`` = its effect on the state at the horizon, moves it in
-    the ellipsoid's norm) subject to every output's reach over the ellipsoid
+    Minimises a bound ``t`` on ``kappa^2 = max_j loads_j' P loads_j`` (how far a
+    unit load in area ``j``, ``loads[:, j]`` = its effect on the state at the
+    horizon, moves it in the ellipsoid's norm): ``loads' P loads <= t I``, one
+    linear matrix inequality for every area at once (``kappa^2`` is its largest
+    diagonal entry, at most ``t``; 30 s for a ring of 10 areas, 59 states, where
+    one inequality per area did not finish in 20 minutes), subject to every output's reach over the ellipsoid
     ``sqrt(c_i' P^-1 c_i) <= room_i`` (its room, pu or pu/s) and the norm
     decreasing along ``e^{At}`` at a rate of at least a tenth of the slowest
     mode's, ``A'P + PA <= -2 gamma P``: invariance, which the certificate's
@@ -494,8 +497,7 @@ def shaped_terminal(A: np.ndarray, C: np.ndarray, loads: np.ndarray,
     Q, t = cp.Variable((n, n), symmetric=True), cp.Variable()
     cons = [Q >> 1e-12 * np.eye(n), A @ Q + Q @ A.T + 2 * gamma * Q << 0]
     cons += [cp.quad_form(c, Q) <= r ** 2 for c, r in zip(C, room)]
-    cons += [cp.bmat([[cp.reshape(t, (1, 1), order="C"), v[None]], [v[:, None], Q]]) >> 0
-             for v in loads.T]
+    cons += [cp.bmat([[t * np.eye(loads.shape[1]), loads.T], [loads, Q]]) >> 0]
     cp.Problem(cp.Minimize(t), cons).solve(solver="CLARABEL")
     if Q.value is None:
         raise ValueError("the terminal ellipsoid's semidefinite program has no solution")
