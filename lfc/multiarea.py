@@ -28,6 +28,7 @@ then one export deviation per tie-line.  Inputs: every area's command
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -203,9 +204,15 @@ def as_grid(params: LFCParams | MultiAreaParams) -> MultiAreaParams:
     if isinstance(params, MultiAreaParams):
         return params
     if isinstance(params, LFCParams):
-        return MultiAreaParams(areas=(params,))
+        return _one_area(params)
     raise ValueError(f"params must be an LFCParams or a MultiAreaParams, got "
                      f"{type(params).__name__}")
+
+
+@functools.lru_cache(maxsize=64)
+def _one_area(params: LFCParams) -> MultiAreaParams:
+    """The grid of one area (both frozen: built once per area, not once per scenario)."""
+    return MultiAreaParams(areas=(params,))
 
 
 def discretize_grid(params: MultiAreaParams, dt: float
