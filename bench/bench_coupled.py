@@ -10,8 +10,9 @@ and control period inside the engine: a 20 s run with a coordinated sinusoid on
 every area's command with the filter, minus the same run without it, divided by
 the calls (goal <= 1 ms at 10 areas).  Reference: the per-area certified filter
 (``"certified"``, built once) on the same run, where it builds.  Where the
-coupled filter's defaults do not build (a finding, ``tests/test_coupled.py``) the
-row uses ``load_bound = recheck_bound = 0.05`` and says so.
+coupled filter's defaults do not build the row uses ``load_bound = recheck_bound
+= 0.05`` and says so; a row whose terminal set is the shaped one
+(``terminal="auto"`` chose it) says so too.
 
 Run: python bench/bench_coupled.py
 """
@@ -57,6 +58,8 @@ def row(name: str, grid: MultiAreaParams) -> None:
         filt = CoupledFilter(grid, relays, load_bound=0.05, recheck_bound=0.05)
         name += " (defaults do not build; load_bound = recheck_bound = 0.05)"
     built = time.perf_counter() - t0
+    if filt.cert.terminal == "sdp":
+        name += " (shaped terminal set)"
     calls = grid.n_areas * DURATION / 0.01
     bare = run_time(grid, None)
     per_call = (run_time(grid, {a: filt for a in range(grid.n_areas)}) - bare) / calls
