@@ -28,7 +28,7 @@ import io
 import math
 import os
 import warnings
-from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import fields, replace
 from pathlib import Path
 
@@ -37,6 +37,7 @@ import pandas as pd
 from tqdm.auto import tqdm
 
 from lfc._files import code_digest, write_atomic
+from lfc._pool import completed
 from lfc._validate import ParameterTypeError, check_count, check_flag, check_folder, is_sequence
 from lfc.engine import METRICS, Scenarios
 from lfc.estimation import STD
@@ -510,7 +511,7 @@ def _execute(todo: list, args: tuple, executor: Executor | None):
     try:
         futures = {pool.submit(run_chunk, params, chunk, duration, relays, dt, cp, lanes):
                    (i, path) for i, chunk, path in todo}
-        for fut in as_completed(futures):
+        for fut in completed(futures):
             i, path = futures[fut]
             yield finish(i, fut.result(), path)
     except KeyboardInterrupt:          # stop the workers now, not after their chunks

@@ -12,7 +12,9 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +22,7 @@ import pandas as pd
 import pytest
 
 from lfc import batch
+from lfc._pool import completed
 from lfc.repro import book
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -64,14 +67,30 @@ def interrupt(cmd: list[str], ready, marker: str, env: dict | None = None,
     t0 = time.monotonic()
     proc.send_signal(sig)
     _, err = proc.communicate(timeout=60)
+    exited = time.monotonic() - t0
+    lingering = describe(running(marker))
     while running(marker) and time.monotonic() - t0 < 30:
         time.sleep(0.05)
     elapsed = time.monotonic() - t0
     assert proc.returncode == 130, err
     assert "interrupted" in err
     assert not running(marker), "processes left running"
-    print(f"stopped in {elapsed:.2f} s")
+    print(f"stopped in {elapsed:.2f} s (the command exited after {exited:.2f} s; "
+          f"then still running: {lingering or 'nothing'})\n{err[-2000:]}")
     return elapsed
+
+
+def describe(pids: list[int]) -> str:
+    """Each process's state and command line (the diagnosis of a slow stop)."""
+    out = []
+    for pid in pids:
+        try:
+            cmd = (Path("/proc") / str(pid) / "cmdline").read_bytes().replace(b"\0", b" ")
+            state = (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[0]
+        except (OSError, IndexError):
+            continue
+        out.append(f"{pid} [{state}] {cmd.decode(errors='replace')[:160]}")
+    return "; ".join(out)
 
 
 @pytest.mark.skipif(not Path("/proc").exists(), reason="needs /proc")
@@ -206,3 +225,36 @@ def test_stop_kernels_kills_a_kernel_its_manager_does_not_know_yet():
         assert child.returncode == -signal.SIGKILL
     finally:
         child.kill()
+
+
+@pytest.mark.parametrize("wait, woken_within", [(completed, 1.0), (as_completed, None)])
+def test_a_signal_another_thread_took_stops_the_wait_at_once(wait, woken_within):
+    """The cause of a Ctrl-C handled 5.6 s late (seen in CI): the kernel gave the
+    signal to a worker thread, and ``as_completed`` keeps the main thread blocked
+    until a future finishes; ``completed`` wakes every 0.1 s and acts on it."""
+    release = threading.Event()
+
+    def handler(signum, frame):
+        raise KeyboardInterrupt
+
+    def poke() -> None:             # the signal, delivered to this thread, not the main one
+        time.sleep(0.2)
+        signal.pthread_kill(threading.get_ident(), signal.SIGUSR1)
+
+    old = signal.signal(signal.SIGUSR1, handler)
+    try:
+        with ThreadPoolExecutor(1) as pool:
+            slow = pool.submit(release.wait, 3.0)
+            threading.Thread(target=poke).start()
+            t0 = time.monotonic()
+            with pytest.raises(KeyboardInterrupt):
+                for _ in wait([slow]):
+                    pass
+            took = time.monotonic() - t0
+            release.set()
+    finally:
+        signal.signal(signal.SIGUSR1, old)
+    if woken_within is not None:
+        assert took < woken_within
+    else:                           # as_completed: only when the future finished
+        assert took >= 2.5

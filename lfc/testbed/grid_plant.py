@@ -249,6 +249,8 @@ def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
     they share; the results in the scenarios' order."""
     from concurrent.futures import ProcessPoolExecutor
 
+    from lfc._pool import completed
+
     from tqdm.auto import tqdm
 
     check_count("jobs", jobs)
@@ -267,8 +269,8 @@ def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
         return out
     with ProcessPoolExecutor(max_workers=min(jobs, len(calls))) as pool:
         futures = [pool.submit(simulate_andes_grid, params, **kw) for kw in calls]
-        for f in futures:
-            f.add_done_callback(lambda _: bar.update())
+        for _ in completed(futures):
+            bar.update()
         out = [f.result() for f in futures]
     bar.close()
     return out
