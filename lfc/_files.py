@@ -49,11 +49,14 @@ def folder_lock(folder: Path) -> Iterator[None]:
 def code_digest(*packages: str) -> str:
     """SHA-256 of the package version and the core's source (``lfc/*.py``,
     ``lfc/filters/*.py``) plus ``lfc/<package>/*.py`` for each of ``packages``
-    (e.g. ``"testbed"``): what stored results depend on besides their inputs."""
+    (e.g. ``"testbed"``; ``"*"``: every source file of the package): what stored
+    results depend on besides their inputs."""
     from lfc import __version__
     root = Path(__file__).resolve().parent
     digest = hashlib.sha256(__version__.encode())
-    for folder in ("", "filters", *packages):
-        for path in sorted((root / folder).glob("*.py")):
-            digest.update(path.relative_to(root).as_posix().encode() + path.read_bytes())
+    paths = (sorted(root.rglob("*.py")) if "*" in packages else
+             [p for folder in ("", "filters", *packages)
+              for p in sorted((root / folder).glob("*.py"))])
+    for path in paths:
+        digest.update(path.relative_to(root).as_posix().encode() + path.read_bytes())
     return digest.hexdigest()

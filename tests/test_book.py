@@ -25,6 +25,7 @@ def book(tmp_path_factory):
     return index
 
 
+@pytest.mark.long(80)
 def test_the_book_has_an_index_with_the_gallery_and_a_page_per_notebook(book):
     text = book.read_text()
     for png in ("tutorial_attack.png", "kalman_scc.png"):

@@ -205,6 +205,7 @@ def test_the_shaped_terminal_set_builds_where_the_lyapunov_one_leaves_no_room():
     assert np.all(reach <= room * (1 + 1e-6))
 
 
+@pytest.mark.long(47)
 def test_a_lightly_damped_area_rides_the_battery_inside_its_certificate():
     """With the shaped terminal set the lightly damped grid runs at the defaults:
     the battery's five attacks x every area x four instants x a ±0.05 pu step

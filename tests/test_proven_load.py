@@ -39,6 +39,7 @@ def test_largest_load_bound_meets_the_issues_floors():
         SafetyFilter(P, method="certified", load_kind="steps", load_bound=0.3)
 
 
+@pytest.mark.long(33)
 def test_largest_load_bound_of_the_robust_configuration():
     robust = largest_load_bound(P, RELAYS, load_kind="steps", uncertainty=0.2,
                                 noise_std=(1e-4, 1e-3), tol=5e-3)
@@ -108,6 +109,7 @@ def test_finding_at_the_largest_bound_a_full_step_under_attack_freezes_the_filte
     assert res.alarms[res.alarms.outside].t.max() > 11.9
 
 
+@pytest.mark.long(38)
 def test_the_readmes_tradeoff_table_is_this_runs():
     """The README's load-during-attack table, recomputed (12 s)."""
     from pathlib import Path

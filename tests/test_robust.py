@@ -104,6 +104,7 @@ def test_the_issue_square_wave_at_half_a_millisecond():
 
 
 # -- the parameter box -----------------------------------------------------------------------
+@pytest.mark.long(46)
 def test_robust_filter_never_trips_at_the_box_corners_or_inside(attacks):
     """The 32 corners of the ±20 % box (proven) and 8 random interior plants
     (measured), the strong attacks, plant step 0.5 ms."""
@@ -170,6 +171,7 @@ def test_a_certified_command_held_keeps_every_corner_inside_at_a_quarter_millise
 
 
 # -- estimation error and noisy relays -------------------------------------------------------
+@pytest.mark.long(37)
 def test_robust_filter_on_kalman_estimates_over_many_seeds(attacks):
     """Default noise, 16 seeds per attack, on the design model and the corner
     with the least inertia and damping and the slowest governor."""
@@ -182,6 +184,7 @@ def test_robust_filter_on_kalman_estimates_over_many_seeds(attacks):
     assert len(res) >= 2 * 16 * 20 and not res.tripped.any()
 
 
+@pytest.mark.long(38)
 def test_robust_filter_on_kalman_estimates_at_all_32_corners(attacks):
     """The issue's "holds at all 32 corners with the Kalman estimate": every
     corner of the box, the strong attacks, one noise seed, 10 s.  No trip.  The

@@ -22,7 +22,7 @@ import tempfile
 import threading
 import time
 import warnings
-from concurrent.futures import Executor, ThreadPoolExecutor, as_completed
+from concurrent.futures import Executor, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -32,10 +32,12 @@ from jupyter_client.manager import KernelManager
 from tqdm.auto import tqdm
 
 from lfc._validate import check_count
-from lfc._files import folder_lock, write_atomic
+from lfc._files import code_digest, folder_lock, write_atomic
+from lfc._pool import completed
 from lfc.experiments.scenarios import ALL_PLANTS
 from lfc.repro.manifest import CHAPTERS
 from lfc.repro.notebook import check_plant, check_type, figure_name, markdown_table
+from lfc.warmup import compile_kernels
 
 ROOT = Path(__file__).resolve().parents[2]
 NOTEBOOKS_DIR = ROOT / "notebooks"
@@ -184,9 +186,7 @@ def run_key(notebook: Path, parameters: dict) -> str:
     nothing else."""
     digest = hashlib.sha256(notebook.read_bytes())
     digest.update(json.dumps(parameters, sort_keys=True, default=str).encode())
-    package = ROOT / "lfc"
-    for path in sorted(package.rglob("*.py")):
-        digest.update(path.relative_to(package).as_posix().encode() + path.read_bytes())
+    digest.update(code_digest("*").encode())
     env = ROOT / "environment.txt"
     digest.update(env.read_bytes() if env.exists() else b"")
     digest.update(f"{sys.version}|{os.environ.get('OPENBLAS_CORETYPE', '')}".encode())
@@ -269,7 +269,7 @@ def _progress(futures: dict, desc: str) -> list:
     done = []
     try:
         with tqdm(total=len(futures), desc=desc, unit="run") as bar:
-            for fut in as_completed(futures):
+            for fut in completed(futures):
                 done.append(fut.result())
                 bar.update(1)
     except KeyboardInterrupt:
@@ -315,6 +315,8 @@ def reproduce(only: list[str] | None = None, plant: str = "all", jobs: int = 2,
         raise ValueError(f"none of {names} runs on plant {plant!r} (see FIGURE_PLANTS)")
     if any(p != "linear" for _, p in runs):
         _prepare_testbed()
+    if jobs > 1 and len(runs) > 1:     # kernels started on a cold cache would each compile
+        compile_kernels()
     pool = executor or ThreadPoolExecutor(max_workers=jobs)
     futures = {}
     labels = [figure_name(n, p) for n, p in runs]
@@ -503,12 +505,13 @@ def sweep(notebook: str | Path, grid: dict[str, list], out: Path | None = None,
         _prepare_testbed()
     out = Path(out or ROOT / "build" / "sweeps" / notebook.stem).resolve()
     points = [dict(zip(grid, combo)) for combo in itertools.product(*grid.values())]
-    pool = executor or ThreadPoolExecutor(max_workers=jobs or os.cpu_count() or 1)
+    todo = [(p, out / run_id(p)) for p in points if not _finished(out / run_id(p))]
+    workers = jobs or os.cpu_count() or 1
+    if len(todo) > 1 and workers > 1:
+        compile_kernels()            # once, not in every kernel that finds the cache cold
+    pool = executor or ThreadPoolExecutor(max_workers=workers)
     futures = {}
-    for point in points:
-        folder = out / run_id(point)
-        if _finished(folder):
-            continue
+    for point, folder in todo:
         params = {"check_claims": False, **point, "figures_dir": str(folder),
                   "results_dir": str(folder)}
         futures[pool.submit(_sweep_one, notebook, folder, params, point)] = point
