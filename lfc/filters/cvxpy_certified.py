@@ -43,10 +43,13 @@ def cvxpy_certified(cert: CertifiedSet, x: np.ndarray, u_ref: float, p_load: flo
         A, B = lfc_matrices(block.plant)
         q = -np.linalg.solve(A, B)
         x_eq = q[:, 0] * u + q[:, 1] * p_load
-        for t, bound in zip(block.times, block.bounds[level]):
-            E = expm(A * t)
-            y = C @ E @ x + (C @ (np.eye(5) - E)) @ x_eq
-            cons.append(cp.abs(cp.multiply(1 / bound, y)) <= 1)   # scaled: better conditioned
+        # the held outputs y(t) = C e^{At} x + C (I − e^{At}) x_eq at every sample time,
+        # affine in u: y(t) = free(t) + per_u(t) u, one row per time, scaled by the bound
+        E = np.array([expm(A * t) for t in block.times])
+        gain = np.einsum("ij,tjk->tik", C, np.eye(5) - E)
+        free = np.einsum("ij,tjk,k->ti", C, E, x) + gain @ q[:, 1] * p_load
+        bound = np.asarray(block.bounds[level])
+        cons.append(cp.abs(free / bound + (gain @ q[:, 0] / bound) * u) <= 1)
         dw_u, dw_p = (C @ q)[0]
         cons.append(cp.abs(dw_u * u + dw_p * p_load) <= block.eq_half[level] * abs(dw_u))
         e = expm(A * block.times[-1]) @ (x - x_eq)          # e'Pe <= rho^2 as a second-order cone
