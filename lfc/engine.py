@@ -867,6 +867,7 @@ class Scenarios:
                        np.zeros(3), np.zeros(3), np.zeros((0, N_CTRL)), np.zeros(1))
             rest = np.flatnonzero(~fit)
         if len(rest):
+            rest = slice(None) if len(rest) == n else rest   # all of them: views, no copies
             m_rest, e_rest = metrics[rest], ends[rest]
             _run(self.n_steps, self.ratio, self.dt, ad, bu, bl, grid.incidence(),
                  k_freq * self.period, k_tie * self.period, plant_of[rest], index[rest],
