@@ -71,6 +71,7 @@ def test_multi_area_notebook_shows_its_figures_and_its_claims_hold(tmp_path):
         assert "|" in (tmp_path / "fig" / f"{table}.md").read_text()
 
 
+@pytest.mark.long(220)
 def test_multi_area_notebook_on_the_kundur_testbed(tmp_path):
     """Notebook 09 on ANDES with its claims checked: AGC restores the schedule,
     every attack trips without filters, the certified filters stop them all;
@@ -97,6 +98,7 @@ def test_multi_area_notebook_on_the_kundur_testbed(tmp_path):
     assert all("on the fitted design model itself" in why for why in deviations.values())
 
 
+@pytest.mark.long(410)
 def test_multi_area_notebook_on_the_ieee39_testbed(tmp_path):
     """Notebook 09 on ANDES' IEEE 39-bus system, claims checked: AGC restores the
     schedule, every attack trips without filters, the certified filters stop
@@ -143,6 +145,7 @@ def tracked_changes() -> str:
     return out.stdout
 
 
+@pytest.mark.long(85)
 def test_red_team_notebook_writes_results_figures_and_the_comparison_table(tmp_path):
     before = tracked_changes()
     run_chapter("redteam", tmp_path)
@@ -282,6 +285,21 @@ def test_sweep_table_and_resume(tmp_path):
         if path != lost:
             assert path.stat().st_mtime_ns == mtime
     assert lost.exists()
+    # the table plotted: one line per panel, labelled axes with units, the relay dashed
+    from lfc.repro.cli import main
+    assert main(["plot-sweep", str(out / "sweep.csv"), "-x", "alpha", "-y",
+                 "max_abs_rocof_meas"]) == 0
+    assert (out / "sweep_max_abs_rocof_meas_vs_alpha.png").stat().st_size > 10_000
+    assert (out / "sweep_max_abs_rocof_meas_vs_alpha.pdf").exists()
+    from lfc.repro.plotting import sweep_figure
+    ax = sweep_figure(table, "alpha", "max_abs_rocof_meas").axes[0]
+    assert ax.get_xlabel() == "Barrier gain α (1/s)"
+    assert ax.get_ylabel() == "Peak |ROCOF| measured (pu/s)"
+    labels = ax.get_legend_handles_labels()[1]
+    assert labels == ["panel a", "panel b", "panel c", "panel d", "ROCOF relay setting"]
+    with pytest.raises(ValueError, match="y='rocof' is not a column of the sweep table"):
+        sweep_figure(table, "alpha", "rocof")
+    assert main(["plot-sweep", str(out / "sweep.csv"), "-x", "alhpa", "-y", "alarms"]) == 2
 
 
 @pytest.mark.parametrize("args, message", [
@@ -403,6 +421,7 @@ def test_the_claims_verdict_explains_a_documented_deviation_on_the_page(tmp_path
     assert "1.0361 pu" in verdict["why not"][0] and verdict["why not"][1] == ""
 
 
+@pytest.mark.long(40)
 def test_coupled_certificate_notebook_shows_its_figure_and_its_claims_hold(tmp_path):
     """Chapter 10 with its short parameters: the figure written and shown, and every
     claim holds (the default per-area filters trip on a step during the attack, the

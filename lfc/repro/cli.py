@@ -82,11 +82,18 @@ def _parser() -> argparse.ArgumentParser:
     sw = sub.add_parser(
         "sweep", help="run a notebook over a parameter grid",
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog="example: Fig. 4 at two gains and three amplitudes, 6 runs on 2 processes\n"
-               "  python -m lfc sweep notebooks/02_fig4_rocof_attack.ipynb \\\n"
-               "      -p alpha 3 20 -p amplitude 0.3 0.5 1.0 --jobs 2\n"
+        epilog="examples:\n"
+               "  Fig. 4 at two gains and three amplitudes, 6 runs on 2 processes\n"
+               "    python -m lfc sweep notebooks/02_fig4_rocof_attack.ipynb \\\n"
+               "        -p alpha 3 20 -p amplitude 0.3 0.5 1.0 --jobs 2\n"
+               "  Fig. 6's load step at three sizes on the linear model, into build/steps\n"
+               "    python -m lfc sweep notebooks/04_fig6_load_step.ipynb \\\n"
+               "        -p load_step 0.05 0.1 0.2 --out build/steps\n"
                "writes OUT/sweep.csv (a row per run and panel: parameters and metrics)\n"
-               "and each run's executed notebook and figures in its own folder of OUT.")
+               "and each run's executed notebook and figures in its own folder of OUT\n"
+               "(a rerun skips finished runs); plot it with\n"
+               "    python -m lfc plot-sweep OUT/sweep.csv -x amplitude -y max_abs_rocof_meas "
+               "--by alpha")
     sw.add_argument("notebook", type=Path)
     sw.add_argument("-p", "--param", nargs="+", action="append", default=[],
                     metavar=("NAME", "VALUE"),
@@ -96,6 +103,20 @@ def _parser() -> argparse.ArgumentParser:
     sw.add_argument("--out", type=_folder, default=None,
                     help="default build/sweeps/<notebook name>")
     sw.add_argument("--dask", metavar="ADDRESS", help="run on a Dask scheduler at ADDRESS")
+    ps = sub.add_parser(
+        "plot-sweep", help="plot a sweep's table: a metric against a parameter",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="example: the peak ROCOF of Fig. 4's panels against the attack amplitude,\n"
+               "one line per gain, the ROCOF relay setting dashed\n"
+               "  python -m lfc plot-sweep build/sweeps/02_fig4_rocof_attack/sweep.csv \\\n"
+               "      -x amplitude -y max_abs_rocof_meas --by alpha")
+    ps.add_argument("table", type=Path, help="a sweep.csv written by python -m lfc sweep")
+    ps.add_argument("-x", required=True, help="the parameter on the horizontal axis")
+    ps.add_argument("-y", required=True, help="the metric (a column of the table)")
+    ps.add_argument("--by", help="a second parameter: one line per value (and panel)")
+    ps.add_argument("--out", type=Path, default=None,
+                    help="figure path without extension (.png and .pdf written; default "
+                         "beside the table: sweep_<y>_vs_<x>)")
     bt = sub.add_parser("batch", help="simulate a scenario table (CSV) with simulate_many")
     bt.add_argument("scenarios", type=Path, help="CSV, one row per scenario (see lfc.batch)")
     bt.add_argument("--duration", type=float, required=True, help="simulated time (s)")
@@ -212,17 +233,16 @@ def _wire(args) -> int:
 def _readme(check: bool) -> int:
     from lfc.repro.notebook import readme_mismatches, sync_readme, update_markdown_section
     readme, tables = runner.ROOT / "README.md", runner.ROOT / "figures"
-    if not check:                        # the last full runs' timing, where measured
-        for name in runner.TIMING_FILES.values():
-            timing = runner.ROOT / "build" / "reproduce" / name
-            if timing.exists():
-                update_markdown_section(readme, name[:-3], timing.read_text())
-                print(f"README section {name[:-3]} from {timing}")
     if check:
         stale = readme_mismatches(readme, tables)
         print("README sections out of date: " + ", ".join(stale) if stale else
               "README tables match figures/")
         return 1 if stale else 0
+    for name in runner.TIMING_FILES.values():     # the last full runs' timing, where measured
+        timing = runner.ROOT / "build" / "reproduce" / name
+        if timing.exists():
+            update_markdown_section(readme, name[:-3], timing.read_text())
+            print(f"README section {name[:-3]} from {timing}")
     changed = sync_readme(readme, tables)
     print("updated README sections: " + ", ".join(changed) if changed else "README up to date")
     return 0
@@ -287,6 +307,8 @@ def main(argv: list[str] | None = None) -> int:
             return _readme(args.check)
         if args.command == "wire":
             return _wire(args)
+        if args.command == "plot-sweep":
+            return _plot_sweep(args)
         if args.command == "book":
             from lfc.repro.book import build_book
             index = build_book(args.only, args.build_dir, args.figures_dir)
@@ -304,6 +326,20 @@ def main(argv: list[str] | None = None) -> int:
         print("interrupted: finished runs and chunks are kept; rerun the same command to "
               "resume", file=sys.stderr)
         return INTERRUPTED
+
+
+def _plot_sweep(args) -> int:
+    import matplotlib
+    import pandas as pd
+    matplotlib.use("Agg")
+    from lfc.repro.plotting import save_figure, sweep_figure
+    if not args.table.is_file():
+        raise ValueError(f"sweep table not found: {args.table}")
+    fig = sweep_figure(pd.read_csv(args.table), args.x, args.y, args.by)
+    out = args.out or args.table.parent / f"sweep_{args.y}_vs_{args.x}"
+    save_figure(fig, out.parent, out.name)
+    print(f"the figure: {out}.png (and .pdf)")
+    return 0
 
 
 def _grid(params: list[list[str]]) -> dict[str, list]:

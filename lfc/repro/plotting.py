@@ -8,6 +8,7 @@ their figures inline; scripts and the runner choose their own).
 from __future__ import annotations
 
 import itertools
+import textwrap
 from pathlib import Path
 
 import matplotlib.pyplot as plt
@@ -21,6 +22,7 @@ from lfc.experiments.surface import scc_label
 from lfc.relays import RelaySettings
 from lfc.simulate import SimResult
 
+TITLE_WIDTH = 90   # characters per line of a title above a legend column: longer ones wrap
 COLORS = {"a": "tab:blue", "b": "tab:orange", "c": "tab:green", "d": "tab:red",
           "no_scc": "tab:blue", "scc": "tab:orange", "scc_true": "tab:orange",
           "scc_kalman": "tab:green"}
@@ -47,7 +49,7 @@ def _finish(axes, title: str) -> None:
     for ax in axes:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1))
-    axes[0].set_title(title)
+    axes[0].set_title(textwrap.fill(title, TITLE_WIDTH))
 
 
 def _rocof(ax, runs: dict[str, SimResult], labels: dict[str, str], relays: RelaySettings,
@@ -75,6 +77,38 @@ def rocof_figure(runs: dict[str, SimResult], labels: dict[str, str], relays: Rel
     _command(top, runs, labels)
     _rocof(bot, runs, labels, relays, mark_trips=mark_trips)
     _finish((top, bot), title)
+    return fig
+
+
+def rocof_panels_figure(runs: dict[str, SimResult], labels: dict[str, str],
+                        relays: RelaySettings, title: str, attacks: dict[str, str]) -> Figure:
+    """One panel per run, as the paper's Fig. 4 (a)–(d): the command (applied and,
+    where the filter changed it, incoming) above the measured ROCOF (pu/s) with
+    the ROCOF setting dashed and the first trip marked; ``attacks`` names each
+    run's attack (its amplitude) in the panel's title.  The panels share their
+    axes, so their heights compare."""
+    keys = list(labels)
+    cols = 2 if len(keys) > 1 else 1
+    rows = -(-len(keys) // cols)
+    fig = plt.figure(figsize=(13, 4.2 * rows), layout="constrained")
+    grid = fig.add_gridspec(2 * rows, cols, height_ratios=[1, 1.6] * rows)
+    first_cmd = first_rocof = None
+    for i, key in enumerate(keys):
+        r, c = divmod(i, cols)
+        cmd = fig.add_subplot(grid[2 * r, c], sharex=first_cmd, sharey=first_cmd)
+        roc = fig.add_subplot(grid[2 * r + 1, c], sharex=cmd, sharey=first_rocof)
+        first_cmd, first_rocof = first_cmd or cmd, first_rocof or roc
+        _command(cmd, runs, {key: labels[key]})
+        cmd.set_ylabel("$\\Delta P_c$ (pu)")
+        cmd.tick_params(labelbottom=False)
+        _rocof(roc, runs, {key: labels[key]}, relays, mark_trips=True)
+        roc.set_ylabel("ROCOF $\\hat{\\dot\\omega}$ (pu/s)")
+        roc.set_xlabel("Time (s)")
+        cmd.set_title(f"{labels[key]}: {attacks[key]}", fontsize=10)
+        for ax in (cmd, roc):
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=7, loc="best")
+    fig.suptitle(title)
     return fig
 
 
@@ -238,7 +272,7 @@ def bias_figure(results, relays: RelaySettings, title: str) -> Figure:
                   "numbers: first trip time (s)")
     _trip_legend(fig)
     ax.legend(fontsize=8, loc="lower left")
-    ax.set_title(title)
+    ax.set_title(textwrap.fill(title, TITLE_WIDTH))
     return fig
 
 
@@ -305,7 +339,7 @@ def severity_figure(red, title: str) -> Figure:
     ax.set_ylabel("Severity: max(|ROCOF| / setting, |Δω̂| / F)")
     ax.grid(alpha=0.3, axis="y")
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1))
-    ax.set_title(title)
+    ax.set_title(textwrap.fill(title, TITLE_WIDTH))
     return fig
 
 
@@ -390,7 +424,7 @@ def box_figure(worst, limit_label: str, title: str) -> Figure:
     ax.set_ylabel("Worst severity over the attacks:\nmax(|ROCOF| / setting, |Δω̂| / F)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1))
-    ax.set_title(title)
+    ax.set_title(textwrap.fill(title, TITLE_WIDTH))
     return fig
 
 
@@ -451,4 +485,48 @@ def latency_figure(exchanges: dict, title: str) -> Figure:
     axes[0].set_ylabel("Control periods")
     axes[1].legend(fontsize=8, loc="upper right")
     fig.suptitle(title)
+    return fig
+
+
+SWEEP_LABELS = {
+    "alpha": "Barrier gain α (1/s)", "amplitude": "Attack amplitude (pu)",
+    "freq_hz": "Attack frequency (Hz)", "duration": "Simulated time (s)",
+    "Ts": "Sampling period $T_s$ (s)", "load_step": "Load step (pu)",
+    "max_abs_rocof_meas": "Peak |ROCOF| measured (pu/s)",
+    "max_abs_dw_meas": "Peak |Δω| measured (pu)", "first_trip_t": "First trip (s)",
+    "final_abs_dw_meas": "|Δω| at the end (pu)", "alarms": "Alarms (control periods)",
+    "active": "Filter active (control periods)",
+    "max_abs_modification": "Largest change of the command (pu)",
+    "mean_abs_modification": "Mean change of the command (pu)",
+}
+
+
+def sweep_figure(table, x: str, y: str, by: str | None = None,
+                 relays: RelaySettings | None = None) -> Figure:
+    """A sweep's table (``python -m lfc sweep``'s ``sweep.csv``): the metric ``y``
+    against the parameter ``x``, one line per panel and value of ``by``; the relay
+    setting dashed where ``y`` is a peak |ROCOF| or |Δω| (``relays``, default the
+    paper's).  ``ValueError`` names a column the table does not have."""
+    for role, col in (("x", x), ("y", y), ("by", by)):
+        if col is not None and col not in table.columns:
+            raise ValueError(f"{role}={col!r} is not a column of the sweep table; it has "
+                             f"{sorted(table.columns)}")
+    relays = relays or RelaySettings()
+    fig, ax = plt.subplots(figsize=(8, 4.5), layout="constrained")
+    groups = ["panel"] + ([by] if by and by != "panel" else [])
+    for key, g in table.sort_values(x).groupby(groups, sort=True):
+        key = key if isinstance(key, tuple) else (key,)
+        label = ", ".join(f"{name} = {value:g}" if isinstance(value, float) else
+                          f"{name} {value}" for name, value in zip(groups, key))
+        ax.plot(g[x], g[y], marker="o", lw=1.2, label=label)
+    limit = {"max_abs_rocof_meas": (relays.rocof_limit, "ROCOF relay setting"),
+             "max_abs_dw_meas": (relays.F, "frequency relay setting")}.get(y)
+    if limit:
+        ax.axhline(limit[0], color="k", ls="--", lw=1, label=limit[1])
+    ax.set_xlabel(SWEEP_LABELS.get(x, x))
+    ax.set_ylabel(SWEEP_LABELS.get(y, y))
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1))
+    ax.set_title(f"{SWEEP_LABELS.get(y, y).split(' (')[0]} against "
+                 f"{SWEEP_LABELS.get(x, x).split(' (')[0].lower()}")
     return fig

@@ -1,0 +1,53 @@
+"""The figures' conventions (labelled axes with units, relay settings dashed,
+names as the paper's panels), checked on the figure objects."""
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import lfc  # noqa: E402
+from lfc.repro.plotting import rocof_panels_figure  # noqa: E402
+
+
+def test_fig4_has_the_papers_four_panels_with_amplitudes_trips_and_settings():
+    P, relays = lfc.LFCParams(), lfc.RelaySettings()
+    attack = lfc.Sinusoid(0.5, 1.0, start=1.0)
+    runs = {"a": lfc.simulate(P, duration=3.0, pc_attack=attack),
+            "b": lfc.simulate(P, duration=3.0, pc_attack=attack,
+                              scc=lfc.SafetyFilter(P, relays, alpha=3.0)),
+            "c": lfc.simulate(P, duration=3.0, pc_attack=attack,
+                              scc=lfc.SafetyFilter(P, relays, alpha=20.0)),
+            "d": lfc.simulate(P, duration=3.0, pc_attack=lfc.Sinusoid(0.1, 1.0, start=1.0),
+                              scc=lfc.SafetyFilter(P, relays, alpha=20.0))}
+    labels = {"a": "(a) no SCC", "b": "(b) SCC α=3", "c": "(c) SCC α=20",
+              "d": "(d) weak attack, SCC α=20"}
+    attacks = {k: f"{a} pu, 1 Hz sinusoid on $P_c$" for k, a in
+               zip("abcd", ("0.5", "0.5", "0.5", "0.1"))}
+    fig = rocof_panels_figure(runs, labels, relays, "Fig. 4 (linear model)", attacks)
+    axes = fig.axes
+    assert len(axes) == 8                                 # a command above each ROCOF
+    titles = [ax.get_title() for ax in axes[::2]]
+    assert titles == [f"{labels[k]}: {attacks[k]}" for k in "abcd"]
+    for cmd, roc in zip(axes[::2], axes[1::2]):
+        assert cmd.get_ylabel() == "$\\Delta P_c$ (pu)"
+        assert roc.get_ylabel().endswith("(pu/s)") and roc.get_xlabel() == "Time (s)"
+        dashed = [line.get_ydata()[0] for line in roc.get_lines() if line.get_linestyle() == "--"]
+        assert sorted(dashed) == [-relays.rocof_limit, relays.rocof_limit]
+        assert roc.get_ylim() == axes[1].get_ylim()       # shared: heights compare
+    trips = [t for ax in axes[1::2] for t in ax.get_legend_handles_labels()[1] if "trips" in t]
+    assert len(trips) == 1 and trips[0].startswith("(a) no SCC: ROCOF trips at")
+
+
+def test_a_long_title_wraps_inside_the_figure():
+    """The red team's replay title (125 characters) was clipped at the left."""
+    from lfc.repro.plotting import rocof_figure
+    P, relays = lfc.LFCParams(), lfc.RelaySettings()
+    runs = {"no_scc": lfc.simulate(P, duration=1.0)}
+    title = ("Worst free-form attack against the paper's SCC (α = 20), replayed (M ×1.114, "
+             "D ×0.928, tau_g ×1.170, tau_t ×0.949, droop ×1.191)")
+    fig = rocof_figure(runs, {"no_scc": "no SCC"}, relays, title)
+    fig.canvas.draw()
+    text = fig.axes[0].title
+    box = text.get_window_extent(fig.canvas.get_renderer())
+    assert "\n" in text.get_text() and text.get_text().replace("\n", " ") == title
+    assert 0 <= box.x0 and box.x1 <= fig.bbox.width
