@@ -547,22 +547,26 @@ def test_samples_columns_on_other_rows_are_refused():
             lfc.simulate_many(LFCParams(), bad, duration=2.0, progress=False)
 
 
-def test_the_sweep_helps_example_parses_into_its_grid():
-    """``python -m lfc sweep --help`` ends with an example; it is a valid command
+def test_the_sweep_helps_examples_parse_into_their_grids():
+    """``python -m lfc sweep --help`` ends with two examples; each is a valid command
     (the notebook exists, its parameters are the notebook's)."""
     import json
+    import re
     import shlex
     from pathlib import Path
 
     from lfc.repro import cli
     parser = cli._parser()
     sweep = parser._subparsers._group_actions[0].choices["sweep"]
-    example = sweep.epilog.split("\n", 1)[1].split("writes")[0].replace("\\\n", " ")
-    argv = shlex.split(example)[3:]                      # after "python -m lfc"
-    args = parser.parse_args(argv)
-    assert cli._grid(args.param) == {"alpha": [3, 20], "amplitude": [0.3, 0.5, 1.0]}
+    text = sweep.epilog.replace("\\\n", " ")
+    examples = re.findall(r"python -m lfc (sweep .*)", text)
+    grids = [{"alpha": [3, 20], "amplitude": [0.3, 0.5, 1.0]}, {"load_step": [0.05, 0.1, 0.2]}]
+    assert len(examples) == 2
     root = Path(__file__).resolve().parents[1]
-    nb = json.loads((root / args.notebook).read_text())
-    source = "".join(next(c for c in nb["cells"] if "parameters" in c["metadata"].get(
-        "tags", []))["source"])
-    assert all(f"\n{name} = " in "\n" + source for name in ("alpha", "amplitude"))
+    for example, grid in zip(examples, grids):
+        args = parser.parse_args(shlex.split(example))
+        assert cli._grid(args.param) == grid
+        nb = json.loads((root / args.notebook).read_text())
+        source = "".join(next(c for c in nb["cells"] if "parameters" in c["metadata"].get(
+            "tags", []))["source"])
+        assert all(f"\n{name} = " in "\n" + source for name in grid)
