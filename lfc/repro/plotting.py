@@ -491,7 +491,7 @@ def latency_figure(exchanges: dict, title: str) -> Figure:
 SWEEP_LABELS = {
     "alpha": "Barrier gain α (1/s)", "amplitude": "Attack amplitude (pu)",
     "freq_hz": "Attack frequency (Hz)", "duration": "Simulated time (s)",
-    "Ts": "Sampling period $T_s$ (s)", "load_step": "Load step (pu)",
+    "Ts": "SCC look-ahead $T_s$ (s)", "load_step": "Load step (pu)",
     "max_abs_rocof_meas": "Peak |ROCOF| measured (pu/s)",
     "max_abs_dw_meas": "Peak |Δω| measured (pu)", "first_trip_t": "First trip (s)",
     "final_abs_dw_meas": "|Δω| at the end (pu)", "alarms": "Alarms (control periods)",
