@@ -32,6 +32,9 @@ opposite ACE biases of ±3 pu, after which AGC restores frequency and schedule).
 ``filters={i: "coupled"}`` at every area is the other way: one certificate on
 the coupled model, each filter reading the grid's state, the tie-line flows part
 of the prediction (:mod:`lfc.filters.coupled`, ``docs/coupled-certificate.md``).
+``filters={i: "contract"}`` at every area is the decentralized one: each area
+keeps its command in a box and certifies against its neighbours' boxes, reading
+nothing (:mod:`lfc.filters.contract`).
 
 Measured, not proven: what happens after an ``outside`` flag.  The held
 command was certified for the net disturbance of an earlier sample; while it
@@ -69,6 +72,7 @@ from lfc._validate import check_count, check_index
 from lfc.batch import metrics_frame
 from lfc.engine import METRICS, Scenarios, check_area_keys, sample_signal
 from lfc.filters import SafetyFilter
+from lfc.filters.contract import contract_design
 from lfc.filters.coupled import CoupledFilter
 from lfc.model import STATES
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams
@@ -78,7 +82,7 @@ from lfc.simulate import SimResult, check_timing, result
 __all__ = ["MultiAreaResult", "area_filter", "multiarea_result", "simulate_grid_linear",
            "simulate_grid_table",
            "tie_step_bound"]
-FILTER_KINDS = ("paper", "certified", "coupled")
+FILTER_KINDS = ("paper", "certified", "coupled", "contract")
 PAPER_ALPHA = 20.0   # 1/s: "paper" as notebook 08 runs it (notebook 09 also runs α = 3)
 
 
@@ -102,13 +106,21 @@ def area_filter(params: MultiAreaParams, area: int,
     ``"coupled"`` (the grid's coupled certificate with its default options,
     :mod:`lfc.filters.coupled`: the same object for every area, which must all
     have it; with ``noise_std``, the measurement noise of its grid Kalman
-    estimate, ``estimator="kalman"``), a filter as given, or None."""
+    estimate, ``estimator="kalman"``), ``"contract"`` (the area's box of the
+    grid's :func:`~lfc.filters.contract.contract_design` with its defaults: the
+    decentralized certificate, proven when every area has it), a filter as
+    given, or None."""
     if kind is None or isinstance(kind, (SafetyFilter, CoupledFilter)):
         return kind
     if kind == "coupled":
         return coupled_filter(params, relays, control_period,
                               None if noise_std is None else tuple(noise_std))
     model = params.areas[area]
+    if kind == "contract":
+        share = contract_design(params, relays, control_period=control_period)
+        return SafetyFilter(model, relays, method="contract", control_period=control_period,
+                            half_width=float(share.half_width[area]),
+                            rate=float(share.rate[area]))
     if kind == "paper":
         return SafetyFilter(model, relays, alpha=PAPER_ALPHA)
     if kind == "certified":

@@ -1,4 +1,5 @@
-"""Safety filters: the paper's SCC and the certified filter, behind one interface.
+"""Safety filters: the paper's SCC, the certified filter and the contract, behind one
+interface.
 
 ``SafetyFilter(params, relays, method=..., **options)`` builds the method
 registered under that name (:func:`available`; each method is one module here:
@@ -30,6 +31,7 @@ from lfc._validate import ParameterTypeError, check_array, check_number, check_p
 from lfc.filters.base import (ALARM_BITS, ALARM_FLAGS, MEMORY, Backend, FilterInfo, Options,
                               binding_names, flag)
 from lfc.filters.certified import CertifiedFilter, CertifiedOptions
+from lfc.filters.contract import ContractFilter, ContractOptions
 from lfc.filters.dispatch import PYTHON, decide, decide_many, register_python
 from lfc.filters.paper import (CONFLICT_RULES, DEFAULT_READING, OUTSIDE_RULES, PREDICTIONS,
                                PaperFilter, PaperOptions)
@@ -37,8 +39,8 @@ from lfc.model import STATES, LFCParams
 from lfc.relays import RelaySettings, relays_or_default
 
 __all__ = ["ALARM_BITS", "ALARM_FLAGS", "CONFLICT_RULES", "DEFAULT_READING", "METHODS",
-           "OUTSIDE_RULES", "PREDICTIONS", "CertifiedOptions", "FilterInfo", "PaperOptions",
-           "SafetyFilter", "alarm_mask", "available", "binding_names", "option_table",
+           "OUTSIDE_RULES", "PREDICTIONS", "CertifiedOptions", "ContractOptions", "FilterInfo",
+           "PaperOptions", "SafetyFilter", "alarm_mask", "available", "binding_names", "option_table",
            "options_of", "register"]
 
 REGISTRY: dict[str, type[Backend]] = {}
@@ -58,6 +60,7 @@ def register(backend: type[Backend]) -> type[Backend]:
 
 register(PaperFilter)
 register(CertifiedFilter)
+register(ContractFilter)
 METHODS = tuple(REGISTRY)   # the methods of this release (available() includes later ones)
 
 
@@ -111,8 +114,10 @@ class SafetyFilter:
         guarantee (options :class:`CertifiedOptions`: ``horizon``,
         ``load_bound``, ``load_kind``, ``margin``, ``uncertainty``, ``noise_std``,
         ``confidence``, ``trips_per_hour``, ``relay_rate``, ``tightening``,
-        ``u_min``, ``u_max``, ``control_period``).  :func:`option_table` lists units, defaults
-        and ranges.
+        ``u_min``, ``u_max``, ``control_period``); ``"contract"``, the command kept in
+        a box that certifies a grid by contract (options :class:`ContractOptions`:
+        ``half_width``, ``load_bound``, ``margin``; :mod:`lfc.filters.contract`).
+        :func:`option_table` lists units, defaults and ranges.
     **options
         The method's options.
 

@@ -17,10 +17,13 @@ import numpy as np
 from lfc._jit import inline, jit
 from lfc.filters.certified import CertifiedFilter
 from lfc.filters.certified import decide as decide_certified
+from lfc.filters.contract import ContractFilter
+from lfc.filters.contract import decide as decide_contract
 from lfc.filters.paper import PaperFilter
 from lfc.filters.paper import decide as decide_paper
 
-PAPER, CERTIFIED, PYTHON = PaperFilter.method_id, CertifiedFilter.method_id, 99
+PAPER, CERTIFIED, CONTRACT, PYTHON = (PaperFilter.method_id, CertifiedFilter.method_id,
+                                     ContractFilter.method_id, 99)
 _PYTHON: weakref.WeakValueDictionary = weakref.WeakValueDictionary()  # id -> backend
 
 
@@ -68,6 +71,8 @@ def decide(method: int, fd: np.ndarray, x: np.ndarray, u_ref: float, p: float,
         return decide_paper(fd, x, u_ref, p, mem)
     if method == CERTIFIED:
         return decide_certified(fd, x, u_ref, p, mem)
+    if method == CONTRACT:
+        return decide_contract(fd, x, u_ref, p, mem)
     return _decide_python(fd, x, u_ref, p, mem)
 
 

@@ -1,0 +1,334 @@
+"""A certificate by contract: each area keeps its command in a box and moves it
+no faster than a rate, and certifies against its neighbours' boxes and rates.
+
+``filters={a: "contract" for every area}`` in :func:`lfc.simulate` (each area's
+share of :func:`contract_design`), or ``SafetyFilter(params, method="contract")``
+for one area.  The decentralized certificate of the Coupled issue, built on what
+an area can promise: not its frequency (with its command held, an area's
+tie-line flow settles only when its frequency equals a weighted mean of its
+neighbours', so a neighbour at ``B`` drags it to ``B`` with gain one plus
+overshoot — ``docs/coupled-certificate.md``, "The decentralized certificate"),
+but what it *injects*: its governor command.
+
+**The contract.**  Area ``j`` applies commands within ``[-a_j, a_j]`` (pu, a
+deviation from its schedule) that move by at most ``r_j T`` at each control
+sample (``T`` the control period; ``r_j`` in pu/s).  Its filter enforces both
+alone: the command is ``u_ref`` clipped to ``[-a_j, a_j]`` and to within
+``r_j T`` of the last one, so the contract holds whatever an attacker sends to
+that area, and the interval is never empty.
+
+**The certificate** (:func:`contract_design`).  On the grid with every command
+an input (the tie-line flows states of the model, not disturbances), every area's
+measured frequency and ROCOF is, from an equilibrium,
+``y_o = sum_j h_oj * u_j + sum_j s^L_oj * dp_j``.  Frequency: over every command
+within the boxes, ``|h_oj * u_j| <= a_j int |h_oj|`` (the L1 norm,
+:func:`~lfc.filters.certified.load_gains` ``"band"``).  ROCOF: a command held
+between samples is a sum of steps ``du_k`` at the samples, ``|du_k| <= r_j T``,
+so ``|h_oj * u_j|(t) <= r_j T sup_phi sum_k |s_oj(phi + k T)|`` with ``s_oj`` the
+step response, which settles to 0 for ROCOF (:func:`rate_gains`).  Loads whose
+total variation summed over the areas is ``V`` move ``y_o`` by at most
+``V max_j sup |s^L_oj|`` (``"steps"``).  The boxes and rates are the largest (a
+linear program each: the smallest as large as possible, then the others) with
+the sum of these bounds within ``L_o``, the relay limit (``F``, ``rocof_limit``)
+times ``1 - margin``, with room for a total load variation ``load_bound``.
+
+**Guarantee (proven).**  For the design grid, starting from an equilibrium
+with every area's filter keeping its contract (this filter at every area, with
+its area's share), and loads whose total variation over the run, summed over
+the areas, is at most ``load_bound``: no area's OF2, UF2 or ROCOF relay trips,
+at any instant — whatever commands, frequency references and ACE signals an
+attacker sends to any subset of the areas, at any moment.  No filter needs a
+state, an estimate, a tie-line flow or a message: the proof uses only the
+contracts.  The filter never flags ``outside``; an invalid input holds the last
+command (inside the contract) and flags ``invalid_input``.
+
+**The price.**  The contract also limits legitimate control: an area's AGC
+cannot follow a load larger than its box (the command stops there; with
+``anti_windup`` the AGC does not wind up behind it), and the box covers the
+worst signal within it, a resonance the AGC never sends, so it is small where
+the grid is lightly damped or the ties stiff (``docs/coupled-certificate.md``,
+"Cost").
+
+**Not covered.**  Plants other than the design grid; a start away from
+equilibrium (its free response is not bounded); an area without the contract
+(the others cannot see it).  On ANDES the contracts are the fitted model's:
+measured there, not proven.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+from scipy.optimize import linprog
+
+from lfc._jit import inline
+from lfc._validate import check_nonnegative, check_positive
+from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, Backend, Options, given,
+                              hold_invalid, option, valid_input)
+from lfc.filters.certified import L1_HORIZON, NUMERIC_MARGIN, _load_responses, load_gains
+from lfc.filters.coupled import output_rows, reduced_model
+from lfc.model import LFCParams
+from lfc.multiarea import MultiAreaParams, as_grid
+from lfc.relays import RelaySettings
+
+HALF, STEP, F_LIM, R_LIM = range(4)   # layout of the data array decide() reads
+
+
+@dataclass(frozen=True)
+class Contract:
+    """Every area's contract on a grid and what it proves (:func:`contract_design`).
+
+    Attributes
+    ----------
+    half_width : ndarray (n_areas,)
+        Each area's box ``[-a_j, a_j]`` on its command (pu).
+    rate : ndarray (n_areas,)
+        Each area's rate ``r_j`` (pu/s): its command moves at most ``r_j T`` per
+        control period ``T``.
+    frequency_gain : ndarray (n_areas, n_areas)
+        ``[i, j]``: how far a command of area ``j`` within ±1 pu can move area
+        ``i``'s measured frequency (pu per pu).
+    rocof_gain : ndarray (n_areas, n_areas)
+        ``[i, j]``: how far a command of area ``j`` moving by at most 1 pu/s can
+        move area ``i``'s measured ROCOF (pu/s per pu/s).
+    load_gain : ndarray (n_areas, 2)
+        Per area, frequency and ROCOF moved per pu of the loads' total variation.
+    limits : ndarray (2,)
+        The relay limits kept (``F``, ``rocof_limit`` times ``1 - margin``).
+    bound : ndarray (n_areas, 2)
+        The proven bound on each area's measured frequency (pu) and ROCOF (pu/s).
+    load_bound, control_period : float
+        The loads' total variation covered (pu) and the control period (s).
+    """
+
+    half_width: np.ndarray
+    rate: np.ndarray
+    frequency_gain: np.ndarray
+    rocof_gain: np.ndarray
+    load_gain: np.ndarray
+    limits: np.ndarray
+    bound: np.ndarray
+    load_bound: float
+    control_period: float
+
+    def use(self) -> np.ndarray:
+        """The fraction of each limit the bound takes (n_areas, 2), at most 1."""
+        return self.bound / self.limits
+
+
+def rate_gains(A: np.ndarray, b: np.ndarray, C: np.ndarray, period: float) -> np.ndarray:
+    """Per output whose step response ``s`` settles to 0, the most a command moving
+    by at most 1 pu/s (steps of at most ``period`` pu at its samples) moves it:
+    ``period sup_phi sum_k |s(phi + k period)|``.
+
+    On a grid of about 1 ms (``period / ceil(period / 1 ms)``) for ``phi``, plus
+    the most ``s`` moves within half a grid step (``|h| dt / 2`` per term) and 1 %;
+    beyond the horizon (60 s, doubled while it matters) a modal bound
+    ``sum_i |r_i / w_i| e^{Re w_i t}`` on ``|s|``, summed as a geometric series,
+    must be below 0.1 % (so that the 1 % covers it).  ``ValueError`` if an
+    output's step response does not settle to 0 (its sum has no bound).
+    """
+    check_positive("period", period)
+    w, V = np.linalg.eig(A)
+    residue = np.abs((C @ V) * np.linalg.solve(V, b)[None, :])
+    final = np.abs(C @ np.linalg.solve(A, b))
+    if np.any(final > 1e-9 * np.maximum(1.0, residue.sum(axis=1))):
+        raise ValueError("rate_gains: an output's step response does not settle to 0 (a "
+                         "command moving at a bounded rate can move it without bound)")
+    m = math.ceil(period / 1e-3 - 1e-9)
+    dt = period / m
+    horizon = L1_HORIZON
+    while True:
+        k = int(round(horizon / period))
+        sums, slack = np.zeros((len(C), m)), np.zeros(len(C))
+        size = max(1, int(round(L1_HORIZON / period)))
+        for k0 in range(0, k, size):
+            t = (np.arange(k0, min(k, k0 + size))[:, None] * period
+                 + np.arange(m)[None, :] * dt).ravel()
+            resp, step = _load_responses(A, b, C, t)
+            sums += np.abs(step).reshape(len(C), -1, m).sum(axis=1)
+            slack += 0.5 * dt * np.abs(resp).reshape(len(C), -1, m).max(axis=2).sum(axis=1)
+        value = period * (sums.max(axis=1) + slack)
+        decay = np.exp(w.real * horizon)
+        tail = period * residue @ (decay / np.abs(w) / -np.expm1(w.real * period))
+        if np.all(tail <= 1e-3 * value):
+            return 1.01 * value
+        if horizon >= 64 * L1_HORIZON:
+            raise ValueError(f"rate_gains: the plant is too slow (slowest decay "
+                             f"{-w.real.max():.3g} 1/s)")
+        horizon *= 2
+
+
+def _largest(gains: np.ndarray, room: np.ndarray) -> np.ndarray:
+    """The largest ``x >= 0`` with ``gains @ x <= room``: the smallest entry as
+    large as possible, then the sum at that smallest (two linear programs)."""
+    n = gains.shape[1]
+    first = linprog(np.r_[np.zeros(n), -1.0],
+                    A_ub=np.block([[gains, np.zeros((len(gains), 1))],
+                                    [-np.eye(n), np.ones((n, 1))]]),
+                    b_ub=np.r_[room, np.zeros(n)], bounds=[(0, None)] * (n + 1), method="highs")
+    if first.status != 0:   # pragma: no cover - x = 0 is feasible and room bounds it
+        raise ValueError(f"the contract's linear program failed: {first.message}")
+    second = linprog(-np.ones(n), A_ub=gains, b_ub=room,
+                     bounds=[(first.x[-1] * (1 - 1e-9), None)] * n, method="highs")
+    if second.status != 0:  # pragma: no cover
+        raise ValueError(f"the contract's linear program failed: {second.message}")
+    return second.x * (1 - NUMERIC_MARGIN)
+
+
+@functools.lru_cache(maxsize=16)
+def contract_design(params: MultiAreaParams | LFCParams, relays: RelaySettings, *,
+                    control_period: float = 0.01, load_bound: float = 0.06,
+                    margin: float = 0.0) -> Contract:
+    """Every area's contract on ``params`` (module docstring): the largest boxes
+    that keep every measured frequency within ``F``, and the largest rates that
+    keep every measured ROCOF within ``rocof_limit``, each with room for loads of
+    total variation ``load_bound``.
+
+    Parameters
+    ----------
+    params : MultiAreaParams or LFCParams
+        The design grid (one area: an ``LFCParams``).
+    relays : RelaySettings
+    control_period : float
+        Period of the filters' calls (s, > 0): a command steps at most ``r T``.
+    load_bound : float
+        Total variation of the loads over a run, summed over the areas (pu,
+        >= 0; default 0.06, the coupled certificate's).
+    margin : float
+        Extra fractional tightening of both limits, in [0, 1).
+
+    Raises
+    ------
+    ValueError
+        If the grid with its commands held is not asymptotically stable (a
+        command within any box can drive it away), or the loads alone take a
+        whole limit.
+    """
+    check_positive("control_period", control_period)
+    check_nonnegative("load_bound", load_bound)
+    if not 0.0 <= margin < 1.0:
+        raise ValueError(f"margin must be in [0, 1), got {margin!r}")
+    grid = as_grid(params)
+    A, Bu, Bl, _ = reduced_model(grid)
+    growth = float(np.max(np.linalg.eigvals(A).real))
+    if growth >= 0:
+        raise ValueError(f"the grid {grid!r} with every command held is not asymptotically "
+                         f"stable (eigenvalue real part {growth:.3g} 1/s): a command within "
+                         f"any box can drive it away, so no contract certifies it")
+    n_a = grid.n_areas
+    C = output_rows(n_a, len(A))
+    limits = np.array([relays.F, relays.rocof_limit]) * (1 - margin) * (1 - NUMERIC_MARGIN)
+    freq = np.array([load_gains(A, Bu[:, j], C[0::2])["band"] for j in range(n_a)]).T
+    rocof = np.array([rate_gains(A, Bu[:, j], C[1::2], control_period)
+                      for j in range(n_a)]).T
+    load = np.max([load_gains(A, Bl[:, j], C)["steps"] for j in range(n_a)],
+                  axis=0).reshape(n_a, 2)
+    room = limits - load_bound * load
+    if np.any(room <= 0):
+        i, o = np.unravel_index(np.argmin(room / limits), room.shape)
+        raise ValueError(f"load_bound={load_bound:g} pu takes the whole of area {i}'s "
+                         f"{('frequency', 'ROCOF')[o]} limit ({load_bound * load[i, o]:.3g} "
+                         f"of {limits[o]:.3g}); lower load_bound")
+    half, rate = _largest(freq, room[:, 0]), _largest(rocof, room[:, 1])
+    bound = np.column_stack([freq @ half, rocof @ rate]) + load_bound * load
+    arrays = (half, rate, freq, rocof, load, limits, bound)
+    for a in arrays:
+        a.setflags(write=False)   # shared by every caller (cached)
+    return Contract(*arrays, float(load_bound), float(control_period))
+
+
+@dataclass(frozen=True)
+class ContractOptions(Options):
+    """Options of the contract filter (``method="contract"``)."""
+
+    half_width: float | None = option(
+        None, "pu", "None or > 0",
+        "the box [-a, a] on the command; None: contract_design of the area alone (a grid's "
+        "area gets its share from area_filter)")
+    rate: float | None = option(
+        None, "pu/s", "None or > 0 (with half_width)",
+        "the most the command moves per second (r T per control period); None: with "
+        "half_width None, contract_design's")
+    load_bound: float = option(0.06, "pu", ">= 0",
+                               "total variation of the loads over a run the design covers")
+    margin: float = option(0.0, "", "[0, 1)", "extra fractional tightening of both limits")
+    control_period: float = option(0.01, "s", "(0, 1]", "period of the calls")
+
+    COLUMNS: ClassVar[tuple[str, ...]] = ("half_width", "rate")
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if (self.half_width is None) != (self.rate is None):
+            raise ValueError(f"half_width and rate go together (both a contract's share, or "
+                             f"both None for the area alone), got half_width="
+                             f"{self.half_width!r}, rate={self.rate!r}")
+        for name in ("half_width", "rate"):
+            if getattr(self, name) is not None:
+                check_positive(name, getattr(self, name))
+                object.__setattr__(self, name, float(getattr(self, name)))
+        check_nonnegative("load_bound", self.load_bound)
+        if not 0.0 <= self.margin < 1.0:
+            raise ValueError(f"margin must be in [0, 1), got {self.margin!r}")
+        check_positive("control_period", self.control_period)
+        if self.control_period > 1.0:
+            raise ValueError(f"control_period must lie in (0, 1] s, got {self.control_period!r}")
+        for name in ("load_bound", "margin", "control_period"):
+            object.__setattr__(self, name, float(getattr(self, name)))
+
+    @classmethod
+    def from_columns(cls, row: dict) -> dict:
+        """The row's ``half_width`` (pu) and ``rate`` (pu/s), if given."""
+        return {c: float(row[c]) for c in cls.COLUMNS if given(row.get(c))}
+
+
+class ContractFilter(Backend):
+    """The contract filter (method ``"contract"``, options
+    :class:`ContractOptions`): clip the command to ``[-a, a]`` and to within
+    ``r T`` of the last one."""
+
+    name, method_id, Options = "contract", 3, ContractOptions
+
+    def __init__(self, params: LFCParams, relays: RelaySettings,
+                 options: ContractOptions) -> None:
+        super().__init__(params, relays, options)
+        half, rate = options.half_width, options.rate
+        if half is None:
+            own = contract_design(params, relays, control_period=options.control_period,
+                                  load_bound=options.load_bound, margin=options.margin)
+            half, rate = float(own.half_width[0]), float(own.rate[0])
+        self.box, self.step = half, rate * options.control_period
+        self.data = np.array([half, self.step, relays.F, relays.rocof_limit])
+
+    def reason(self, flags: int) -> str:
+        if flags & INVALID:
+            return ("invalid input (non-finite or beyond 1e6: a corrupted message); last "
+                    "command held (inside the contract)")
+        return (f"command clipped to its contract (within ±{self.box:.4g} pu, moving at most "
+                f"{self.step:.3g} pu per period)" if flags & ACTIVE else "")
+
+    def details(self, d0: float, d1: float, flags: int) -> dict:
+        return {"interval": (d0, d1)}
+
+
+@inline
+def decide(fd: np.ndarray, x: np.ndarray, u_ref: float, p: float, mem: np.ndarray) -> tuple:
+    """One call of the contract filter: ``u_ref`` clipped to ``[-a, a]`` and to
+    within ``r T`` of the last command ``mem[0]`` (``a = fd[HALF]``, ``r T =
+    fd[STEP]``; never empty, ``mem[0]`` lying in the box); an invalid input holds
+    ``mem[0]``.  Returns ``(u, flags, h_freq, h_rocof, margin, margin, y_freq,
+    y_rocof, lo, hi)`` with ``margin`` the distance from ``u`` to the interval's
+    nearer end."""
+    if not valid_input(x, u_ref, p):
+        return hold_invalid(mem, u_ref)
+    lo, hi = max(-fd[HALF], mem[0] - fd[STEP]), min(fd[HALF], mem[0] + fd[STEP])
+    u = min(max(u_ref, lo), hi)
+    mem[0] = u
+    flags = ACTIVE | BIND_CERT if u != u_ref else 0
+    m = min(u - lo, hi - u)
+    return (u, flags, fd[F_LIM] ** 2 - x[3] ** 2, fd[R_LIM] ** 2 - x[4] ** 2, m, m, x[3], x[4],
+            lo, hi)
