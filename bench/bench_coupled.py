@@ -1,5 +1,5 @@
-"""Benchmark: what the coupled certificate costs per area and control period, and
-how its conservatism grows with the number of areas.
+"""Benchmark: what the coupled certificate and the contract cost per area and
+control period, and how their conservatism grows with the number of areas.
 
 Prints, from one run on this machine, for rings of 2 (the two-area preset), 4, 6
 and 10 areas (the three-area preset's areas in turn, T = 2 pu) and for the
@@ -12,7 +12,12 @@ the calls (goal <= 1 ms at 10 areas).  Reference: the per-area certified filter
 (``"certified"``, built once) on the same run, where it builds.  Where the
 coupled filter's defaults do not build the row uses ``load_bound = recheck_bound
 = 0.05`` and says so; a row whose terminal set is the shaped one
-(``terminal="auto"`` chose it) says so too.
+(``terminal="auto"`` chose it) says so too.  The decentralized certificate by
+contract (``"contract"``, :mod:`lfc.filters.contract`) on the same grids: each
+area's box (pu) and rate (pu/s) — its conservatism — its design time and its
+time per call: one clip, too short to resolve as a difference of run times, so
+measured on ``filter_batch`` of 10^6 commands (the same compiled call), median
+of 3.
 
 Run: python bench/bench_coupled.py
 """
@@ -22,8 +27,12 @@ from __future__ import annotations
 import statistics
 import time
 
+import numpy as np
+
 import lfc
 from lfc import MultiAreaParams
+from lfc.filters.certified import _pair
+from lfc.filters.contract import contract_design
 from lfc.filters.coupled import CoupledFilter
 from lfc.simulate_multiarea import area_filter
 
@@ -48,6 +57,20 @@ def run_time(grid: MultiAreaParams, filters: dict | None) -> float:
     return statistics.median(times)
 
 
+def batch_call(filt: lfc.SafetyFilter, n: int = 10**6) -> float:
+    """Median time of one call of ``filt`` in ``filter_batch`` over ``n`` random
+    commands (s)."""
+    rng = np.random.default_rng(0)
+    x, u = np.zeros((n, 5)), rng.normal(0.0, 0.5, n)
+    filt.filter_batch(x[:10], u[:10])                 # compile
+    times = []
+    for _ in range(REPEAT):
+        t0 = time.perf_counter()
+        filt.filter_batch(x, u)
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times) / n
+
+
 def row(name: str, grid: MultiAreaParams) -> None:
     relays = lfc.RelaySettings()
     t0 = time.perf_counter()
@@ -69,10 +92,15 @@ def row(name: str, grid: MultiAreaParams) -> None:
         ref = f"{1e6 * (run_time(grid, per_area) - bare) / calls:.2f} µs"
     except ValueError:
         ref = "does not build"
+    t0 = time.perf_counter()
+    share = contract_design(grid, relays)
+    designed = time.perf_counter() - t0
+    contract_call = batch_call(area_filter(grid, 0, "contract", relays, 0.01))
     b = filt.cert.budget
     print(f"| {name} | {built:.1f} s | {len(filt.cert.times)} / {filt.cert.n_rows} | "
-          f"{b['load']} | {b['between samples']} | {1e6 * per_call:.1f} µs | {ref} |",
-          flush=True)
+          f"{_pair(b['load'])} | {_pair(b['between samples'])} | {1e6 * per_call:.1f} µs | {ref} | "
+          f"±{share.half_width.min():.3g} pu, {share.rate.min():.3g} pu/s | {designed:.1f} s | "
+          f"{1e9 * contract_call:.0f} ns |", flush=True)
 
 
 def main() -> None:
@@ -82,8 +110,9 @@ def main() -> None:
           f"(frequency pu, ROCOF pu/s) of the limits ({lfc.RelaySettings().F:.3g}, "
           f"{lfc.RelaySettings().rocof_limit:.3g})")
     print("| grid | build | samples / rows | load tightening | between samples | "
-          "per call | per-area certified, per call |")
-    print("|---|---|---|---|---|---|---|")
+          "per call | per-area certified, per call | contract: box, rate | contract: design | "
+          "contract: per call (batch) |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for n in (2, 4, 6, 10):
         row(f"ring of {n}" if n > 2 else "two-area", ring(n))
     for T in (10.0, 30.0):

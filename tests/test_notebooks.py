@@ -423,12 +423,13 @@ def test_the_claims_verdict_explains_a_documented_deviation_on_the_page(tmp_path
 
 @pytest.mark.long(40)
 def test_coupled_certificate_notebook_shows_its_figure_and_its_claims_hold(tmp_path):
-    """Chapter 10 with its short parameters: the figure written and shown, and every
-    claim holds (the default per-area filters trip on a step during the attack, the
-    coupled ones neither trip nor flag ``outside``, also behind Kundur's stiff tie)."""
+    """Chapter 10 with its short parameters: both figures written and shown, and
+    every claim holds (the default per-area filters trip on a step during the
+    attack, the coupled ones and the contracts neither trip nor flag ``outside``,
+    also behind Kundur's stiff tie)."""
     run_chapter("coupled", tmp_path, check_claims=True)
     claims = json.loads((tmp_path / "res" / "claims.json").read_text())
-    assert len(claims) == 5 and all(claims.values())
+    assert len(claims) == 7 and all(claims.values())
 
 
 def test_wire_notebook_shows_its_figures_and_its_claims_hold(tmp_path):

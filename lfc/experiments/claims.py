@@ -156,12 +156,13 @@ def multiarea_claims(load_step: dict, attacks: dict[str, dict], tol: float = 1e-
 
 
 def coupled_claims(runs: dict, kundur: dict[str, tuple[int, int, int]]) -> dict[str, bool]:
-    """The coupled-certificate chapter (notebook 10).  ``runs`` maps a filter
+    """The grid-certificates chapter (notebook 10).  ``runs`` maps a filter
     setting (``"none"``, ``"per-area"``: the default per-area certified filters,
-    ``"per-area steps"``, ``"coupled"``) to the multi-area run of a legitimate
-    load step during an attack; ``kundur`` maps ``"per-area steps"`` and
-    ``"coupled"`` to ``(runs, runs with a trip, runs with an outside flag)`` of
-    load steps during an ACE attack on Kundur's areas as fitted to ANDES."""
+    ``"per-area steps"``, ``"coupled"``, ``"contract"``) to the multi-area run of a
+    legitimate load step during an attack; ``kundur`` maps ``"per-area steps"``,
+    ``"coupled"`` and ``"contract"`` to ``(runs, runs with a trip, runs with an
+    outside flag)`` of load steps during an ACE attack on Kundur's areas as fitted
+    to ANDES."""
     def outside(r) -> int:
         return sum(int(area.alarms.outside.sum()) for area in r.areas)
 
@@ -171,10 +172,14 @@ def coupled_claims(runs: dict, kundur: dict[str, tuple[int, int, int]]) -> dict[
             runs["per-area"].tripped and outside(runs["per-area"]) > 0,
         "the coupled filters trip nothing and never flag outside":
             not runs["coupled"].tripped and outside(runs["coupled"]) == 0,
+        "the contracts trip nothing and never flag outside":
+            not runs["contract"].tripped and outside(runs["contract"]) == 0,
         "Kundur: the per-area steps filters leave their certificate (outside)":
             kundur["per-area steps"][2] > 0,
         "Kundur: the coupled filters trip nothing and never flag outside":
             kundur["coupled"][1:] == (0, 0),
+        "Kundur: the contracts trip nothing and never flag outside":
+            kundur["contract"][1:] == (0, 0),
     })
 
 

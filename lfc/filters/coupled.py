@@ -83,7 +83,7 @@ from lfc._validate import check_nonnegative, check_positive, check_range
 from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, MAX_ABS_INPUT, OUTSIDE,
                               applied_flags, check_limits, hold_invalid, valid_input)
 from lfc.filters.certified import (NUMERIC_MARGIN, _curvature_gains, _expm_at,
-                                   _intersample, _merge_intervals, grid, load_gains,
+                                   _intersample, _merge_intervals, _pair, grid, load_gains,
                                    period_step_gain, rate_bound)
 from lfc.estimation import (LOAD_STD, check_noise_std, kf_correct, kf_predict, measurement_std,
                             steady_state_kalman)
@@ -309,8 +309,8 @@ class CoupledSet:
     times : ndarray
         The certificate's sample times (s).
     budget : dict
-        Each tightening of the limits (pu, pu/s per output kind): ``load``,
-        ``re-check``, ``between samples``.
+        Each tightening of the limits, ``[frequency pu, ROCOF pu/s]`` (the largest
+        over the areas): ``load``, ``re-check``, ``between samples``, ``estimate``.
     """
 
     def __init__(self, params: MultiAreaParams, relays: RelaySettings,
@@ -471,7 +471,7 @@ class CoupledSet:
         self.W = R[N_AREA_STATES * n_a:, N_AREA_STATES * n_a:].T   # the reachable flows' basis
 
     def _describe(self) -> str:
-        return ", ".join(f"{name} {v}" for name, v in self.budget.items())
+        return ", ".join(f"{name} {_pair(v)}" for name, v in self.budget.items())
 
 
 def shaped_terminal(A: np.ndarray, C: np.ndarray, loads: np.ndarray,
@@ -561,9 +561,9 @@ def _sup_abs(w: np.ndarray, steps: np.ndarray, chunk: int = 4096) -> np.ndarray:
     return out
 
 
-def _by_kind(per_output: np.ndarray) -> str:
-    """The largest of an array over the outputs, per kind: ``(frequency pu, ROCOF pu/s)``."""
-    return f"({np.max(per_output[0::2]):.3g}, {np.max(per_output[1::2]):.3g})"
+def _by_kind(per_output: np.ndarray) -> np.ndarray:
+    """The largest of an array over the outputs, per kind: ``[frequency pu, ROCOF pu/s]``."""
+    return np.array([np.max(per_output[0::2]), np.max(per_output[1::2])])
 
 
 def _worst(fraction: np.ndarray) -> str:

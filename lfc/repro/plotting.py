@@ -442,7 +442,8 @@ def areas_figure(runs: dict, labels: dict[str, str], relays: RelaySettings, titl
     fig, axes = plt.subplots(len(panels), 1, sharex=True, figsize=(10, 2.6 * len(panels)),
                              layout="constrained")
     axes = np.atleast_1d(axes)
-    colors = dict(zip(labels, ("tab:blue", "tab:orange", "tab:green", "tab:red")))
+    colors = dict(zip(labels, ("tab:blue", "tab:orange", "tab:green", "tab:red",
+                              "tab:purple")))
     column = {"command": "pc", "frequency": "dw_meas", "rocof": "rocof_meas", "tie": "p_tie"}
     ylabel = {"command": "Applied command $\\Delta P_c^*$ (pu)",
               "frequency": f"Measured frequency $\\hat\\omega$ (pu of {f_nominal:g} Hz)",
@@ -465,6 +466,42 @@ def areas_figure(runs: dict, labels: dict[str, str], relays: RelaySettings, titl
                     f"ROCOF setting $\\pm${relays.rocof_limit:g} pu/s")
         ax.set_ylabel(ylabel[panel])
     _finish(axes, title)
+    return fig
+
+
+def scaling_figure(table, title: str, load_step: float = 0.05) -> Figure:
+    """How two grid certificates' conservatism grows: one row of panels against
+    the number of areas (``table.axis == "areas"``), one against the tie-lines'
+    synchronizing coefficient (``"tie"``, log scale); columns: the contract's
+    smallest box (pu, with ``load_step`` dashed: a load AGC must follow), its
+    smallest rate (pu/s), and the share of each relay limit the coupled
+    certificate's tightenings take (%).  ``table`` has columns ``axis``, ``x``,
+    ``box``, ``rate``, ``coupled_frequency``, ``coupled_rocof`` (fractions; NaN
+    where it does not build)."""
+    fig, axes = plt.subplots(2, 3, figsize=(12, 6.5), layout="constrained")
+    xlabels = {"areas": "Number of areas (a chain, T = 2 pu)",
+               "tie": "Tie-line coefficient $T$ (pu, two areas)"}
+    for row, (axis, xlabel) in zip(axes, xlabels.items()):
+        part = table[table.axis == axis].sort_values("x")
+        row[0].plot(part.x, part.box, "o-", color="tab:purple", label="contract: box $a$")
+        row[0].axhline(load_step, color="k", ls="--", lw=1,
+                       label=f"a {load_step:g} pu load step AGC must follow")
+        row[0].set_ylabel("Smallest box $\\pm a$ (pu)")
+        row[1].plot(part.x, part.rate, "o-", color="tab:purple", label="contract: rate $r$")
+        row[1].set_ylabel("Smallest rate $r$ (pu/s)")
+        row[2].plot(part.x, 100 * part.coupled_frequency, "o-", color="tab:red",
+                    label="coupled: frequency limit")
+        row[2].plot(part.x, 100 * part.coupled_rocof, "s--", color="tab:red",
+                    label="coupled: ROCOF limit")
+        row[2].set_ylabel("Limit taken by tightenings (%)")
+        for ax in row:
+            ax.set_xlabel(xlabel)
+            ax.grid(alpha=0.3)
+            ax.set_ylim(bottom=0)
+            ax.legend(fontsize=8)
+            if axis == "tie":
+                ax.set_xscale("log")
+    fig.suptitle(textwrap.fill(title, TITLE_WIDTH))
     return fig
 
 
