@@ -477,7 +477,8 @@ def scaling_figure(table, title: str, load_step: float = 0.05) -> Figure:
     smallest rate (pu/s), and the share of each relay limit the coupled
     certificate's tightenings take (%).  ``table`` has columns ``axis``, ``x``,
     ``box``, ``rate``, ``coupled_frequency``, ``coupled_rocof`` (fractions; NaN
-    where it does not build)."""
+    where that certificate does not build: no point there)."""
+    from matplotlib.ticker import NullFormatter, ScalarFormatter
     fig, axes = plt.subplots(2, 3, figsize=(12, 6.5), layout="constrained")
     xlabels = {"areas": "Number of areas (a chain, T = 2 pu)",
                "tie": "Tie-line coefficient $T$ (pu, two areas)"}
@@ -501,6 +502,9 @@ def scaling_figure(table, title: str, load_step: float = 0.05) -> Figure:
             ax.legend(fontsize=8)
             if axis == "tie":
                 ax.set_xscale("log")
+                ax.xaxis.set_minor_formatter(NullFormatter())
+            ax.set_xticks(part.x)
+            ax.xaxis.set_major_formatter(ScalarFormatter())
     fig.suptitle(textwrap.fill(title, TITLE_WIDTH))
     return fig
 
