@@ -336,3 +336,20 @@ def test_on_andes_kundur_the_coupled_filters_never_leave_their_certificate():
     per_area = lfc.simulate(case, filters={0: "certified", 1: "certified"}, **run)
     assert not per_area.tripped
     assert sum(int(a.alarms.outside.sum()) for a in per_area.areas) > 100
+
+
+def test_finding_on_andes_ieee39_the_coupled_filters_leave_their_certificate():
+    """Finding, pinned (measured, the fit's mismatch): the IEEE 39-bus system's two
+    areas on ANDES under chapter 09's coordinated attack (a 0.6 pu, 0.5 Hz
+    sinusoid on both areas' commands) and a -0.05 pu load step in area 1: the
+    coupled filters, built on the fitted model, trip nothing but flag ``outside``
+    at hundreds of samples (341 and 334 when measured) — ANDES' trajectory leaves
+    what the fitted model certified; the contracts, which read no state, never
+    flag it (``tests/test_contract.py``).  Under the ACE bias: no ``outside``."""
+    from lfc.testbed import GridCase
+    r = lfc.simulate(GridCase.ieee39(), duration=20.0, anti_windup=True,
+                     attacks={a: {"pc": lfc.Sinusoid(0.6, 0.5, start=1.0)} for a in range(2)},
+                     loads={1: lfc.Step(-STEP, start=3.37)},
+                     filters={0: "coupled", 1: "coupled"})
+    assert not r.tripped
+    assert all(int(a.alarms.outside.sum()) > 100 for a in r.areas)
