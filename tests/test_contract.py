@@ -268,3 +268,22 @@ def test_finding_the_coupled_defaults_do_not_build_behind_some_ties():
         with pytest.raises(ValueError, match="not invariant in floating point"):
             CoupledFilter(grid, RELAYS)
         assert contract_design(grid, RELAYS).half_width.min() > box
+
+
+@pytest.mark.long(30)
+def test_the_red_teams_winner_on_the_fitted_model_replayed_on_andes_trips_nothing():
+    """The red team's coordinated search (a sinusoid on both areas' commands)
+    against the contracts of Kundur's areas as fitted to ANDES; its winner
+    (``theta``, rebuilt by ``coordinated_attacks``) replayed on ANDES with the
+    same contracts: nothing trips, no ``outside`` (measured, not proven)."""
+    from lfc.experiments.redteam import coordinated_attacks, coordinated_search
+    from lfc.testbed import GridCase, grid_design
+    case = GridCase.kundur()
+    found = coordinated_search(grid_design(case), {0: "contract", 1: "contract"},
+                               "sinusoid on P_c", duration=20.0, maxiter=2, popsize=4, jobs=1)
+    assert not found["tripped"]
+    r = lfc.simulate(case, duration=20.0,
+                     attacks=coordinated_attacks(found["search"], found["theta"], 2, 20.0),
+                     filters={0: "contract", 1: "contract"})
+    assert not r.tripped
+    assert [int(a.alarms.outside.sum()) for a in r.areas] == [0, 0]

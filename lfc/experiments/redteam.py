@@ -347,7 +347,8 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
     ``filters`` is :func:`lfc.simulate`'s ``{area: "paper" |
     "certified" | "coupled" | filter}``, built once for the controller period
     ``control_period`` (s).  Returns the family, the worst severity, the area it
-    is reached in, whether any area tripped and the attack per area.
+    is reached in, whether any area tripped, the attack per area (text) and its
+    parameters ``theta`` (:func:`coordinated_attacks` rebuilds it).
     """
     if not isinstance(params, MultiAreaParams):
         raise ParameterTypeError(f"params must be a MultiAreaParams (a grid; one area: "
@@ -357,20 +358,14 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
     check_search(duration=duration, seed=seed, maxiter=maxiter, popsize=popsize, relays=relays)
     check_count("jobs", jobs)
     relays = relays_or_default(relays)
-    channel, waveform, bounds = MULTI_FAMILIES[family]
-    k, n = len(bounds), params.n_areas
+    k, n = len(MULTI_FAMILIES[family][2]), params.n_areas
     filters = {a: area_filter(params, a, f, relays, control_period)     # built once, not
                for a, f in filters.items()}                            # per generation
 
-    def attacks(theta: np.ndarray) -> dict:
-        return {a: {channel: scenario_signal(
-            {"waveform": waveform, "amplitude": float(theta[k * a]),
-             "freq_hz": float(theta[k * a + 1]) if k > 1 else 0.0, "start": ATTACK_START},
-            duration)} for a in range(n)}
-
     def run(thetas: np.ndarray) -> pd.DataFrame:
         out = simulate_many(
-            params, [{"attacks": attacks(th), "filters": filters} for th in thetas.T],
+            params, [{"attacks": coordinated_attacks(family, th, n, duration),
+                      "filters": filters} for th in thetas.T],
             duration=duration, relays=relays, jobs=jobs, control_period=control_period)
         out["severity"] = severity(out, relays)
         return out
@@ -378,7 +373,8 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
     def objective(thetas: np.ndarray) -> np.ndarray:
         return -run(thetas).groupby("scenario").severity.max().to_numpy()
 
-    sol = differential_evolution(objective, list(bounds) * n, seed=seed, maxiter=maxiter,
+    sol = differential_evolution(objective, list(MULTI_FAMILIES[family][2]) * n, seed=seed,
+                                 maxiter=maxiter,
                                  popsize=popsize, vectorized=True, updating="deferred",
                                  polish=False, tol=0)
     best = run(sol.x[:, None])
@@ -387,7 +383,26 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
             "tripped": bool(best.tripped.any()),
             "attack": "; ".join(f"area {a}: " + ", ".join(f"{v:.4g}" for v in
                                                            sol.x[k * a:k * (a + 1)])
-                                for a in range(n))}
+                                for a in range(n)),
+            "theta": tuple(float(v) for v in sol.x)}
+
+
+def coordinated_attacks(family: str, theta, n_areas: int, duration: float) -> dict:
+    """The ``attacks`` argument of :func:`lfc.simulate` for parameters ``theta`` of
+    ``family`` (``MULTI_FAMILIES``) in each of ``n_areas`` areas, as
+    :func:`coordinated_search` runs them (its result's ``search`` and ``theta``
+    replay its winner, e.g. on ANDES); ``duration`` (s) ends a chirp."""
+    check_choice("family", family, tuple(MULTI_FAMILIES))
+    channel, waveform, bounds = MULTI_FAMILIES[family]
+    k = len(bounds)
+    theta = np.asarray(theta, float)
+    if theta.shape != (k * n_areas,):
+        raise ValueError(f"theta must hold {k} parameters per area ({k * n_areas} for "
+                         f"{n_areas} areas), got shape {theta.shape}")
+    return {a: {channel: scenario_signal(
+        {"waveform": waveform, "amplitude": float(theta[k * a]),
+         "freq_hz": float(theta[k * a + 1]) if k > 1 else 0.0, "start": ATTACK_START},
+        duration)} for a in range(n_areas)}
 
 
 def piecewise_attack_table(*, n: int, amplitude: float, duration: float, seed: int,
