@@ -353,3 +353,28 @@ def test_finding_on_andes_ieee39_the_coupled_filters_leave_their_certificate():
                      filters={0: "coupled", 1: "coupled"})
     assert not r.tripped
     assert all(int(a.alarms.outside.sum()) > 100 for a in r.areas)
+
+
+@pytest.mark.long(45)
+def test_finding_on_andes_ieee39_the_red_teams_winner_trips_the_coupled_filters():
+    """Finding, pinned (measured: the coupled certificate is the fitted model's, not
+    ANDES'): the red team's coordinated search (a square wave on both areas'
+    commands) against the coupled filters of the IEEE 39-bus system's areas as
+    fitted to ANDES finds nothing that trips the fitted model (severity 0.38), but
+    its winner replayed on ANDES with the same filters trips ROCOF after the
+    filters flag ``outside`` at hundreds of samples (peak 0.45 pu/s when
+    measured).  The contracts, replayed likewise, trip nothing
+    (``bench/survey_grid_certificates.py --andes``)."""
+    from lfc.experiments.redteam import coordinated_attacks, coordinated_search
+    from lfc.testbed import GridCase, grid_design
+    case = GridCase.ieee39()
+    every = {0: "coupled", 1: "coupled"}
+    found = coordinated_search(grid_design(case), every, "square on P_c", duration=20.0,
+                               maxiter=2, popsize=4, jobs=1)
+    assert not found["tripped"]
+    r = lfc.simulate(case, duration=20.0, filters=every, anti_windup=True,
+                     attacks=coordinated_attacks("square on P_c", found["theta"], 2, 20.0))
+    assert r.tripped
+    first_trip = min(a.metrics()["first_trip_t"] or np.inf for a in r.areas)
+    first_outside = min(a.alarms.query("outside").t.min() for a in r.areas)
+    assert first_outside < first_trip

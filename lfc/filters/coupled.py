@@ -66,7 +66,9 @@ is not proven on an estimate: ``outside`` flags are measured.
 than the design grid, an area without this filter.  On ANDES (``lfc.simulate``
 of a ``GridCase``) the filters read each area's metered states and tie-line
 export (:meth:`CoupledFilter.grid_state`) and the certificate is the fitted
-model's: measured there, not proven (``tests/test_coupled.py``).
+model's: measured there, not proven — and broken there: on the IEEE 39-bus
+system a red-team attack found against the fitted model trips ROCOF on ANDES
+(``tests/test_coupled.py::test_finding_on_andes_ieee39_the_red_teams_winner_trips_the_coupled_filters``).
 """
 
 from __future__ import annotations
