@@ -57,20 +57,22 @@ def battery(grid: MultiAreaParams, filt, *, instants=INSTANTS, signs=(1, -1),
     return len(runs), int(runs.tripped.sum()), int((runs.outside > 0).sum())
 
 
+@pytest.mark.parametrize("kind", ["coupled", "contract"])
 @pytest.mark.parametrize("name", ["two-area", "three-area", "kundur", "ieee39"])
-def test_the_battery_trips_nothing_and_never_leaves_the_certificate(name):
+def test_the_battery_trips_nothing_and_never_leaves_the_certificate(name, kind):
     """Five attacks x every area x four instants x a ±0.05 pu load step x
     anti-windup off and on (on only beyond two areas, for time), 20 s each: no trip
     and no ``outside`` flag, on the
     presets and on Kundur's two areas (T = 98 pu) and the IEEE 39-bus system's
-    two areas (T = 28 pu) as fitted to ANDES; on Kundur the
+    two areas (T = 28 pu) as fitted to ANDES, with the coupled certificate or the
+    contract (``tests/test_contract.py``) at every area; on Kundur the
     per-area filters flag ``outside`` in 117 of 160 runs.  A single 0.05 pu step is
-    within what the held level absorbs (``load_bound - recheck_bound``), so this is
-    the proven statement, checked."""
+    within what the coupled held level absorbs (``load_bound - recheck_bound``) and
+    within the contract's ``load_bound``, so this is the proven statement, checked."""
     grid = {"two-area": MultiAreaParams.two_area, "three-area": lambda: THREE,
             "kundur": kundur, "ieee39": ieee39}[name]()
     aw = (False, True) if name == "two-area" else (True,)
-    runs, tripped, outside = battery(grid, "coupled", anti_windup=aw)
+    runs, tripped, outside = battery(grid, kind, anti_windup=aw)
     assert runs == 40 * len(aw) * grid.n_areas
     assert (tripped, outside) == (0, 0)
 
@@ -143,17 +145,19 @@ def ended(n: int, stop: float) -> dict:
                                                           stop=stop)} for a in every}}
 
 
+@pytest.mark.parametrize("kind", ["coupled", "contract"])
 @pytest.mark.parametrize("name", ["two-area", "three-area"])
-def test_after_every_attack_agc_restores_frequency_and_schedules(name):
+def test_after_every_attack_agc_restores_frequency_and_schedules(name, kind):
     """With anti-windup, 40 s after each attack ends (10 s long, a -0.05 pu step in
     area 1 during it; every attack of the battery on the two-area preset, the ACE
     bias on the three-area one): every area's frequency and tie-line export are
     back at schedule (|dw| < 5e-4 pu = 0.03 Hz, |export| < 5e-3 pu; AGC alone,
     without filters, leaves 1.6e-3 pu after the ACE bias when measured), nothing
     tripped, no filter flagged ``outside``, and the filters fell silent within 5 s
-    of the attack's end (1.5 s at most when measured)."""
+    of the attack's end (1.5 s at most when measured); with the coupled
+    certificate or the contract at every area."""
     grid = MultiAreaParams.two_area() if name == "two-area" else THREE
-    every = {a: "coupled" for a in range(grid.n_areas)}
+    every = {a: kind for a in range(grid.n_areas)}
     attacks = ended(grid.n_areas, 11.0)
     for key in attacks if name == "two-area" else ["bias on every ACE"]:
         r = simulate_grid_linear(grid, duration=51.0, attacks=attacks[key], filters=every,
@@ -278,17 +282,18 @@ def test_a_call_never_raises_and_says_why():
         CoupledOptions(load_bound=0.0)
 
 
+@pytest.mark.parametrize("kind", ["coupled", "contract"])
 @pytest.mark.parametrize("family", ["sinusoid on P_c", "square on ω_ref", "bias on ACE",
                                     "ramp on ω_ref"])
-def test_the_red_teams_coordinated_search_trips_nothing(family):
+def test_the_red_teams_coordinated_search_trips_nothing(family, kind):
     """The red team's coordinated search (differential evolution over the family's
     parameters in both areas at once, maximizing the worst relay severity) against
-    the coupled filters of the two-area preset: its worst attack stays inside every
-    relay (severity < 1), where it drives the paper's SCC past them
-    (``tests/test_multiarea.py``)."""
+    the coupled filters or the contracts of the two-area preset: its worst attack
+    stays inside every relay (severity < 1), where it drives the paper's SCC past
+    them (``tests/test_multiarea.py``)."""
     from lfc.experiments.redteam import coordinated_search
     grid = MultiAreaParams.two_area()
-    found = coordinated_search(grid, {0: "coupled", 1: "coupled"}, family, duration=20.0,
+    found = coordinated_search(grid, {0: kind, 1: kind}, family, duration=20.0,
                                maxiter=2, popsize=4, jobs=1)
     assert not found["tripped"] and found["severity"] < 1.0
 

@@ -224,6 +224,18 @@ def reduced_model(params: MultiAreaParams) -> tuple[np.ndarray, ...]:
     return R @ A_full @ L, R @ B_full[:, :n_a], R @ B_full[:, n_a:], R
 
 
+def held_grid(params: MultiAreaParams, needs: str) -> tuple[np.ndarray, ...]:
+    """:func:`reduced_model`, and a ``ValueError`` (ending with ``needs``) unless
+    the grid with every command held is asymptotically stable."""
+    A, Bu, Bl, R = reduced_model(params)
+    growth = float(np.max(np.linalg.eigvals(A).real))
+    if growth >= 0:
+        raise ValueError(f"the grid {params!r} with every command held is not "
+                         f"asymptotically stable (eigenvalue real part {growth:.3g} 1/s); "
+                         f"{needs}")
+    return A, Bu, Bl, R
+
+
 def output_rows(n_areas: int, n_states: int) -> np.ndarray:
     """``C`` (2 n_areas, n_states): area ``a``'s measured frequency (row ``2a``)
     and ROCOF (row ``2a + 1``)."""
@@ -319,12 +331,7 @@ class CoupledSet:
                  options: CoupledOptions) -> None:
         self.params, self.relays, self.options = params, relays, options
         o = options
-        A, Bu, Bl, R = reduced_model(params)
-        growth = float(np.max(np.linalg.eigvals(A).real))
-        if growth >= 0:
-            raise ValueError(f"the grid {params!r} with every command held is not "
-                             f"asymptotically stable (eigenvalue real part {growth:.3g} 1/s); "
-                             f"the coupled certificate needs it")
+        A, Bu, Bl, R = held_grid(params, "the coupled certificate needs it")
         n_a, n_r = params.n_areas, len(A)
         C = output_rows(n_a, n_r)
         pair = np.array([relays.F, relays.rocof_limit]) * (1 - o.margin) * (1 - NUMERIC_MARGIN)
