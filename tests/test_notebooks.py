@@ -421,7 +421,7 @@ def test_the_claims_verdict_explains_a_documented_deviation_on_the_page(tmp_path
     assert "1.0361 pu" in verdict["why not"][0] and verdict["why not"][1] == ""
 
 
-@pytest.mark.long(40)
+@pytest.mark.long(65)
 def test_coupled_certificate_notebook_shows_its_figure_and_its_claims_hold(tmp_path):
     """Chapter 10 with its short parameters: both figures written and shown, and
     every claim holds (the default per-area filters trip on a step during the
