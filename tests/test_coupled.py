@@ -360,7 +360,7 @@ def test_finding_on_andes_ieee39_the_coupled_filters_leave_their_certificate():
     assert all(int(a.alarms.outside.sum()) > 100 for a in r.areas)
 
 
-@pytest.mark.long(45)
+@pytest.mark.long(85)
 def test_finding_on_andes_ieee39_the_red_teams_winner_trips_the_coupled_filters():
     """Finding, pinned (measured: the coupled certificate is the fitted model's, not
     ANDES'): the red team's coordinated search (a square wave on both areas'
@@ -368,8 +368,10 @@ def test_finding_on_andes_ieee39_the_red_teams_winner_trips_the_coupled_filters(
     fitted to ANDES finds nothing that trips the fitted model (severity 0.38), but
     its winner replayed on ANDES with the same filters trips ROCOF after the
     filters flag ``outside`` at hundreds of samples (peak 0.45 pu/s when
-    measured).  The contracts, replayed likewise, trip nothing
-    (``bench/survey_grid_certificates.py --andes``)."""
+    measured).  The per-area certified filters, which also trip nothing on the
+    fitted model, trip on ANDES too (17-18 s when measured); the contracts, which
+    read no state, trip nothing on either (``bench/survey_grid_certificates.py
+    --andes``: every family).  Without filters the attack trips both plants."""
     from lfc.experiments.redteam import coordinated_attacks, coordinated_search
     from lfc.testbed import GridCase, grid_design
     case = GridCase.ieee39()
@@ -383,3 +385,8 @@ def test_finding_on_andes_ieee39_the_red_teams_winner_trips_the_coupled_filters(
     first_trip = min(a.metrics()["first_trip_t"] or np.inf for a in r.areas)
     first_outside = min(a.alarms.query("outside").t.min() for a in r.areas)
     assert first_outside < first_trip
+    replay = coordinated_attacks("square on P_c", found["theta"], 2, 20.0)
+    for kind, trips in (("certified", True), ("contract", False)):
+        other = lfc.simulate(case, duration=20.0, filters={0: kind, 1: kind}, anti_windup=True,
+                             attacks=replay)
+        assert other.tripped == trips, kind
