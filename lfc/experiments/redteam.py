@@ -358,7 +358,8 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
     check_search(duration=duration, seed=seed, maxiter=maxiter, popsize=popsize, relays=relays)
     check_count("jobs", jobs)
     relays = relays_or_default(relays)
-    k, n = len(MULTI_FAMILIES[family][2]), params.n_areas
+    bounds = MULTI_FAMILIES[family][2]
+    k, n = len(bounds), params.n_areas
     filters = {a: area_filter(params, a, f, relays, control_period)     # built once, not
                for a, f in filters.items()}                            # per generation
 
@@ -373,8 +374,7 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
     def objective(thetas: np.ndarray) -> np.ndarray:
         return -run(thetas).groupby("scenario").severity.max().to_numpy()
 
-    sol = differential_evolution(objective, list(MULTI_FAMILIES[family][2]) * n, seed=seed,
-                                 maxiter=maxiter,
+    sol = differential_evolution(objective, list(bounds) * n, seed=seed, maxiter=maxiter,
                                  popsize=popsize, vectorized=True, updating="deferred",
                                  polish=False, tol=0)
     best = run(sol.x[:, None])

@@ -40,8 +40,8 @@ from lfc.relays import RelaySettings, relays_or_default
 
 __all__ = ["ALARM_BITS", "ALARM_FLAGS", "CONFLICT_RULES", "DEFAULT_READING", "METHODS",
            "OUTSIDE_RULES", "PREDICTIONS", "CertifiedOptions", "ContractOptions", "FilterInfo",
-           "PaperOptions", "SafetyFilter", "alarm_mask", "available", "binding_names", "option_table",
-           "options_of", "register"]
+           "PaperOptions", "SafetyFilter", "alarm_mask", "available", "binding_names",
+           "option_table", "options_of", "register"]
 
 REGISTRY: dict[str, type[Backend]] = {}
 
@@ -116,7 +116,8 @@ class SafetyFilter:
         ``confidence``, ``trips_per_hour``, ``relay_rate``, ``tightening``,
         ``u_min``, ``u_max``, ``control_period``); ``"contract"``, the command kept in
         a box that certifies a grid by contract (options :class:`ContractOptions`:
-        ``half_width``, ``load_bound``, ``margin``; :mod:`lfc.filters.contract`).
+        ``half_width``, ``rate``, ``load_bound``, ``margin``, ``control_period``;
+        :mod:`lfc.filters.contract`).
         :func:`option_table` lists units, defaults and ranges.
     **options
         The method's options.

@@ -16,6 +16,7 @@ import numpy as np
 from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch
+from matplotlib.ticker import NullFormatter, ScalarFormatter
 
 from lfc._files import replace_atomic
 from lfc.experiments.surface import scc_label
@@ -478,7 +479,6 @@ def scaling_figure(table, title: str, load_step: float = 0.05) -> Figure:
     certificate's tightenings take (%).  ``table`` has columns ``axis``, ``x``,
     ``box``, ``rate``, ``coupled_frequency``, ``coupled_rocof`` (fractions; NaN
     where that certificate does not build: no point there)."""
-    from matplotlib.ticker import NullFormatter, ScalarFormatter
     fig, axes = plt.subplots(2, 3, figsize=(12, 6.5), layout="constrained")
     xlabels = {"areas": "Number of areas (a chain, T = 2 pu)",
                "tie": "Tie-line coefficient $T$ (pu, two areas)"}
