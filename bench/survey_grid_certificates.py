@@ -7,6 +7,16 @@ Prints, from one run:
   (``"contract"``) at every area of rings of 6 and 10 areas and a chain of 6
   (the three-area preset's areas in turn, T = 2 pu): runs, runs with a trip,
   runs with an ``outside`` flag;
+* how tight theorem D's bound is: the most any command sequence within the
+  contracts moves each output at 30 s (the linear program of
+  ``tests/test_contract.py``), as a share of the bound's part for the commands,
+  the smallest and largest over the areas, on two-area, three-area, Kundur as
+  fitted to ANDES and two lightly damped areas;
+* with ``--andes``: what the fit's mismatch eats — the contracts on Kundur and
+  the IEEE 39-bus system on ANDES and on their fitted models under the same
+  attacks (the coordinated 0.6 pu sinusoid, a -2.5 pu ACE bias, each with a
+  -0.05 pu step in area 1 at 3.37 s): ANDES' peak frequency and ROCOF over the
+  fitted model's, and over the proven bound, the largest over the areas;
 * with ``--andes``: the red team's coordinated search (every family of
   ``MULTI_FAMILIES``, both areas at once) against the contract and the coupled
   certificate on Kundur's and the IEEE 39-bus system's areas as fitted to ANDES,
@@ -27,11 +37,14 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 import lfc
 from lfc.experiments.redteam import MULTI_FAMILIES, coordinated_attacks, coordinated_search
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from test_coupled import battery, ring  # noqa: E402  (the tests' battery, not a copy)
+from test_contract import RELAYS, worst_commands  # noqa: E402  (the tests', not copies)
+from test_coupled import LIGHT, THREE, battery, kundur, ring  # noqa: E402
 
 
 def grids() -> None:
@@ -43,6 +56,46 @@ def grids() -> None:
         runs, tripped, outside = battery(grid, "contract", anti_windup=(True,))
         print(f"| {name} | {runs} | {tripped} | {outside} | {time.perf_counter() - t0:.0f} s |",
               flush=True)
+
+
+def tightness() -> None:
+    from lfc.filters.contract import contract_design
+    print("| grid | frequency: worst / bound | ROCOF: worst / bound |")
+    print("|---|---|---|")
+    for name, grid in (("two-area", lfc.MultiAreaParams.two_area()), ("three-area", THREE),
+                       ("Kundur (fitted)", kundur()),
+                       ("two lightly damped", lfc.MultiAreaParams.two_area(LIGHT))):
+        share = contract_design(grid, RELAYS)
+        commands = share.bound - share.load_bound * share.load_gain
+        ratio = [[worst_commands(grid, 2 * a + o, 30.0)[0] / commands[a, o]
+                  for a in range(grid.n_areas)] for o in (0, 1)]
+        print(f"| {name} | " + " | ".join(f"{min(r):.2f}-{max(r):.2f}" for r in ratio) + " |",
+              flush=True)
+
+
+def mismatch() -> None:
+    from lfc.filters.contract import contract_design
+    from lfc.testbed import GridCase, grid_design
+    print("| case | attack | frequency: ANDES / fitted | ROCOF: ANDES / fitted | "
+          "frequency: ANDES / bound | ROCOF: ANDES / bound |")
+    print("|---|---|---|---|---|---|")
+    attacks = {"coordinated": {a: {"pc": lfc.Sinusoid(0.6, 0.5, start=1.0)} for a in range(2)},
+               "ACE bias": {a: {"ace": lfc.Step(-2.5, start=1.0)} for a in range(2)}}
+    for case in (GridCase.kundur(), GridCase.ieee39()):
+        fit = grid_design(case)
+        bound = contract_design(fit, RELAYS).bound
+        for name, attack in attacks.items():
+            peaks = []
+            for plant in (case, fit):
+                r = lfc.simulate(plant, duration=20.0, anti_windup=True, attacks=attack,
+                                 loads={1: lfc.Step(-0.05, start=3.37)},
+                                 filters={0: "contract", 1: "contract"})
+                peaks.append([[a.metrics()[k] for k in ("max_abs_dw_meas", "max_abs_rocof_meas")]
+                              for a in r.areas])
+            on, off = (np.array(p) for p in peaks)
+            print(f"| {case.name} | {name} | {(on / off)[:, 0].max():.2f} | "
+                  f"{(on / off)[:, 1].max():.2f} | {(on / bound)[:, 0].max():.2f} | "
+                  f"{(on / bound)[:, 1].max():.2f} |", flush=True)
 
 
 def andes() -> None:
@@ -79,7 +132,9 @@ def main() -> None:
                         help="also the red team's winners replayed on ANDES (about 10 min)")
     args = parser.parse_args()
     grids()
+    tightness()
     if args.andes:
+        mismatch()
         andes()
 
 

@@ -16,9 +16,9 @@ from scipy.optimize import linprog
 
 import lfc
 from lfc import MultiAreaParams
-from lfc.filters.certified import load_gains
 from lfc.filters.contract import ContractOptions, contract_design
 from lfc.filters.coupled import output_rows, reduced_model
+from lfc.filters.responses import load_gains, responses
 from lfc.model import zoh
 from lfc.simulate_multiarea import simulate_grid_linear
 from test_coupled import LIGHT, THREE, battery, ieee39, kundur, ring
@@ -54,17 +54,21 @@ def worst_commands(grid: MultiAreaParams, output: int, seconds: float = 30.0
     return -res.fun, res.x.reshape(n, K).T
 
 
-@pytest.mark.parametrize("name", ["two-area", "kundur"])
+@pytest.mark.parametrize("name", ["two-area", "three-area", "kundur", "lightly damped"])
 def test_the_worst_commands_within_the_contracts_stay_within_the_proven_bound(name):
     """For every area's frequency and ROCOF: the most any command sequence within
     every area's contract moves it (the linear program of :func:`worst_commands`,
     at 30 s after the start and at 2 s) is within the design's bound minus the
     loads' share, and not far below it (the bound is not vacuous: 40-100 % of it
-    is reached).  Then the engine runs the worst sequence for area 0's ROCOF as an
+    is reached; 67-95 % for frequency and 45-97 % for ROCOF at 30 s when measured,
+    ``python bench/survey_grid_certificates.py``).  On the lightly damped grid
+    the frequency bound is the rate's (the box's L1 bound is twenty times larger):
+    the linear program checks that one too.  Then the engine runs the worst sequence for area 0's ROCOF as an
     attack on every area's command, with a load step of exactly ``load_bound``
     landing 1 ms after a control sample in the direction that adds: nothing trips,
     no filter flags ``outside``, and every output stays within its proven bound."""
-    grid = MultiAreaParams.two_area() if name == "two-area" else kundur()
+    grid = {"two-area": MultiAreaParams.two_area(), "three-area": THREE, "kundur": kundur(),
+            "lightly damped": MultiAreaParams.two_area(LIGHT)}[name]
     share = contract_design(grid, RELAYS)
     commands_only = share.bound - share.load_bound * share.load_gain
     for output in range(2 * grid.n_areas):
@@ -96,10 +100,10 @@ def test_the_design_keeps_every_output_within_its_limit_and_says_what_it_costs()
     optimum); the boxes and rates measured (pu, pu/s) are pinned to a range."""
     light = MultiAreaParams.two_area(LIGHT)
     expected = {"two-area": (MultiAreaParams.two_area(), 0.15, 0.22),
-                "three-area": (THREE, 0.088, 0.12), "kundur": (kundur(), 0.29, 0.51),
+                "three-area": (THREE, 0.16, 0.12), "kundur": (kundur(), 0.29, 0.51),
                 "ieee39": (ieee39(), 0.15, 0.25), "ring of 4": (ring(4), 0.085, 0.11),
                 "chain of 4": (ring(4, chain=True), 0.084, 0.11),
-                "lightly damped": (light, 0.018, 0.025)}
+                "lightly damped": (light, 0.36, 0.025)}
     for name, (grid, box, rate) in expected.items():
         share = contract_design(grid, RELAYS)
         assert np.all(share.use() <= 1.0) and share.use().max() > 1 - 1e-5, name
@@ -118,22 +122,26 @@ def test_a_step_of_exactly_load_bound_just_after_a_control_sample_trips_nothing(
         assert runs == 5 * grid.n_areas * len(instants) * 2 and (tripped, outside) == (0, 0)
 
 
-def test_finding_a_lightly_damped_areas_box_is_smaller_than_a_load_it_must_follow():
-    """Finding, pinned (the price of a contract): on two lightly damped areas
-    (damping ratio 0.03) the box is 0.019 pu, because it covers a command
-    resonating with the area; a legitimate -0.05 pu load step then leaves AGC
-    unable to restore frequency and schedule (the commands stop at the box), though
-    nothing trips.  Without a filter the same step is restored."""
+def test_a_lightly_damped_areas_box_covers_the_load_it_must_follow():
+    """On two lightly damped areas (ratio 0.03) a box bounded by the L1 norm alone
+    would be 0.019 pu (it covers a command resonating with the area), below a
+    0.05 pu load.  Each command's share of the frequency bound is the smaller of
+    its box bound and its settled-plus-transient bound (the rate keeps the
+    command from resonating), so the box is 0.36 pu: a legitimate -0.05 pu load
+    step is restored exactly as without filters, which never act."""
     grid = MultiAreaParams.two_area(LIGHT)
-    half = contract_design(grid, RELAYS).half_width
-    assert np.all(half < 0.02)
+    share = contract_design(grid, RELAYS)
+    room = share.limits[0] - share.load_bound * share.load_gain[:, 0]
+    assert np.all(room / share.frequency_gain.sum(axis=1) < 0.02)
+    assert np.all(share.half_width > 0.35)
     run = dict(duration=60.0, loads={1: lfc.Step(-STEP, start=1.0)}, anti_windup=True)
     r = simulate_grid_linear(grid, filters={0: "contract", 1: "contract"}, **run)
-    assert not r.tripped
+    free = simulate_grid_linear(grid, **run)
+    assert not r.tripped and all(res.alarms.empty for res in r.areas)
+    assert np.array_equal(r.trace[["dw_meas_0", "dw_meas_1", "p_tie_1"]].to_numpy(),
+                          free.trace[["dw_meas_0", "dw_meas_1", "p_tie_1"]].to_numpy())
     end = r.trace.iloc[-1]
-    assert abs(end["p_tie_1"]) > 0.01 and abs(end["pc_1"]) == pytest.approx(half[1])
-    free = simulate_grid_linear(grid, **run).trace.iloc[-1]
-    assert abs(free["p_tie_1"]) < 5e-3 and abs(free["dw_meas_1"]) < 5e-4
+    assert abs(end["p_tie_1"]) < 5e-3 and abs(end["dw_meas_1"]) < 5e-4
 
 
 def test_where_no_contract_exists_it_says_why():
@@ -172,13 +180,12 @@ def test_the_l1_norm_counts_what_lies_beyond_sixty_seconds():
     norm after 60 s, where ``load_gains`` used to stop; it now extends its
     horizon until a modal bound on the rest is below 0.1 %, and its ``"band"``
     gain bounds the integral over 2,000 s (within 1.5 % of it)."""
-    from lfc.filters.certified import _load_responses
     grid = ring(4, chain=True)
     A, Bu, Bl, _ = reduced_model(grid)
     C = output_rows(4, len(A))
     t = np.arange(0.0, 2000.0, 2e-3)
     for b in (Bu[:, 0], Bl[:, 3]):
-        resp, _ = _load_responses(A, b, C, t)
+        resp, _ = responses(A, b, C, t)
         whole = np.trapezoid(np.abs(resp), t, axis=1)
         first = np.trapezoid(np.abs(resp[:, t < 60.0]), t[t < 60.0], axis=1)
         assert np.any(1.01 * first < whole)                    # 60 s was not enough

@@ -10,7 +10,8 @@ import pytest
 import lfc
 from lfc import LFCParams, SafetyFilter
 from lfc.experiments.load_during_attack import battery
-from lfc.filters.certified import box_plants, largest_load_bound, load_gains
+from lfc.filters.certified import box_plants, largest_load_bound
+from lfc.filters.responses import load_gains
 from lfc.model import lfc_matrices, output_matrix
 
 P, RELAYS = LFCParams(), lfc.RelaySettings()

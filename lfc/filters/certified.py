@@ -118,6 +118,7 @@ from lfc.estimation import KalmanFilter, check_noise_std, measurement_std
 from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, OUTSIDE, Backend, Options,
                               applied_flags, check_limits, given, hold_invalid, option,
                               valid_input)
+from lfc.filters.responses import L1_HORIZON, load_gains, period_step_gain
 from lfc.model import LFCParams, lfc_matrices, output_matrix
 from lfc.relays import RelaySettings
 
@@ -126,7 +127,6 @@ MIN_STEP, MAX_STEP = 1e-3, 0.1  # s: the sample spacing of adaptive_grid
 BOX = ("M", "D", "tau_g", "tau_t", "droop")  # the parameters an uncertainty box may cover
 LOAD_KINDS = ("band", "steps")   # what load_bound bounds (module docstring)
 LP_LOAD = 1.0          # pu: load range of _derivative_bound's programs (V does not depend on it)
-L1_HORIZON = 60.0      # s over which the load-to-output impulse response is integrated
 NUMERIC_MARGIN = 1e-6  # relative tightening that absorbs floating-point differences
 # layout of the data array decide() reads: a header, then one block per plant
 U_MIN, U_MAX, N_PLANTS, N_ROWS, F_LIM, R_LIM, HEAD = range(7)
@@ -648,85 +648,6 @@ def _expm_at(A: np.ndarray, times: np.ndarray) -> np.ndarray:
 
 def _pair(v) -> str:
     return f"({v[0]:.3g}, {v[1]:.3g})"
-
-
-def load_gains(A: np.ndarray, bl: np.ndarray, C: np.ndarray) -> dict[str, np.ndarray]:
-    """Per output, the largest deviation per pu of load (``load_kind``):
-
-    * ``"band"``: ``int_0^inf |h(t)| dt`` with ``h = C e^{At} bl`` the load's impulse
-      response: the worst over every signal within ±1 pu (trapezoidal at 1 ms up to
-      the horizon, plus 1 %);
-    * ``"steps"``: ``sup_t |S(t)|`` with ``S(t) = C A^-1 (e^{At} - I) bl`` the step
-      response: a load ``L`` of total variation ``V`` moves the output by
-      ``int S(t - s) dL(s)``, at most ``V sup |S|``; on the same grid, plus the
-      most ``S`` can move within half a step (``|h| dt / 2``) and 1 %, and the
-      final value ``-C A^-1 bl``.
-
-    The horizon is ``L1_HORIZON`` (60 s), doubled (up to ``64 L1_HORIZON``) while a
-    modal bound on what lies beyond it exceeds 0.1 % of either gain, so that the
-    1 % covers it: with ``h = sum_i r_i e^{w_i t}``, ``int_T^inf |h| <= sum_i |r_i|
-    e^{Re w_i T} / |Re w_i|`` and ``|S(t) - S(inf)| <= sum_i |r_i / w_i| e^{Re w_i T}``
-    for ``t >= T``.  A slow grid needs it: on a chain of six areas the L1 norm over
-    60 s is 0.6 of the whole (``tests/test_contract.py``).  Raises ``ValueError``
-    for a plant too slow for that (or not asymptotically stable).
-    """
-    w, V = np.linalg.eig(A)
-    if not np.all(w.real < 0):
-        raise ValueError(f"the held plant is not asymptotically stable (eigenvalue real part "
-                         f"{w.real.max():.3g} 1/s >= 0): no load gain is finite")
-    residue = np.abs((C @ V) * np.linalg.solve(V, bl)[None, :])       # |r_i| per output
-    final = np.abs(C @ np.linalg.solve(A, bl))
-    horizon = L1_HORIZON
-    while True:
-        band, peak = _gains_until(A, bl, C, horizon)
-        peak = np.maximum(peak, final)
-        decay = np.exp(w.real * horizon)
-        tail_band = residue @ (decay / -w.real)
-        tail_step = residue @ (decay / np.abs(w))
-        if np.all(tail_band <= 1e-3 * band) and np.all(tail_step <= 1e-3 * peak):
-            return {"band": 1.01 * band, "steps": 1.01 * peak}
-        if horizon >= 64 * L1_HORIZON:
-            raise ValueError(f"the held plant is too slow for a load gain (slowest decay "
-                             f"{-w.real.max():.3g} 1/s: more than 0.1 % of its response lies "
-                             f"beyond {horizon:.0f} s)")
-        horizon *= 2
-
-
-def _gains_until(A: np.ndarray, bl: np.ndarray, C: np.ndarray,
-                 horizon: float) -> tuple[np.ndarray, np.ndarray]:
-    """``int |h|`` (trapezoidal) and ``sup |S| + |h| dt / 2`` on a 1 ms grid over
-    ``[0, horizon)``, in pieces of ``L1_HORIZON`` s (memory)."""
-    t = np.arange(0.0, horizon, 1e-3)
-    band, peak = np.zeros(len(C)), np.zeros(len(C))
-    size = int(round(L1_HORIZON / 1e-3))
-    for start in range(0, len(t), size):
-        piece = t[start:start + size + 1]          # the next piece's first point closes this
-        resp, step = _load_responses(A, bl, C, piece)
-        band += np.trapezoid(np.abs(resp), piece, axis=1)
-        peak = np.maximum(peak, np.abs(step).max(axis=1) + 0.5e-3 * np.abs(resp).max(axis=1))
-    return band, peak
-
-
-def period_step_gain(A: np.ndarray, bl: np.ndarray, C: np.ndarray,
-                     period: float) -> np.ndarray:
-    """Per output, the most a load of total variation 1 pu moves it within
-    ``period`` s of its start: ``sup_{t <= period} |S(t)|``, ``S`` the load's step
-    response (:func:`load_gains`), on a 0.1 ms grid plus the most ``S`` moves in
-    half a grid step (``|h| dt / 2``) and 1 %."""
-    dt = 1e-4
-    resp, step = _load_responses(A, bl, C, np.append(np.arange(0.0, period, dt), period))
-    return 1.01 * (np.abs(step).max(axis=1) + 0.5 * dt * np.abs(resp).max(axis=1))
-
-
-def _load_responses(A: np.ndarray, bl: np.ndarray, C: np.ndarray,
-                    t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The outputs' impulse response ``h(t) = C e^{At} bl`` and step response
-    ``S(t) = C A^-1 (e^{At} - I) bl`` to the load at times ``t`` (each (2, len(t)))."""
-    w, V = np.linalg.eig(A)
-    modes = np.linalg.solve(V, bl)
-    resp = np.real((C @ V) @ (np.exp(np.outer(w, t)) * modes[:, None]))
-    step = np.real((C @ V) @ (np.expm1(np.outer(w, t)) * (modes / w)[:, None]))
-    return resp, step
 
 
 def largest_load_bound(params: LFCParams, relays: RelaySettings, *, tol: float = 1e-3,

@@ -20,17 +20,22 @@ that area, and the interval is never empty.
 **The certificate** (:func:`contract_design`).  On the grid with every command
 an input (the tie-line flows states of the model, not disturbances), every area's
 measured frequency and ROCOF is, from an equilibrium,
-``y_o = sum_j h_oj * u_j + sum_j s^L_oj * dp_j``.  Frequency: over every command
-within the boxes, ``|h_oj * u_j| <= a_j int |h_oj|`` (the L1 norm,
-:func:`~lfc.filters.certified.load_gains` ``"band"``).  ROCOF: a command held
-between samples is a sum of steps ``du_k`` at the samples, ``|du_k| <= r_j T``,
-so ``|h_oj * u_j|(t) <= r_j T sup_phi sum_k |s_oj(phi + k T)|`` with ``s_oj`` the
-step response, which settles to 0 for ROCOF (:func:`rate_gains`).  Loads whose
-total variation summed over the areas is ``V`` move ``y_o`` by at most
-``V max_j sup |s^L_oj|`` (``"steps"``).  The boxes and rates are the largest (a
-linear program each: the smallest as large as possible, then the others) with
-the sum of these bounds within ``L_o``, the relay limit (``F``, ``rocof_limit``)
-times ``1 - margin``, with room for a total load variation ``load_bound``.
+``y_o = sum_j h_oj * u_j + sum_j s^L_oj * dp_j``.  A command held between samples
+is a sum of steps ``du_k`` at the samples, ``|du_k| <= r_j T``.  ROCOF, by the
+rate: ``|h_oj * u_j|(t) <= r_j T sup_phi sum_k |s_oj(phi + k T)|`` with ``s_oj``
+the step response, which settles to 0 for ROCOF
+(:func:`~lfc.filters.responses.rate_gains`).  Frequency, by the smaller of two
+bounds: the box's, ``a_j int |h_oj|`` (the L1 norm,
+:func:`~lfc.filters.responses.load_gains` ``"band"``: any signal within the
+box), and the rate's, ``|s_oj(inf)| a_j + r_j T sup_phi sum_k |s_oj(phi + k T) -
+s_oj(inf)|`` (the settled part plus what the steps move around it: no resonance
+faster than the rate allows) — :func:`frequency_bound`.  Loads whose total
+variation summed over the areas is ``V`` move ``y_o`` by at most ``V max_j sup
+|s^L_oj|`` (``"steps"``).  The rates are the largest (a linear program: the
+smallest as large as possible, then the others) with the ROCOF bounds within
+``rocof_limit``; then the boxes at those rates with the frequency bounds within
+``F`` (the largest common box by bisection, the others by a linear program), each
+limit times ``1 - margin`` with room for a total load variation ``load_bound``.
 
 **Guarantee (proven).**  For the design grid, starting from an equilibrium
 with every area's filter keeping its contract (this filter at every area, with
@@ -43,11 +48,12 @@ contracts.  The filter never flags ``outside``; an invalid input holds the last
 command (inside the contract) and flags ``invalid_input``.
 
 **The price.**  The contract also limits legitimate control: an area's AGC
-cannot follow a load larger than its box (the command stops there; with
-``anti_windup`` the AGC does not wind up behind it), and the box covers the
-worst signal within it, a resonance the AGC never sends, so it is small where
-the grid is lightly damped or the ties stiff (``docs/coupled-certificate.md``,
-"Cost").
+cannot follow a load larger than its box or faster than its rate (the command
+stops there; with ``anti_windup`` the AGC does not wind up behind it).  The
+boxes and rates shrink with the number of areas and where the ties are stiff
+(chapter 10's scaling figure); on a lightly damped area the rate's bound keeps
+the box large (0.36 pu on two areas at ratio 0.03, where the L1 norm alone
+gives 0.019 pu).
 
 **Not covered.**  Plants other than the design grid; a start away from
 equilibrium (its free response is not bounded); an area without the contract
@@ -58,7 +64,6 @@ measured there, not proven.
 from __future__ import annotations
 
 import functools
-import math
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -67,10 +72,11 @@ from scipy.optimize import linprog
 
 from lfc._jit import inline
 from lfc._validate import check_nonnegative, check_positive
-from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, Backend, Options, given,
-                              hold_invalid, option, valid_input)
-from lfc.filters.certified import L1_HORIZON, NUMERIC_MARGIN, _load_responses, load_gains
+from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, MAX_ABS_INPUT, Backend, Options,
+                              given, hold_invalid, option, valid_input)
+from lfc.filters.certified import NUMERIC_MARGIN
 from lfc.filters.coupled import held_grid, output_rows
+from lfc.filters.responses import load_gains, rate_gains
 from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams, as_grid
 from lfc.relays import RelaySettings
@@ -91,7 +97,13 @@ class Contract:
         control period ``T``.
     frequency_gain : ndarray (n_areas, n_areas)
         ``[i, j]``: how far a command of area ``j`` within ±1 pu can move area
-        ``i``'s measured frequency (pu per pu).
+        ``i``'s measured frequency (pu per pu; the L1 norm).
+    settled_gain : ndarray (n_areas, n_areas)
+        ``[i, j]``: area ``i``'s frequency per pu of area ``j``'s command once
+        settled (pu per pu; the step response's final value).
+    transient_gain : ndarray (n_areas, n_areas)
+        ``[i, j]``: how far a command of area ``j`` moving by at most 1 pu/s can
+        move area ``i``'s frequency away from its settled part (pu per pu/s).
     rocof_gain : ndarray (n_areas, n_areas)
         ``[i, j]``: how far a command of area ``j`` moving by at most 1 pu/s can
         move area ``i``'s measured ROCOF (pu/s per pu/s).
@@ -108,6 +120,8 @@ class Contract:
     half_width: np.ndarray
     rate: np.ndarray
     frequency_gain: np.ndarray
+    settled_gain: np.ndarray
+    transient_gain: np.ndarray
     rocof_gain: np.ndarray
     load_gain: np.ndarray
     limits: np.ndarray
@@ -120,47 +134,13 @@ class Contract:
         return self.bound / self.limits
 
 
-def rate_gains(A: np.ndarray, b: np.ndarray, C: np.ndarray, period: float) -> np.ndarray:
-    """Per output whose step response ``s`` settles to 0, the most a command moving
-    by at most 1 pu/s (steps of at most ``period`` pu at its samples) moves it:
-    ``period sup_phi sum_k |s(phi + k period)|``.
-
-    On a grid of about 1 ms (``period / ceil(period / 1 ms)``) for ``phi``, plus
-    the most ``s`` moves within half a grid step (``|h| dt / 2`` per term) and 1 %;
-    beyond the horizon (60 s, doubled while it matters) a modal bound
-    ``sum_i |r_i / w_i| e^{Re w_i t}`` on ``|s|``, summed as a geometric series,
-    must be below 0.1 % (so that the 1 % covers it).  ``ValueError`` if an
-    output's step response does not settle to 0 (its sum has no bound).
-    """
-    check_positive("period", period)
-    w, V = np.linalg.eig(A)
-    residue = np.abs((C @ V) * np.linalg.solve(V, b)[None, :])
-    final = np.abs(C @ np.linalg.solve(A, b))
-    if np.any(final > 1e-9 * np.maximum(1.0, residue.sum(axis=1))):
-        raise ValueError("rate_gains: an output's step response does not settle to 0 (a "
-                         "command moving at a bounded rate can move it without bound)")
-    m = math.ceil(period / 1e-3 - 1e-9)
-    dt = period / m
-    horizon = L1_HORIZON
-    while True:
-        k = int(round(horizon / period))
-        sums, slack = np.zeros((len(C), m)), np.zeros(len(C))
-        size = max(1, int(round(L1_HORIZON / period)))
-        for k0 in range(0, k, size):
-            t = (np.arange(k0, min(k, k0 + size))[:, None] * period
-                 + np.arange(m)[None, :] * dt).ravel()
-            resp, step = _load_responses(A, b, C, t)
-            sums += np.abs(step).reshape(len(C), -1, m).sum(axis=1)
-            slack += 0.5 * dt * np.abs(resp).reshape(len(C), -1, m).max(axis=2).sum(axis=1)
-        value = period * (sums.max(axis=1) + slack)
-        decay = np.exp(w.real * horizon)
-        tail = period * residue @ (decay / np.abs(w) / -np.expm1(w.real * period))
-        if np.all(tail <= 1e-3 * value):
-            return 1.01 * value
-        if horizon >= 64 * L1_HORIZON:
-            raise ValueError(f"rate_gains: the plant is too slow (slowest decay "
-                             f"{-w.real.max():.3g} 1/s)")
-        horizon *= 2
+def frequency_bound(box_gain: np.ndarray, settled: np.ndarray, transient: np.ndarray,
+                    half: np.ndarray, rate: np.ndarray) -> np.ndarray:
+    """Per output, the most commands within boxes ``half`` moving at rates
+    ``rate`` move it: each command's share is the smaller of its box bound
+    ``box_gain a`` and its settled-plus-transient bound ``settled a + transient r``
+    (both hold; module docstring)."""
+    return np.minimum(box_gain * half, settled * half + transient * rate).sum(axis=1)
 
 
 def _largest(gains: np.ndarray, room: np.ndarray) -> np.ndarray:
@@ -180,14 +160,34 @@ def _largest(gains: np.ndarray, room: np.ndarray) -> np.ndarray:
     return second.x * (1 - NUMERIC_MARGIN)
 
 
+def _largest_boxes(box_gain: np.ndarray, settled: np.ndarray, transient: np.ndarray,
+                   rate: np.ndarray, room: np.ndarray) -> np.ndarray:
+    """The largest boxes at rates ``rate`` with :func:`frequency_bound` within
+    ``room``: the common box as large as possible (the bound grows with every box:
+    bisection), then, each command's share taken by the bound smaller there, the
+    others as large as possible (:func:`_largest`)."""
+    def fits(t: float) -> bool:
+        return bool(np.all(frequency_bound(box_gain, settled, transient, t, rate) <= room))
+
+    lo, hi = 0.0, 1.0
+    while fits(hi) and hi < MAX_ABS_INPUT:
+        lo, hi = hi, 2.0 * hi
+    for _ in range(100):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if fits(mid) else (lo, mid)
+    by_box = box_gain * lo <= settled * lo + transient * rate
+    offset = np.where(by_box, 0.0, transient * rate).sum(axis=1)
+    return np.minimum(_largest(np.where(by_box, box_gain, settled), room - offset), MAX_ABS_INPUT)
+
+
 @functools.lru_cache(maxsize=16)
 def contract_design(params: MultiAreaParams | LFCParams, relays: RelaySettings, *,
                     control_period: float = 0.01, load_bound: float = 0.06,
                     margin: float = 0.0) -> Contract:
-    """Every area's contract on ``params`` (module docstring): the largest boxes
-    that keep every measured frequency within ``F``, and the largest rates that
-    keep every measured ROCOF within ``rocof_limit``, each with room for loads of
-    total variation ``load_bound``.
+    """Every area's contract on ``params`` (module docstring): the largest rates
+    that keep every measured ROCOF within ``rocof_limit``, then the largest boxes
+    that keep every measured frequency within ``F`` at those rates, each with room
+    for loads of total variation ``load_bound``.
 
     Parameters
     ----------
@@ -219,9 +219,10 @@ def contract_design(params: MultiAreaParams | LFCParams, relays: RelaySettings, 
     n_a = grid.n_areas
     C = output_rows(n_a, len(A))
     limits = np.array([relays.F, relays.rocof_limit]) * (1 - margin) * (1 - NUMERIC_MARGIN)
-    freq = np.array([load_gains(A, Bu[:, j], C[0::2])["band"] for j in range(n_a)]).T
-    rocof = np.array([rate_gains(A, Bu[:, j], C[1::2], control_period)
-                      for j in range(n_a)]).T
+    box_gain = np.array([load_gains(A, Bu[:, j], C[0::2])["band"] for j in range(n_a)]).T
+    moving, settled = (np.array(g).transpose(1, 0)
+                       for g in zip(*(rate_gains(A, Bu[:, j], C, control_period)
+                                      for j in range(n_a))))
     load = np.max([load_gains(A, Bl[:, j], C)["steps"] for j in range(n_a)],
                   axis=0).reshape(n_a, 2)
     room = limits - load_bound * load
@@ -230,9 +231,14 @@ def contract_design(params: MultiAreaParams | LFCParams, relays: RelaySettings, 
         raise ValueError(f"load_bound={load_bound:g} pu takes the whole of area {i}'s "
                          f"{('frequency', 'ROCOF')[o]} limit ({load_bound * load[i, o]:.3g} "
                          f"of {limits[o]:.3g}); lower load_bound")
-    half, rate = _largest(freq, room[:, 0]), _largest(rocof, room[:, 1])
-    bound = np.column_stack([freq @ half, rocof @ rate]) + load_bound * load
-    arrays = (half, rate, freq, rocof, load, limits, bound)
+    # ROCOF settles to 0 (``settled[1::2]`` is rounding): bounded by the rates alone
+    rate = _largest(moving[1::2], room[:, 1] - settled[1::2].sum(axis=1) * MAX_ABS_INPUT)
+    half = _largest_boxes(box_gain, settled[0::2], moving[0::2], rate, room[:, 0])
+    bound = np.column_stack([
+        frequency_bound(box_gain, settled[0::2], moving[0::2], half, rate),
+        moving[1::2] @ rate + settled[1::2] @ half]) + load_bound * load
+    arrays = (half, rate, box_gain, settled[0::2], moving[0::2], moving[1::2], load, limits,
+              bound)
     for a in arrays:
         a.setflags(write=False)   # shared by every caller (cached)
     return Contract(*arrays, float(load_bound), float(control_period))

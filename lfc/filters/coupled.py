@@ -48,8 +48,8 @@ commands, frequency references and ACE signals an attacker sends to any subset
 of the areas.  A new vector leaves room for a total load variation of
 ``load_bound`` from its certification on (each limit tightened by
 ``load_bound`` times the largest step response of any area's load on that
-output, :func:`lfc.filters.certified.load_gains`), a held one for
-``recheck_bound`` over the coming period (:func:`~lfc.filters.certified.period_step_gain`);
+output, :func:`lfc.filters.responses.load_gains`), a held one for
+``recheck_bound`` over the coming period (:func:`~lfc.filters.responses.period_step_gain`);
 ``outside`` is then flagged only if the loads moved by more than the new vector
 left room for.  Proof and the tests that check it: ``docs/coupled-certificate.md``.
 
@@ -85,8 +85,8 @@ from lfc._validate import check_nonnegative, check_positive, check_range
 from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, MAX_ABS_INPUT, OUTSIDE,
                               applied_flags, check_limits, hold_invalid, valid_input)
 from lfc.filters.certified import (NUMERIC_MARGIN, _curvature_gains, _expm_at,
-                                   _intersample, _merge_intervals, _pair, grid, load_gains,
-                                   period_step_gain, rate_bound)
+                                   _intersample, _merge_intervals, _pair, grid, rate_bound)
+from lfc.filters.responses import load_gains, period_step_gain
 from lfc.estimation import (LOAD_STD, check_noise_std, kf_correct, kf_predict, measurement_std,
                             steady_state_kalman)
 from lfc.model import zoh
