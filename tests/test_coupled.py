@@ -187,6 +187,25 @@ def test_where_it_cannot_be_built_it_says_why():
         CoupledFilter(THREE, RELAYS, load_bound=0.01, recheck_bound=0.02)
 
 
+def test_behind_soft_and_stiff_ties_the_defaults_build_and_ride_the_battery():
+    """Found by chapter 10's scaling figure, fixed: on two areas behind T = 1 pu
+    and T = 50 pu ties the Lyapunov terminal set leaves no room and the shaped
+    one's semidefinite program returned an inaccurate ``Q`` (smallest eigenvalue
+    about 1e-9) whose inverse was not invariant in floating point, so the
+    defaults did not build.  With ``Q``'s smallest eigenvalue floored
+    (``Q_FLOORS``, the first floor that gives an invariant ellipsoid: 1e-6 and
+    1e-5) both build (``shaped_terminal`` checks the invariance) and ride the battery at one
+    instant (anti-windup): 0 trips, 0 ``outside`` (the full battery, 80 runs
+    each, measured 0 / 0 once).  The contract builds there too."""
+    from lfc.filters.contract import contract_design
+    for T in (1.0, 50.0):
+        grid = MultiAreaParams.two_area(T=T)
+        assert CoupledFilter(grid, RELAYS).cert.terminal == "sdp"   # invariant: checked there
+        runs, tripped, outside = battery(grid, "coupled", instants=(3.37,), anti_windup=(True,))
+        assert runs == 20 and (tripped, outside) == (0, 0), T
+        assert contract_design(grid, RELAYS).half_width.min() > 0.1
+
+
 def test_the_shaped_terminal_set_builds_where_the_lyapunov_one_leaves_no_room():
     """The Lyapunov ellipsoid overstates what a held load step leaves at the
     horizon 37-67 times on a lightly damped area and on chains (``kappa sigma``

@@ -102,6 +102,7 @@ EXPORT_STD = 1e-4    # pu: the grid Kalman filter's noise model of the metered t
 
 
 TERMINALS = ("auto", "lyapunov", "sdp")
+Q_FLOORS = (1e-12, 1e-6, 1e-5, 1e-4)   # shaped_terminal's floors on Q's eigenvalues, in turn
 
 
 @dataclass(frozen=True)
@@ -499,24 +500,35 @@ def shaped_terminal(A: np.ndarray, C: np.ndarray, loads: np.ndarray,
     proof needs, checked on the result in floating point (``ValueError`` if it
     does not hold).  In ``Q = P^-1`` every condition is a linear matrix
     inequality (cvxpy, Clarabel); ``P = Q^-1``.
+
+    The optimum drives ``Q`` towards singular in the directions no output or load
+    constrains; behind some ties (two areas at T = 1 pu and 50 pu) the solver then
+    returns an inaccurate ``Q`` whose inverse is not invariant in floating point.
+    So ``Q``'s smallest eigenvalue is floored, at ``Q_FLOORS`` in turn (in the
+    model's state units, pu^2), until the ellipsoid is invariant: a larger floor
+    costs a larger ``t``, never soundness (the check is on the result).
     """
     import cvxpy as cp
     n = len(A)
     gamma = 0.1 * float(-np.max(np.linalg.eigvals(A).real))
-    Q, t = cp.Variable((n, n), symmetric=True), cp.Variable()
-    cons = [Q >> 1e-12 * np.eye(n), A @ Q + Q @ A.T + 2 * gamma * Q << 0]
-    cons += [cp.quad_form(c, Q) <= r ** 2 for c, r in zip(C, room)]
-    cons += [cp.bmat([[t * np.eye(loads.shape[1]), loads.T], [loads, Q]]) >> 0]
-    cp.Problem(cp.Minimize(t), cons).solve(solver="CLARABEL")
-    if Q.value is None:
-        raise ValueError("the terminal ellipsoid's semidefinite program has no solution")
-    Qv = 0.5 * (Q.value + Q.value.T)
-    P = np.linalg.inv(Qv)
-    P = 0.5 * (P + P.T)
-    if np.max(np.linalg.eigvalsh(A.T @ P + P @ A)) >= 0 or np.min(np.linalg.eigvalsh(P)) <= 0:
-        raise ValueError("the shaped terminal ellipsoid is not invariant in floating point; "
-                         "use terminal='lyapunov'")
-    return P
+    for floor in Q_FLOORS:
+        Q, t = cp.Variable((n, n), symmetric=True), cp.Variable()
+        cons = [Q >> floor * np.eye(n), A @ Q + Q @ A.T + 2 * gamma * Q << 0]
+        cons += [cp.quad_form(c, Q) <= r ** 2 for c, r in zip(C, room)]
+        cons += [cp.bmat([[t * np.eye(loads.shape[1]), loads.T], [loads, Q]]) >> 0]
+        try:
+            cp.Problem(cp.Minimize(t), cons).solve(solver="CLARABEL")
+        except cp.error.SolverError:
+            continue
+        if Q.value is None:
+            continue
+        P = np.linalg.inv(0.5 * (Q.value + Q.value.T))
+        P = 0.5 * (P + P.T)
+        if np.max(np.linalg.eigvalsh(A.T @ P + P @ A)) < 0 and np.min(np.linalg.eigvalsh(P)) > 0:
+            return P
+    raise ValueError(f"the shaped terminal ellipsoid's semidefinite program gives no ellipsoid "
+                     f"invariant in floating point (Q's smallest eigenvalue floored at "
+                     f"{', '.join(f'{f:g}' for f in Q_FLOORS)}); use terminal='lyapunov'")
 
 
 def _load_error_steps(kalman: GridKalman, A: np.ndarray, Bl: np.ndarray, period: float,
