@@ -215,3 +215,22 @@ def test_stop_on_trip_ends_at_the_first_trip_of_the_full_run(fit):
     for a, r in enumerate(stopped.areas):
         expected = full.areas[a].trips[full.areas[a].trips.t <= first + 1e-9]
         assert r.trips.to_dict("list") == expected.reset_index(drop=True).to_dict("list")
+
+
+def test_andes_warnings_become_one_summary_line_per_case(monkeypatch, capsys):
+    """ANDES' warnings while the IEEE 39-bus case is loaded and initialized (a
+    corrected ACE bias, a table of GENROU reactances outside its typical range:
+    about 170 printed lines per run in chapter 09 before) are collected: the first
+    run prints one summary line per stage to stderr, a second run none, and
+    ``LOAD_WARNINGS`` keeps every message."""
+    from lfc.testbed import andes_setup
+    with capsys.disabled():       # ANDES' own handler binds the stream of its first use:
+        andes_setup.prepare_andes()   # the session's, not this test's (closed after it)
+    monkeypatch.setattr(andes_setup, "LOAD_WARNINGS", {})
+    for _ in range(2):
+        lfc.simulate(GridCase.ieee39(), duration=0.5)
+    err = capsys.readouterr().err
+    summaries = [line for line in err.splitlines() if line.startswith("ANDES: ")]
+    assert len(summaries) == 2 and "GENROU" not in err and "ACEc" not in err, err
+    messages = sum(andes_setup.LOAD_WARNINGS.values(), [])
+    assert any("ACEc" in m for m in messages) and any("GENROU" in m for m in messages)

@@ -74,6 +74,7 @@ system a red-team attack found against the fitted model trips ROCOF on ANDES
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -517,7 +518,9 @@ def shaped_terminal(A: np.ndarray, C: np.ndarray, loads: np.ndarray,
         cons += [cp.quad_form(c, Q) <= r ** 2 for c, r in zip(C, room)]
         cons += [cp.bmat([[t * np.eye(loads.shape[1]), loads.T], [loads, Q]]) >> 0]
         try:
-            cp.Problem(cp.Minimize(t), cons).solve(solver="CLARABEL")
+            with warnings.catch_warnings():   # "inaccurate": the result is checked below
+                warnings.filterwarnings("ignore", message="Solution may be inaccurate")
+                cp.Problem(cp.Minimize(t), cons).solve(solver="CLARABEL")
         except cp.error.SolverError:
             continue
         if Q.value is None:

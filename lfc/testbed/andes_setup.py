@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 _CONFIGURED = False
+LOAD_WARNINGS: dict[str, list[str]] = {}   # per case: ANDES' warnings (quiet_load)
 
 
 def prepare_andes() -> None:
@@ -33,3 +36,35 @@ def prepare_andes() -> None:
               file=sys.stderr, flush=True)
         andes.prepare(quick=True)
     _CONFIGURED = True
+
+
+@contextlib.contextmanager
+def quiet_load(case: str) -> Iterator[None]:
+    """Collect ANDES' warnings while case ``case`` is loaded, set up or initialized
+    (parameters it corrected, values outside its typical ranges: the IEEE 39-bus
+    case gives about 170 lines per run) instead of printing them: the first time
+    in a process each ``case`` prints one summary line to stderr, and
+    ``LOAD_WARNINGS[case]`` keeps the messages."""
+    logger = logging.getLogger("andes")
+    messages: list[str] = []
+
+    class Collect(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            messages.append(record.getMessage())
+
+    handlers, collect = logger.handlers[:], Collect(logging.WARNING)
+    for h in handlers:
+        logger.removeHandler(h)
+    logger.addHandler(collect)
+    try:
+        yield
+    finally:
+        logger.removeHandler(collect)
+        for h in handlers:
+            logger.addHandler(h)
+        if messages and case not in LOAD_WARNINGS:
+            print(f"ANDES: {len(messages)} warning(s) in {case} (parameters it corrected "
+                  f"or found atypical; lfc.testbed.andes_setup.LOAD_WARNINGS[{case!r}] lists "
+                  f"them)", file=sys.stderr, flush=True)
+        if messages:
+            LOAD_WARNINGS[case] = messages

@@ -212,11 +212,17 @@ def build_grid(case: GridCase):
     RuntimeError
         If the power flow does not converge.
     """
-    import andes
-
-    from lfc.testbed.andes_setup import prepare_andes
+    from lfc.testbed.andes_setup import prepare_andes, quiet_load
 
     prepare_andes()
+    with quiet_load(case.name):
+        return _build(case)
+
+
+def _build(case: GridCase):
+    """:func:`build_grid`'s work, its ANDES warnings collected."""
+    import andes
+
     ss = andes.load(andes.get_case(case.case_file), setup=False, no_output=True,
                     default_config=True)
     buses = set(ss.Bus.idx.v)

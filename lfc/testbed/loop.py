@@ -18,6 +18,7 @@ ANDES case is one such class.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Protocol
 
 import numpy as np
@@ -27,6 +28,7 @@ from lfc._validate import check_flag
 from lfc.engine import GeneratorSide, sample_signal
 from lfc.filters.coupled import CoupledFilter
 from lfc.relays import RelayBank, RelaySettings
+from lfc.testbed.andes_setup import quiet_load
 
 # columns of AndesPlant.measure, per area
 MEASURED = ("dPg", "dPm", "dw", "dw_meas", "rocof_meas", "p_load", "p_tie", "p_net")
@@ -88,7 +90,9 @@ def init_tds(ss, duration: float, step: float) -> None:
     cfg = ss.TDS.config
     cfg.tf, cfg.tstep, cfg.no_tqdm, cfg.criteria = duration, step, 1, 0
     cfg.linesearch, cfg.save_every = 0, 0
-    ss.TDS.init()
+    case = Path(ss.files.case).stem if ss.files.case else "the microgrid"
+    with quiet_load(f"{case}'s time-domain initialization"):
+        ss.TDS.init()
 
 
 def run_tds(ss, duration: float, callback) -> float:
