@@ -220,9 +220,9 @@ def contract_design(params: MultiAreaParams | LFCParams, relays: RelaySettings, 
     C = output_rows(n_a, len(A))
     limits = np.array([relays.F, relays.rocof_limit]) * (1 - margin) * (1 - NUMERIC_MARGIN)
     box_gain = np.array([load_gains(A, Bu[:, j], C[0::2])["band"] for j in range(n_a)]).T
-    moving, settled = (np.array(g).transpose(1, 0)
-                       for g in zip(*(rate_gains(A, Bu[:, j], C, control_period)
-                                      for j in range(n_a))))
+    gains = [rate_gains(A, Bu[:, j], C, control_period) for j in range(n_a)]
+    moving = np.array([g for g, _ in gains]).T        # (outputs, areas): per pu/s
+    settled = np.array([s for _, s in gains]).T       # (outputs, areas): per pu
     load = np.max([load_gains(A, Bl[:, j], C)["steps"] for j in range(n_a)],
                   axis=0).reshape(n_a, 2)
     room = limits - load_bound * load
