@@ -71,16 +71,23 @@ def test_multi_area_notebook_shows_its_figures_and_its_claims_hold(tmp_path):
         assert "|" in (tmp_path / "fig" / f"{table}.md").read_text()
 
 
+# On ANDES the tests run the paper's SCC at the barrier gain the figures show there,
+# its strongest on both cases (α = 3, figures/multiarea_attacks_*.md); the full
+# reproduce runs both.  The other α was a quarter of these tests' ANDES runs (~90 s
+# of CPU each), and its only claim is that AGC restores the load step with it.
+ONE_ALPHA = [3.0]
+
+
 @pytest.mark.long(220)
 def test_multi_area_notebook_on_the_kundur_testbed(tmp_path):
     """Notebook 09 on ANDES with its claims checked: AGC restores the schedule,
     every attack trips without filters, the certified filters stop them all;
     that they flag ``outside`` there (the plant is not their model) is a
     documented deviation, which fails the run if it stops occurring."""
-    run_chapter("multiarea", tmp_path, "testbed")
+    run_chapter("multiarea", tmp_path, "testbed", paper_alphas=ONE_ALPHA)
     claims = json.loads((tmp_path / "res" / "claims.json").read_text())
     deviations = json.loads((tmp_path / "res" / "deviations.json").read_text())
-    assert len(claims) == 13
+    assert len(claims) == 12
     assert {c for c, ok in claims.items() if not ok} == set(deviations) == {
         f"{a} attack: no certified filter flags outside" for a in ("single", "coordinated", "ACE")}
     assert "|" in (tmp_path / "fig" / "multiarea_attacks_testbed.md").read_text()
@@ -106,9 +113,9 @@ def test_multi_area_notebook_on_the_ieee39_testbed(tmp_path):
     pinned: there assumption (c) of the guarantee fails (the machines' output
     moves by more than ``load_bound`` within a control period under the
     sinusoids), so the result is measured, not proven."""
-    run_chapter("multiarea", tmp_path, "ieee39")
+    run_chapter("multiarea", tmp_path, "ieee39", paper_alphas=ONE_ALPHA)
     claims = json.loads((tmp_path / "res" / "claims.json").read_text())
-    assert len(claims) == 13 and all(claims.values())
+    assert len(claims) == 12 and all(claims.values())
     assert json.loads((tmp_path / "res" / "deviations.json").read_text()) == {}
     assert "| M (s) |" in (tmp_path / "fig" / "ieee39_fit.md").read_text()
     metrics = json.loads((tmp_path / "res" / "metrics.json").read_text())
