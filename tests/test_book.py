@@ -1,15 +1,20 @@
-"""The book (``python -m lfc book``): HTML pages of the executed notebooks and an
-index with the figure gallery, checked in a real browser (headless Chromium)."""
+"""The book (``python -m lfc book``): HTML pages of the executed notebooks, the README
+and the appendices, and an index with the contents and the figure gallery, checked in a
+real browser (headless Chromium) with the network blocked."""
 
+import html as htmllib
 import re
 import shutil
 import subprocess
+from pathlib import Path
+from urllib.parse import unquote
 
 import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
-from lfc.repro.book import build_book
+from lfc.repro import runner
+from lfc.repro.book import APPENDICES, build_book
 from lfc.repro.cli import main
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -25,6 +30,9 @@ def book(tmp_path_factory):
     return index
 
 
+PAGES = ["introduction", "tutorial", "kalman", *APPENDICES]
+
+
 @pytest.mark.long(80)
 def test_the_book_has_an_index_with_the_gallery_and_a_page_per_notebook(book):
     text = book.read_text()
@@ -35,6 +43,52 @@ def test_the_book_has_an_index_with_the_gallery_and_a_page_per_notebook(book):
         html = (book.parent / page).read_text()
         assert html.count("data:image/png;base64") >= 1        # the figures, inline
     assert (book.parent.parent / "reproduce" / "kalman" / "07_kalman.ipynb").exists()
+    # contents in reading order, chapters numbered as their notebooks, captions unique
+    toc = re.findall(r'<li><a href="([\w-]+)\.html">([^<]*)</a>', text)
+    assert [name for name, _ in toc] == PAGES
+    assert toc[1][1].startswith("01 · ") and toc[2][1].startswith("07 · ")
+    assert toc[3][1].startswith("A · ") and toc[-1][1].startswith(f"{chr(64 + len(APPENDICES))} · ")
+    captions = re.findall(r"<figcaption>(.*?)</figcaption>", text)
+    assert len(captions) == 2 and len(set(captions)) == len(captions)
+
+
+def test_every_page_has_previous_and_next_links_in_reading_order(book):
+    for i, name in enumerate(PAGES):
+        page = (book.parent / f"{name}.html").read_text()
+        navs = re.findall(r'<nav class="book">(.*?)</nav>', page, re.S)
+        assert len(navs) == 2, name                               # above and below
+        prev = re.findall(r'href="([\w-]+)\.html" rel="prev"', navs[0])
+        nxt = re.findall(r'href="([\w-]+)\.html" rel="next"', navs[0])
+        assert prev == ([PAGES[i - 1]] if i else []) and 'href="index.html"' in navs[0]
+        assert nxt == ([PAGES[i + 1]] if i + 1 < len(PAGES) else [])
+
+
+def test_no_page_holds_an_absolute_path_an_injected_cell_or_a_cdn(book, tmp_path):
+    build = book.parents[1]
+    for page in book.parent.glob("*.html"):
+        text = page.read_text()
+        for place in (str(build), str(runner.ROOT), str(Path.home()) + "/", "/tmp/"):
+            assert place not in text, (page.name, place)
+        assert "injected-parameters" not in text, page.name
+        fetched = re.findall(r'<(?:script|link|img)[^>]+(?:src|href)="(https?://[^"]+)"', text)
+        assert fetched == [], (page.name, fetched)
+
+
+def test_every_link_and_image_of_the_book_resolves(book):
+    """Every relative ``href`` and ``src`` names a file of the book, and every
+    anchor an ``id`` on its page (the README's and appendices' cross-links)."""
+    for page in book.parent.glob("*.html"):
+        text = page.read_text()
+        for target in re.findall(r'(?:href|src)="([^"]+)"', text):
+            target = htmllib.unescape(target)
+            if target.startswith(("http://", "https://", "data:", "mailto:")):
+                continue
+            path, _, anchor = target.partition("#")
+            where = book.parent / path.split("?")[0] if path else page
+            assert where.exists(), (page.name, target)
+            if anchor:                   # as a browser matches: raw, then percent-decoded
+                ids = set(re.findall(r'id="([^"]+)"', where.read_text()))
+                assert {anchor, unquote(anchor)} & ids, (page.name, target)
 
 
 BROWSER = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars"]
@@ -73,6 +127,21 @@ def test_chromium_renders_the_pages_with_their_figures(book, page, n_images, tmp
     status = images_loaded(book.parent / page)
     decoded, total = map(int, re.fullmatch(r"images (\d+) of (\d+)", status).groups())
     assert decoded == total >= n_images, f"{page}: {status} decoded by Chromium"
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="Chromium is not installed")
+@pytest.mark.parametrize("page, n_math", [("tutorial.html", 20), ("introduction.html", 0)])
+def test_chromium_offline_typesets_the_equations_with_the_bundled_mathjax(book, page, n_math):
+    """No network (every host name fails to resolve): MathJax, copied beside the
+    pages, typesets every equation; none is left as raw TeX or an error."""
+    dom = subprocess.run([*BROWSER, "--host-resolver-rules=MAP * ~NOTFOUND",
+                          "--virtual-time-budget=15000", "--dump-dom",
+                          (book.parent / page).as_uri()],
+                         check=True, capture_output=True, text=True, timeout=120).stdout
+    typeset = dom.count('class="MathJax"') + dom.count('class="MathJax_Display"')
+    assert typeset >= n_math and 'class="MathJax_Error"' not in dom
+    if n_math:
+        assert 'type="math/tex' in dom        # MathJax's record of each equation it read
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="Chromium is not installed")

@@ -112,7 +112,7 @@ def test_finding_at_the_largest_bound_a_full_step_under_attack_freezes_the_filte
 
 @pytest.mark.long(38)
 def test_the_readmes_tradeoff_table_is_this_runs():
-    """The README's load-during-attack table, recomputed (12 s)."""
+    """The load-during-attack table of docs/certified-filter.md, recomputed (12 s)."""
     from pathlib import Path
 
     from lfc.experiments.load_during_attack import tradeoff
@@ -121,7 +121,7 @@ def test_the_readmes_tradeoff_table_is_this_runs():
                                **({"load_kind": "steps", "load_bound": b} if b else {}))
                for k, b in bounds.items()}
     table = tradeoff(P, filters, bounds)
-    readme = Path(__file__).parents[1].joinpath("README.md").read_text()
+    readme = Path(__file__).parents[1].joinpath("docs", "certified-filter.md").read_text()
     for row in table.itertuples():
         restored = "never" if np.isnan(row.recovery_s) else f"{row.recovery_s:.1f}"
         cells = (f"| {row.runs} | {row.trips} | {row.outside_runs} | {row.worst_severity:.3f} | "
@@ -196,7 +196,7 @@ def test_replay_refuses_what_it_cannot_replay():
 
 
 def test_the_readmes_bound_price_table_is_this_runs():
-    """The README's table of what a load bound costs when nothing attacks (robust
+    """docs/certified-filter.md's table of what a load bound costs when nothing attacks (robust
     configuration, Kalman estimate, seed 1), recomputed (≈ 50 s)."""
     from pathlib import Path
 
@@ -206,7 +206,7 @@ def test_the_readmes_bound_price_table_is_this_runs():
     table = bound_price(P, (0.0, 0.02, 0.05, 0.1), steps,
                         options={"uncertainty": 0.2, "noise_std": noise},
                         estimator="kalman", noise_std=noise, seed=1)
-    readme = Path(__file__).parents[1].joinpath("README.md").read_text()
+    readme = Path(__file__).parents[1].joinpath("docs", "certified-filter.md").read_text()
     for row in table.to_dict("records"):
         name = "0 (default)" if row["load_bound"] == 0 else f"{row['load_bound']:g}"
         alarms = " / ".join(str(row[f"alarms {s:g}"]) for s in steps)

@@ -1,7 +1,11 @@
-"""The README: its two commands, and generated tables that match the figures they come from."""
+"""The README and the appendices (docs/): the two commands, a README a newcomer reads in
+minutes, and generated tables that match the figures they come from."""
+
+import re
 
 from lfc.repro import runner
-from lfc.repro.notebook import readme_mismatches, sync_readme
+from lfc.repro.book import APPENDICES
+from lfc.repro.notebook import documents, readme_mismatches, sync_readme
 
 README = runner.ROOT / "README.md"
 
@@ -14,10 +18,42 @@ def test_readme_starts_with_the_two_commands():
     assert text.index("```bash") < text.index("##")
 
 
-def test_generated_tables_in_the_readme_match_the_committed_results():
+def test_generated_tables_in_the_readme_and_docs_match_the_committed_results():
     """Each ``<!-- name:start -->`` section equals ``figures/name.md``, written by the
     notebook that computes it (``python -m lfc readme`` copies them in)."""
-    assert readme_mismatches(README, runner.ROOT / "figures") == []
+    docs = documents(runner.ROOT)
+    assert len(docs) == 1 + len(APPENDICES)
+    assert {d.name: readme_mismatches(d, runner.ROOT / "figures") for d in docs} == {
+        d.name: [] for d in docs}
+
+
+def test_the_readme_is_short_and_speaks_to_a_newcomer():
+    """At most 250 lines; the quick start and the venv step are in it; it names no
+    issue or working note; every appendix it points to exists and each is a book page."""
+    text = README.read_text()
+    assert len(text.splitlines()) <= 250
+    assert "python3 -m venv" in text and "## Quick start" in text
+    assert not re.search(r"\bissues?\b|notes §|\bnotes/", text, re.I)
+    linked = set(re.findall(r"\(docs/([\w-]+)\.md", text))
+    assert linked == set(APPENDICES)
+    for doc in documents(runner.ROOT)[1:]:
+        assert not re.search(r"\bthe issue\b|notes §|Robust issue|Proven issue", doc.read_text())
+
+
+def test_every_link_between_the_readme_and_the_appendices_resolves():
+    """Relative links (files and GitHub heading anchors) of the README and docs/*.md."""
+    def anchors(path) -> set[str]:
+        heads = re.findall(r"^#+ (.+)$", path.read_text(), re.M)
+        return {re.sub(r"[^\w\- ]", "", h.strip().lower()).replace(" ", "-") for h in heads}
+    for doc in documents(runner.ROOT):
+        for target in re.findall(r"\]\(([^)\s]+)\)", doc.read_text()):
+            if target.startswith(("http://", "https://")):
+                continue
+            path, _, anchor = target.partition("#")
+            where = (doc.parent / path).resolve() if path else doc
+            assert where.exists(), (doc.name, target)
+            if anchor and where.suffix == ".md":
+                assert anchor in anchors(where), (doc.name, target)
 
 
 def test_sync_copies_tables_and_reports_what_changed(tmp_path):

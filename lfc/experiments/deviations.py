@@ -4,8 +4,8 @@ metrics and an explanation with its numbers.
 
 ``python -m lfc reproduce`` shows a failed claim that matches one as "no
 (documented)"; :func:`lfc.repro.notebook.record_claims` fails a notebook whose
-claim fails another way, or whose documented deviation no longer occurs.  The
-README explains them ("Where the testbed differs").  The multi-area records
+claim fails another way, or whose documented deviation no longer occurs.
+``docs/testbed.md`` explains them ("Where the testbed differs").  The multi-area records
 (:func:`multiarea_records`) are built here, so the names the predicates read
 are defined where they are read.
 """
@@ -101,8 +101,8 @@ def _held_explain(attack: str) -> Callable[[dict], str]:
     return explain
 
 
-# Shown by ``python -m lfc reproduce`` as "no (documented)" and explained in the README
-# ("Where the testbed differs").
+# Shown by ``python -m lfc reproduce`` as "no (documented)" and explained in
+# docs/testbed.md ("Where the testbed differs").
 DEVIATIONS = (
     Deviation("testbed", "with SCC no relay trips", _fig5_testbed_matches, _fig5_testbed_explain),
     Deviation("testbed", "with SCC frequency stays below OF2", _fig5_testbed_matches,

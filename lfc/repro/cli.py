@@ -1,7 +1,7 @@
 """Command line: ``python -m lfc reproduce``, ``sweep`` (notebooks over a grid),
 ``batch`` (a scenario table through the batched simulator), ``book`` (the executed
 notebooks as HTML) and ``readme`` (copy the generated tables of the last reproduce
-into the README)."""
+into the README and the appendices in ``docs/``)."""
 
 from __future__ import annotations
 
@@ -153,9 +153,9 @@ def _parser() -> argparse.ArgumentParser:
                     help="the plant at the wall clock (default: lockstep, one control period "
                          "per exchanged command)")
     wr.add_argument("--pcap", type=Path, help="write the last run's traffic here")
-    rd = sub.add_parser("readme", help="copy figures/<name>.md into the README's "
-                        "<!-- name:start --> sections, and the last full reproduce's timing "
-                        "(build/reproduce/timing*.md; reproduce never edits the README)")
+    rd = sub.add_parser("readme", help="copy figures/<name>.md into the <!-- name:start --> "
+                        "sections of the README and docs/*.md, and the last full reproduce's "
+                        "timing (build/reproduce/timing*.md; reproduce never edits them)")
     rd.add_argument("--check", action="store_true",
                     help="only report sections that differ (exit 1 if any)")
     return ap
@@ -231,20 +231,23 @@ def _wire(args) -> int:
 
 
 def _readme(check: bool) -> int:
-    from lfc.repro.notebook import readme_mismatches, sync_readme, update_markdown_section
-    readme, tables = runner.ROOT / "README.md", runner.ROOT / "figures"
+    from lfc.repro.notebook import documents, readme_mismatches, sync_readme, \
+        update_markdown_section
+    tables = runner.ROOT / "figures"
+    docs = documents(runner.ROOT)
     if check:
-        stale = readme_mismatches(readme, tables)
-        print("README sections out of date: " + ", ".join(stale) if stale else
-              "README tables match figures/")
+        stale = [f"{d.name}: {name}" for d in docs for name in readme_mismatches(d, tables)]
+        print("sections out of date: " + ", ".join(stale) if stale else
+              "generated sections match figures/")
         return 1 if stale else 0
     for name in runner.TIMING_FILES.values():     # the last full runs' timing, where measured
         timing = runner.ROOT / "build" / "reproduce" / name
-        if timing.exists():
-            update_markdown_section(readme, name[:-3], timing.read_text())
-            print(f"README section {name[:-3]} from {timing}")
-    changed = sync_readme(readme, tables)
-    print("updated README sections: " + ", ".join(changed) if changed else "README up to date")
+        for doc in docs:
+            if timing.exists() and f"<!-- {name[:-3]}:start -->" in doc.read_text():
+                update_markdown_section(doc, name[:-3], timing.read_text())
+                print(f"{doc.name} section {name[:-3]} from {timing}")
+    changed = [f"{d.name}: {name}" for d in docs for name in sync_readme(d, tables)]
+    print("updated sections: " + ", ".join(changed) if changed else "every section up to date")
     return 0
 
 
@@ -280,14 +283,15 @@ def main(argv: list[str] | None = None) -> int:
                         / runner.TIMING_FILES[cached == len(outcomes)])
                 path.parent.mkdir(parents=True, exist_ok=True)
                 path.write_text(runner.timing_table(outcomes, wall, cpu, args.jobs))
-                print(f"timing: {path} (python -m lfc readme copies it into the README)")
+                print(f"timing: {path} (python -m lfc readme copies it into "
+                      "docs/reproducing.md)")
             print(f"\nNotebooks ({wall:.0f} s wall on {args.jobs} jobs"
                   + (f"; {cached} of {len(outcomes)} unchanged since their last run, read "
                      f"back from build/ — --no-cache reruns them" if cached else "") + "):")
             print(runner.times_table(outcomes).to_string(index=False))
             notes = runner.deviation_notes(outcomes)
             if notes:
-                print("\nDocumented deviations (README, 'Where the testbed differs'):")
+                print("\nDocumented deviations (docs/testbed.md, 'Where the testbed differs'):")
                 print("\n".join(f"- {n}" for n in notes))
             ok = all(o.ok for o in outcomes)
             if args.compare_blas:

@@ -160,7 +160,7 @@ def record_claims(results_dir: str | Path, claims: dict[str, bool], check: bool,
 
     With ``check``, raise ``AssertionError`` on a failed claim that is not a
     documented deviation or fails in another way than documented, and on a
-    documented deviation that now holds (so the README is updated).
+    documented deviation that now holds (so ``docs/testbed.md`` is updated).
     """
     out = Path(results_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -177,7 +177,7 @@ def record_claims(results_dir: str | Path, claims: dict[str, bool], check: bool,
     if check and (failed or stale):
         raise AssertionError("claim(s) not reproduced: " + "; ".join(failed) if failed else
                              "documented deviation(s) no longer observed, update DEVIATIONS "
-                             "and the README: " + "; ".join(stale))
+                             "and docs/testbed.md: " + "; ".join(stale))
     verdict = ["yes" if ok else "no (documented)" if k in deviations else "no"
                for k, ok in claims.items()]
     return pd.DataFrame({"claim": list(claims), "reproduced": verdict,
@@ -202,14 +202,22 @@ def markdown_table(table, digits: int = STABLE_DIGITS) -> str:
 
 def save_table(text: str, directory: str | Path, name: str) -> Path:
     """Write a generated markdown table to ``directory/name.md`` (beside the
-    figures; the README shows it between ``<!-- name:start -->`` markers)."""
+    figures; the README or an appendix in ``docs/`` shows it between
+    ``<!-- name:start -->`` markers)."""
     path = Path(directory) / f"{name}.md"
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(text.strip() + "\n")
     return path
 
 
-RUN_SECTIONS = ("timing", "timing_rerun")   # README sections a full reproduce writes
+RUN_SECTIONS = ("timing", "timing_rerun")   # sections a full reproduce's timing fills
+
+
+def documents(root: str | Path) -> list[Path]:
+    """The markdown files with generated sections: the README and the appendices
+    (``docs/*.md``)."""
+    return [Path(root) / "README.md", *sorted((Path(root) / "docs").glob("*.md"))]
+
 _SECTION = re.compile(r"<!-- ([\w-]+):start -->\n(.*?)<!-- \1:end -->", re.S)
 
 
@@ -228,14 +236,15 @@ def readme_mismatches(readme: str | Path, tables_dir: str | Path) -> list[str]:
 
 
 def sync_readme(readme: str | Path, tables_dir: str | Path) -> list[str]:
-    """Copy each generated table into its README section; return the names changed.
+    """Copy each generated table into its section of the markdown file ``readme`` (the
+    README or an appendix); return the names changed.
 
     Raises ``ValueError`` if a section has no table file."""
     changed = readme_mismatches(readme, tables_dir)
     for name in changed:
         table = Path(tables_dir) / f"{name}.md"
         if not table.exists():
-            raise ValueError(f"README section {name!r} has no table {table}")
+            raise ValueError(f"{Path(readme).name} section {name!r} has no table {table}")
         update_markdown_section(readme, name, table.read_text())
     return changed
 
