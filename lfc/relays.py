@@ -21,6 +21,8 @@ RELAY_NAMES = ("OF2", "UF2", "ROCOF")
 TIME_TOL = 1e-9  # s, tolerance when comparing elapsed pickup time to a delay
 MAX_ROCOF_LIMIT = 10.0   # pu/s: the largest ROCOF setting (RelaySettings)
 MAX_DELAY = 1e4          # s: the longest clearing time
+#: IEEE 1547-2018's ROCOF ride-through by DER category (Hz/s): I, II, III.
+IEEE1547_ROCOF_HZ_PER_S = {"I": 0.5, "II": 2.0, "III": 3.0}
 
 
 def relays_or_default(relays: object) -> "RelaySettings":
@@ -70,6 +72,28 @@ class RelaySettings:
         check_range("uf2", self.uf2, 0.0, 1.0)
         for name in ("of2_delay", "uf2_delay", "rocof_delay"):
             check_range(name, getattr(self, name), 0.0, MAX_DELAY, closed=True)
+
+    @classmethod
+    def ieee1547(cls, category: str = "III", nominal_hz: float = 60.0) -> "RelaySettings":
+        """The relays of an IEEE 1547-2018 DER of ``category`` (``"I"``, ``"II"`` or
+        ``"III"``).
+
+        OF2 and UF2 are the paper's Table 1 (1.03 and 0.942 pu, 160 ms: the
+        standard's 62.0 Hz and 56.5 Hz defaults, the same in every category, as the
+        paper rounds them); the ROCOF setting is the category's ride-through
+        (0.5, 2.0, 3.0 Hz/s, as ``nominal_hz``'s pu/s), so ``ieee1547("III")`` is
+        the default ``RelaySettings()`` (the paper's Cat. III, 0.05 pu/s at 60 Hz).
+
+        Raises
+        ------
+        ValueError
+            If ``category`` is not one of them, or ``nominal_hz`` is not in (0, 1000].
+        """
+        if category not in IEEE1547_ROCOF_HZ_PER_S:
+            raise ValueError(f"category must be one of {tuple(IEEE1547_ROCOF_HZ_PER_S)} "
+                             f"(IEEE 1547-2018), got {category!r}")
+        check_range("nominal_hz", nominal_hz, 0.0, 1000.0)
+        return cls(rocof_limit=IEEE1547_ROCOF_HZ_PER_S[category] / nominal_hz)
 
     @property
     def F(self) -> float:

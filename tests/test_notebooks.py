@@ -372,6 +372,19 @@ def test_notebook_defaults_are_the_documented_scenario(name):
 
 
 @pytest.mark.parametrize("c", CHAPTERS, ids=lambda c: c.name)
+def test_papermill_reads_every_parameter_of_every_chapter(c, caplog):
+    """Each assignment of the parameters cell is a parameter papermill (and so
+    ``sweep``) knows: a comment holding ``=`` made papermill skip its line."""
+    cells = json.loads((runner.NOTEBOOKS_DIR / c.notebook).read_text())["cells"]
+    cell = next(x for x in cells if "parameters" in x["metadata"].get("tags", []))
+    names = {t.id for node in ast.parse("".join(cell["source"])).body
+             for t in getattr(node, "targets", [])}
+    with caplog.at_level("WARNING"):
+        found = runner.pm.inspect_notebook(str(runner.NOTEBOOKS_DIR / c.notebook))
+    assert set(found) == names and "Unable to parse" not in caplog.text
+
+
+@pytest.mark.parametrize("c", CHAPTERS, ids=lambda c: c.name)
 def test_each_chapter_reads_as_a_chapter(c):
     """Markdown first; imports only in the first code cell after the parameters;
     short code cells; the scenario run on the page (a simulate call), not hidden

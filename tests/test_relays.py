@@ -77,3 +77,39 @@ def test_safe_set():
     r = RelaySettings()
     assert r.in_safe_set(0.0, 0.0) and not r.in_safe_set(0.031, 0.0)
     assert not r.in_safe_set(0.0, -0.051) and r.in_safe_set(-0.058, 0.05)
+
+
+@pytest.mark.parametrize("category, hz_per_s", [("I", 0.5), ("II", 2.0), ("III", 3.0)])
+def test_ieee1547_categories_set_the_rocof_ride_through_and_keep_table_1(category, hz_per_s):
+    """IEEE 1547-2018: ROCOF ride-through 0.5 / 2.0 / 3.0 Hz/s for categories I / II /
+    III; the frequency thresholds are the paper's Table 1 in every category, and
+    category III is the default (the paper's)."""
+    r = RelaySettings.ieee1547(category)
+    assert r.rocof_limit * 60.0 == pytest.approx(hz_per_s, rel=1e-15)
+    assert (r.of2, r.uf2, r.of2_delay, r.uf2_delay) == (1.03, 0.942, 0.16, 0.16)
+    assert RelaySettings.ieee1547(category, nominal_hz=50.0).rocof_limit == hz_per_s / 50.0
+    assert RelaySettings.ieee1547() == RelaySettings()
+
+
+@pytest.mark.parametrize("kwargs, name", [({"category": "IV"}, "category"),
+                                          ({"category": 3}, "category"),
+                                          ({"nominal_hz": 0.0}, "nominal_hz")])
+def test_ieee1547_refuses_an_unknown_category_or_frequency(kwargs, name):
+    with pytest.raises(ValueError, match=name):
+        RelaySettings.ieee1547(**kwargs)
+
+
+def test_a_notebooks_physical_knobs_reach_its_model_and_relays():
+    """``lfc.repro.notebook.setup``: M, the relay category and the ROCOF setting."""
+    from lfc.repro.notebook import setup
+    params, relays = setup("linear", M=2.0, relay_category="I")
+    assert params.M == 2.0 and relays == RelaySettings.ieee1547("I")
+    assert setup("linear", rocof_limit=0.02)[1].rocof_limit == 0.02
+    assert setup("linear", M=4.0) == setup("linear")         # the defaults are the paper's
+    for kwargs, name in (({"M": 0.0}, "M"), ({"M": 101.0}, "M"),
+                         ({"relay_category": "IV"}, "category"),
+                         ({"rocof_limit": -0.1}, "rocof_limit")):
+        with pytest.raises(ValueError, match=name):
+            setup("linear", **kwargs)
+    with pytest.raises(ValueError, match="fitted"):
+        setup("testbed", M=4.0)

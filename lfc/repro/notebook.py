@@ -7,6 +7,7 @@ import ast
 import json
 import math
 import re
+from dataclasses import replace
 from numbers import Integral, Real
 from pathlib import Path
 
@@ -118,15 +119,42 @@ def _assigned(source: str) -> set[str]:
     return names
 
 
-def setup(plant: str, supported: tuple[str, ...] = PLANTS) -> tuple[LFCParams, RelaySettings]:
-    """The design model of ``plant`` and the paper's relay settings.
+def setup(plant: str, supported: tuple[str, ...] = PLANTS, *, M: float | None = None,
+          relay_category: str = "III", rocof_limit: float | None = None
+          ) -> tuple[LFCParams, RelaySettings]:
+    """The design model of ``plant`` and its relays: a notebook's physical knobs.
 
-    Raises ``ValueError`` if the notebook does not run on ``plant`` (``supported``).
+    Parameters
+    ----------
+    plant : str
+        ``"linear"`` or ``"testbed"``; ``supported``: those the notebook runs on.
+    M : float, optional
+        Inertia ``2H`` (s) of the linear model, in (0, 100]; None keeps the design
+        model's (4 s; on the testbed the fitted one, which cannot be changed).
+    relay_category : str
+        IEEE 1547-2018 DER category of the relays (:meth:`RelaySettings.ieee1547`):
+        ``"III"`` is the paper's Table 1.
+    rocof_limit : float, optional
+        ROCOF setting (pu/s) in place of the category's.
+
+    Raises ``ValueError`` if the notebook does not run on ``plant``, or a knob is
+    out of its range.
     """
     check_plant(plant)
     if plant not in supported:
         raise ValueError(f"plant must be one of {supported} for this notebook, got {plant!r}")
-    return design_params(plant), RelaySettings()
+    if M is not None and plant != "linear":
+        raise ValueError("M is the linear model's; on the testbed the design model's "
+                         "inertia is fitted to ANDES (leave M = None)")
+    if M is not None and not (isinstance(M, Real) and 0.0 < M <= 100.0):
+        raise ValueError(f"M must lie in (0, 100] s, got {M!r}")
+    params = design_params(plant)
+    if M is not None:
+        params = replace(params, M=float(M))
+    relays = RelaySettings.ieee1547(relay_category)
+    if rocof_limit is not None:
+        relays = replace(relays, rocof_limit=rocof_limit)
+    return params, relays
 
 
 def figure_name(base: str, plant: str) -> str:
