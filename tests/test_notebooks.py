@@ -2,6 +2,7 @@
 
 import ast
 import json
+import re
 import subprocess
 from pathlib import Path
 
@@ -43,6 +44,23 @@ def run_chapter(name: str, tmp_path: Path, plant: str = "linear", **params) -> N
         assert (tmp_path / "fig" / png).stat().st_size > 1000
         assert (tmp_path / "fig" / png.replace(".png", ".pdf")).stat().st_size > 1000
     assert images(tmp_path / nb.name) >= len(c.figures)       # inline, in the notebook
+    assert output_problems(tmp_path / nb.name, tmp_path) == []
+
+
+def output_problems(notebook: Path, tmp_path: Path) -> list[str]:
+    """Outputs a reader should not see: a Python warning (it names a file by its
+    absolute path) or any absolute path of this machine."""
+    cells = json.loads(notebook.read_text())["cells"]
+    found = []
+    for i, cell in enumerate(cells):
+        for out in cell.get("outputs", []):
+            text = "".join(out.get("text", "")) + json.dumps(out.get("data", {}))
+            if re.search(r"\b\w*Warning: ", text):
+                found.append(f"cell {i}: a warning: {text[:200]}")
+            for place in (str(runner.ROOT), str(tmp_path)):
+                if place in text:
+                    found.append(f"cell {i}: the path {place}")
+    return found
 
 
 @pytest.mark.parametrize("name, plant", RUNS)
@@ -369,6 +387,20 @@ def test_notebook_defaults_are_the_documented_scenario(name):
     found = runner.pm.inspect_notebook(str(runner.NOTEBOOKS_DIR / chapter(name).notebook))
     for param, value in DEFAULTS[name].items():
         assert ast.literal_eval(found[param]["default"]) == value, param
+
+
+@pytest.mark.parametrize("c", CHAPTERS, ids=lambda c: c.name)
+def test_each_chapter_is_a_lesson(c):
+    """It opens with what you will learn and ends with what to try next; the
+    single-area chapters on the linear model take the physical knobs (M, the relays'
+    IEEE 1547 category, the ROCOF setting) as parameters."""
+    cells = json.loads((runner.NOTEBOOKS_DIR / c.notebook).read_text())["cells"]
+    assert "What you will learn" in "".join(cells[0]["source"])
+    assert any("What to try next" in "".join(x["source"]) for x in cells[-3:]
+               if x["cell_type"] == "markdown")
+    if c.name in ("tutorial", "fig4", "fig5", "fig6", "kalman"):
+        found = runner.pm.inspect_notebook(str(runner.NOTEBOOKS_DIR / c.notebook))
+        assert {"M", "relay_category", "rocof_limit"} <= set(found)
 
 
 @pytest.mark.parametrize("c", CHAPTERS, ids=lambda c: c.name)

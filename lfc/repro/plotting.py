@@ -396,8 +396,11 @@ def readings_figure(summary, title: str) -> Figure:
     left.set_yticks(y, labels, fontsize=8)
     left.invert_yaxis()
     left.set_xlabel("Tripping attacks stopped (of the maps' sinusoids, squares and biases)")
-    right.set_xlabel("False alarms on legitimate load steps (control periods, log scale)")
-    right.set_xscale("log")
+    if (summary["load-step alarms"] > 0).any():      # a log scale needs a positive bar
+        right.set_xscale("log")
+        right.set_xlabel("False alarms on legitimate load steps (control periods, log scale)")
+    else:
+        right.set_xlabel("False alarms on legitimate load steps (control periods): none")
     left.set_ylabel("Reading: outside (E9) / conflict (E10) / prediction (E5)")
     for ax in (left, right):
         ax.grid(alpha=0.3, axis="x")
