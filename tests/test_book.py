@@ -30,7 +30,7 @@ def book(tmp_path_factory):
     return index
 
 
-PAGES = ["introduction", "tutorial", "kalman", *APPENDICES]
+PAGES = ["introduction", "tutorial", "kalman", *(f"appendix-{a}" for a in APPENDICES)]
 
 
 @pytest.mark.long(80)
@@ -150,3 +150,13 @@ def test_the_browser_check_sees_a_missing_figure(book, tmp_path):
     broken = tmp_path / "index.html"
     broken.write_text(book.read_text())           # figures/ is not beside it
     assert images_loaded(broken) == "images 0 of 2"
+
+
+def test_no_two_pages_of_the_full_book_share_a_file():
+    """Chapter 11's page is ``wire.html``; the appendix ``docs/wire.md`` is
+    ``appendix-wire.html`` (it once overwrote the chapter)."""
+    from lfc.repro.manifest import CHAPTERS
+    from lfc.repro.notebook import figure_name
+    labels = [figure_name(c.name, p) for c in CHAPTERS for p in c.plants]
+    assert len(set(labels)) == len(labels) and "wire" in labels
+    assert not any(label == "introduction" or label.startswith("appendix-") for label in labels)

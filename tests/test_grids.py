@@ -223,14 +223,23 @@ def test_andes_warnings_become_one_summary_line_per_case(monkeypatch, capsys):
     about 170 printed lines per run in chapter 09 before) are collected: the first
     run prints one summary line per stage to stderr, a second run none, and
     ``LOAD_WARNINGS`` keeps every message."""
+    import contextlib
+    import io
+    import logging
+
     from lfc.testbed import andes_setup
-    with capsys.disabled():       # ANDES' own handler binds the stream of its first use:
-        andes_setup.prepare_andes()   # the session's, not this test's (closed after it)
+    with contextlib.redirect_stderr(io.StringIO()):   # as if set up before this test
+        andes_setup.prepare_andes()
     monkeypatch.setattr(andes_setup, "LOAD_WARNINGS", {})
     for _ in range(2):
         lfc.simulate(GridCase.ieee39(), duration=0.5)
     err = capsys.readouterr().err
     summaries = [line for line in err.splitlines() if line.startswith("ANDES: ")]
     assert len(summaries) == 2 and "GENROU" not in err and "ACEc" not in err, err
+    assert set(andes_setup.LOAD_WARNINGS) == {"ieee39_full (loading)",
+                                              "ieee39_full (time-domain initialization)"}
     messages = sum(andes_setup.LOAD_WARNINGS.values(), [])
     assert any("ACEc" in m for m in messages) and any("GENROU" in m for m in messages)
+    # outside a load, ANDES' warnings reach sys.stderr as it is now (here: the test's)
+    logging.getLogger("andes").warning("a warning after the load")
+    assert "a warning after the load" in capsys.readouterr().err

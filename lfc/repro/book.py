@@ -27,7 +27,8 @@ from lfc.repro import runner
 from lfc.repro.manifest import CHAPTERS, chapter
 from lfc.repro.notebook import PLANT_LABELS, figure_name
 
-#: The appendices, in order: ``docs/<name>.md``, each the page ``<name>.html``.
+#: The appendices, in order: ``docs/<name>.md``, each the page ``appendix-<name>.html``
+#: (a prefix no chapter's page has: chapter 11's is ``wire.html``, like an appendix).
 APPENDICES = ("paper", "certified-filter", "multi-area", "coupled-certificate", "wire",
               "testbed", "engine", "reproducing", "parameters", "architecture")
 
@@ -157,8 +158,10 @@ def build_book(only: list[str] | None = None, build_dir: Path = runner.ROOT / "b
                     shutil.copyfile(figures_dir / png, out / "figures" / png)
             entries.append((c, plant, label, runner.read_json(executed.parent / "claims.json")))
     pages = [Page("introduction", "Introduction (the README)", runner.ROOT / "README.md"),
-             *pages, *(Page(name, f"{chr(ord('A') + i)} · {appendix_title(name)}",
+             *pages, *(Page(f"appendix-{name}", f"{chr(ord('A') + i)} · {appendix_title(name)}",
                             DOCS_DIR / f"{name}.md") for i, name in enumerate(appendices))]
+    if len({p.name for p in pages}) < len(pages):      # one page would overwrite another
+        raise ValueError(f"two pages of the book share a name: {[p.name for p in pages]}")
     names = {p.source: p.name for p in pages if p.source.suffix == ".md"}
     _bundle_mathjax(out)
     exporter = _exporter()

@@ -63,7 +63,7 @@ CHAPTERS = (
     Chapter("fig6", "04_fig6_load_step.ipynb", "Fig. 6: a legitimate load step", PLANTS,
             ("fig6_load_step",), {"duration": 3.0}),
     Chapter("fig7", "05_fig7_fault.ipynb",
-            "Fig. 7: a fault at B5 and the over-current relay (ANDES)", ("testbed",),
+            "Fig. 7: a fault at B5 and the over-current relay", ("testbed",),
             ("fig7_fault",), {"duration": 2.0}),
     Chapter("surface", "06_attack_surface.ipynb",
             "Which attacks does the SCC stop? Maps, readings and the α–T_s trade-off",

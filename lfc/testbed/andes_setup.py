@@ -9,7 +9,26 @@ from collections.abc import Iterator
 from pathlib import Path
 
 _CONFIGURED = False
-LOAD_WARNINGS: dict[str, list[str]] = {}   # per case: ANDES' warnings (quiet_load)
+LOAD_WARNINGS: dict[str, list[str]] = {}   # per "case (stage)": ANDES' warnings (quiet_load)
+
+
+class _Stderr(logging.StreamHandler):
+    """ANDES' stream handler (through ``tqdm.write``, which keeps progress bars
+    whole), writing to ``sys.stderr`` as it is when a record comes, not as it was
+    when the handler was made: ANDES' own binds the latter, so its warnings went
+    to a stream that pytest or a kernel had since replaced."""
+
+    @property
+    def stream(self):
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value) -> None:    # StreamHandler.__init__ sets it; always stderr
+        pass
+
+    def emit(self, record: logging.LogRecord) -> None:
+        from tqdm import tqdm
+        tqdm.write(self.format(record), file=self.stream)
 
 
 def prepare_andes() -> None:
@@ -28,9 +47,18 @@ def prepare_andes() -> None:
     from andes.utils.paths import get_pycode_path
 
     andes.config_logger(stream_level=logging.WARNING, file=False)
+    logger = logging.getLogger("andes")
+    for h in logger.handlers[:]:
+        if isinstance(h, logging.StreamHandler) and not isinstance(h, (logging.FileHandler,
+                                                                        _Stderr)):
+            mine = _Stderr()
+            mine.setLevel(h.level)
+            mine.setFormatter(h.formatter)
+            logger.removeHandler(h)
+            logger.addHandler(mine)
     # config_logger leaves the logger itself at DEBUG: every debug call in ANDES'
     # step loop then builds a record the handler drops (about 5 % of a run's time)
-    logging.getLogger("andes").setLevel(logging.WARNING)
+    logger.setLevel(logging.WARNING)
     if not (Path(get_pycode_path()) / "__init__.py").exists():
         print("lfc.testbed: generating ANDES' model code once (about 10 s) ...",
               file=sys.stderr, flush=True)
@@ -39,12 +67,14 @@ def prepare_andes() -> None:
 
 
 @contextlib.contextmanager
-def quiet_load(case: str) -> Iterator[None]:
-    """Collect ANDES' warnings while case ``case`` is loaded, set up or initialized
-    (parameters it corrected, values outside its typical ranges: the IEEE 39-bus
-    case gives about 170 lines per run) instead of printing them: the first time
-    in a process each ``case`` prints one summary line to stderr, and
-    ``LOAD_WARNINGS[case]`` keeps the messages."""
+def quiet_load(case: str, stage: str) -> Iterator[None]:
+    """Collect ANDES' warnings while ``case`` (its file's name without suffix,
+    ``"ieee39_full"``) goes through ``stage`` (``"loading"``, ``"time-domain
+    initialization"``): parameters it corrected, values outside its typical ranges
+    (the IEEE 39-bus case gives about 170 lines per run), instead of printing
+    them.  The first time in a process each case and stage prints one summary line
+    to stderr; ``LOAD_WARNINGS["<case> (<stage>)"]`` keeps the messages."""
+    key = f"{case} ({stage})"
     logger = logging.getLogger("andes")
     messages: list[str] = []
 
@@ -62,9 +92,9 @@ def quiet_load(case: str) -> Iterator[None]:
         logger.removeHandler(collect)
         for h in handlers:
             logger.addHandler(h)
-        if messages and case not in LOAD_WARNINGS:
-            print(f"ANDES: {len(messages)} warning(s) in {case} (parameters it corrected "
-                  f"or found atypical; lfc.testbed.andes_setup.LOAD_WARNINGS[{case!r}] lists "
-                  f"them)", file=sys.stderr, flush=True)
+        if messages and key not in LOAD_WARNINGS:
+            print(f"ANDES: {len(messages)} warning(s) in {case}'s {stage} (parameters it "
+                  f"corrected or found atypical; lfc.testbed.andes_setup.LOAD_WARNINGS"
+                  f"[{key!r}] lists them)", file=sys.stderr, flush=True)
         if messages:
-            LOAD_WARNINGS[case] = messages
+            LOAD_WARNINGS[key] = messages

@@ -54,6 +54,7 @@ machines), 5000 MVA for the 39-bus system (its areas' machines are rated
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -215,7 +216,7 @@ def build_grid(case: GridCase):
     from lfc.testbed.andes_setup import prepare_andes, quiet_load
 
     prepare_andes()
-    with quiet_load(case.name):
+    with quiet_load(Path(case.case_file).stem, "loading"):
         return _build(case)
 
 

@@ -91,7 +91,7 @@ def init_tds(ss, duration: float, step: float) -> None:
     cfg.tf, cfg.tstep, cfg.no_tqdm, cfg.criteria = duration, step, 1, 0
     cfg.linesearch, cfg.save_every = 0, 0
     case = Path(ss.files.case).stem if ss.files.case else "the microgrid"
-    with quiet_load(f"{case}'s time-domain initialization"):
+    with quiet_load(case, "time-domain initialization"):
         ss.TDS.init()
 
 
