@@ -92,3 +92,18 @@ def test_the_timing_sections_are_a_runs_record_and_its_table_says_what_ran(tmp_p
     readme.write_text("<!-- timing:start -->\nold\n<!-- timing:end -->\n")
     assert readme_mismatches(readme, tmp_path) == []
     assert runner.TIMING_FILES == {False: "timing.md", True: "timing_rerun.md"}
+
+
+def test_the_readmes_quick_start_runs_and_stops_the_attack(tmp_path, monkeypatch):
+    """The Python block under "Quick start", run as a reader would (in a folder of
+    their own): the SCC keeps the Fig. 4 attack's ROCOF inside its setting and the
+    run's files are written."""
+    code = README.read_text().split("## Quick start", 1)[1].split("```python\n", 1)[1]
+    code = code.split("```", 1)[0]
+    monkeypatch.chdir(tmp_path)
+    space: dict = {}
+    exec(compile(code, "README.md (quick start)", "exec"), space)
+    metrics = space["res"].metrics()
+    assert not metrics["tripped"] and metrics["alarms"] > 0
+    assert {p.name for p in (tmp_path / "build" / "run").iterdir()} >= {
+        "trace.csv", "controls.csv", "trips.csv", "alarms.csv", "metrics.json"}
