@@ -4,7 +4,7 @@ minutes, and generated tables that match the figures they come from."""
 import re
 
 from lfc.repro import runner
-from lfc.repro.book import APPENDICES
+from lfc.repro.book import APPENDICES, github_anchor
 from lfc.repro.notebook import documents, readme_mismatches, sync_readme
 
 README = runner.ROOT / "README.md"
@@ -44,7 +44,7 @@ def test_every_link_between_the_readme_and_the_appendices_resolves():
     """Relative links (files and GitHub heading anchors) of the README and docs/*.md."""
     def anchors(path) -> set[str]:
         heads = re.findall(r"^#+ (.+)$", path.read_text(), re.M)
-        return {re.sub(r"[^\w\- ]", "", h.strip().lower()).replace(" ", "-") for h in heads}
+        return {github_anchor(h) for h in heads}
     for doc in documents(runner.ROOT):
         for target in re.findall(r"\]\(([^)\s]+)\)", doc.read_text()):
             if target.startswith(("http://", "https://")):

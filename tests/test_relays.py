@@ -113,3 +113,5 @@ def test_a_notebooks_physical_knobs_reach_its_model_and_relays():
             setup("linear", **kwargs)
     with pytest.raises(ValueError, match="fitted"):
         setup("testbed", M=4.0)
+    with pytest.raises(TypeError, match="M must be a number"):
+        setup("linear", M=True)                 # refused, not read as M = 1 s

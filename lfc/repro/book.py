@@ -49,8 +49,6 @@ MathJax.Hub.Config({
 </script>
 <script src="mathjax/MathJax.js?config=TeX-AMS-MML_HTMLorMML-full,Safe"></script>"""
 
-#: The lab template without what it fetches from a CDN (require.js, mermaid), with
-#: the navigation above and below each page.
 STYLE = """
 body { font-family: system-ui, sans-serif; max-width: 72rem; margin: 2rem auto; padding: 0 1rem;
        color: #222; }
@@ -63,6 +61,8 @@ figcaption { font-size: .85rem; margin-top: .3rem; }
 .ok { color: #1a7f37; } .no { color: #cf222e; }
 """
 
+#: The lab template without what it fetches from a CDN (require.js, mermaid), with
+#: the navigation above and below each page.
 TEMPLATE = """{%- extends 'lab/index.html.j2' -%}
 {%- block html_head_js_requirejs -%}{%- endblock html_head_js_requirejs -%}
 {%- block html_head_js_mermaidjs -%}{%- endblock html_head_js_mermaidjs -%}
@@ -162,7 +162,7 @@ def build_book(only: list[str] | None = None, build_dir: Path = runner.ROOT / "b
                             DOCS_DIR / f"{name}.md") for i, name in enumerate(appendices))]
     if len({p.name for p in pages}) < len(pages):      # one page would overwrite another
         raise ValueError(f"two pages of the book share a name: {[p.name for p in pages]}")
-    names = {p.source: p.name for p in pages if p.source.suffix == ".md"}
+    names = {p.source: p for p in pages if p.source.suffix == ".md"}
     _bundle_mathjax(out)
     exporter = _exporter()
     places = {str(build_dir): "build", str(figures_dir): "figures", str(runner.ROOT): ".",
@@ -221,18 +221,24 @@ def _nav(pages: list[Page], i: int) -> str:
 _LINK = re.compile(r"\[([^\]]+)\]\(([^)\s]+)\)")
 
 
+def github_anchor(heading: str) -> str:
+    """The anchor GitHub gives a markdown heading: lower case, punctuation dropped,
+    spaces as hyphens."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
 def _heading_id(doc: Path, slug: str) -> str:
     """The id nbconvert gives the heading of ``doc`` whose GitHub anchor is ``slug``
     (its text, spaces as hyphens); ``slug`` itself if no heading has it."""
     for head in re.findall(r"^#+ (.+)$", doc.read_text(encoding="utf-8"), re.M):
-        if re.sub(r"[^\w\- ]", "", head.strip().lower()).replace(" ", "-") == slug:
+        if github_anchor(head) == slug:
             return head.strip().replace(" ", "-")
     return slug
 
 
-def _page_markdown(source: Path, names: dict[Path, str], figures_dir: Path, out: Path) -> str:
+def _page_markdown(source: Path, names: dict[Path, Page], figures_dir: Path, out: Path) -> str:
     """The README or an appendix as a book page: a link to another of them goes to
-    its page (``names``: source to page name; GitHub's anchors to nbconvert's
+    its page (``names``: source to page; GitHub's anchors to nbconvert's
     heading ids), a figure to the book's copy, a link to any other file of the
     repository becomes its path in code (the book holds only its pages)."""
     def fix(m: re.Match) -> str:
@@ -247,14 +253,14 @@ def _page_markdown(source: Path, names: dict[Path, str], figures_dir: Path, out:
                 shutil.copyfile(found, out / "figures" / where.name)
             return f"[{label}](figures/{where.name})"
         if where in names:
-            return (f"[{label}]({names[where]}.html"
+            return (f"[{label}]({names[where].href}"
                     + (f"#{_heading_id(where, anchor)}" if anchor else "") + ")")
         shown = where.relative_to(runner.ROOT) if where.is_relative_to(runner.ROOT) else path
         return f"{label} (`{shown}`)"
     return _LINK.sub(fix, source.read_text(encoding="utf-8"))
 
 
-def _render(exporter, page: Page, nav: str, names: dict[Path, str], figures_dir: Path,
+def _render(exporter, page: Page, nav: str, names: dict[Path, Page], figures_dir: Path,
             out: Path) -> str:
     """The HTML of ``page``."""
     import nbformat

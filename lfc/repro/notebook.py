@@ -14,6 +14,7 @@ from pathlib import Path
 import pandas as pd
 
 from lfc._format import STABLE_DIGITS, count, number
+from lfc._validate import check_number
 from lfc.experiments.deviations import DEVIATIONS
 from lfc.experiments.scenarios import ALL_PLANTS, PLANTS, check_plant, design_params
 from lfc.model import LFCParams
@@ -146,11 +147,13 @@ def setup(plant: str, supported: tuple[str, ...] = PLANTS, *, M: float | None = 
     if M is not None and plant != "linear":
         raise ValueError("M is the linear model's; on the testbed the design model's "
                          "inertia is fitted to ANDES (leave M = None)")
-    if M is not None and not (isinstance(M, Real) and 0.0 < M <= 100.0):
-        raise ValueError(f"M must lie in (0, 100] s, got {M!r}")
+    if M is not None:
+        check_number("M", M)                 # a bool or a string is refused, not coerced
+        if not 0.0 < M <= 100.0:
+            raise ValueError(f"M must lie in (0, 100] s, got {M!r}")
     params = design_params(plant)
     if M is not None:
-        params = replace(params, M=float(M))
+        params = replace(params, M=M)
     relays = RelaySettings.ieee1547(relay_category)
     if rocof_limit is not None:
         relays = replace(relays, rocof_limit=rocof_limit)
