@@ -17,9 +17,12 @@ Prints, from one run:
   attacks (the coordinated 0.6 pu sinusoid, a -2.5 pu ACE bias, each with a
   -0.05 pu step in area 1 at 3.37 s): ANDES' peak frequency and ROCOF over the
   fitted model's, and over the proven bound, the largest over the areas;
-* with ``--andes``: the red team's coordinated search (every family of
-  ``MULTI_FAMILIES``, both areas at once) against the contract and the coupled
-  certificate on Kundur's and the IEEE 39-bus system's areas as fitted to ANDES,
+* with ``--andes``: each fitted model's command range (the ladder of
+  ``lfc.testbed.grid_fit.validated_range``), then the red team's coordinated
+  search (every family of ``MULTI_FAMILIES``, both areas at once) against the
+  contract, the coupled certificate (its commands within the range) and the
+  coupled certificate without the range, on Kundur's and the IEEE 39-bus
+  system's areas as fitted to ANDES,
   and its winner replayed on ANDES with the same filters (anti-windup): the
   fitted model's worst severity, and on ANDES whether anything tripped, the
   ``outside`` samples per area and the peak |ROCOF| per area.
@@ -102,16 +105,24 @@ def mismatch() -> None:
 
 
 def andes() -> None:
-    from lfc.testbed import GridCase, grid_design
+    from lfc.filters.coupled import CoupledFilter
+    from lfc.testbed import GridCase, grid_design, grid_fit_report
     from lfc.testbed.loop import TestbedError
     logging.getLogger("andes").setLevel(logging.ERROR)
-    print("| case | filters | family | fitted: severity | ANDES: tripped | ANDES: outside "
+    cases = (GridCase.kundur(), GridCase.ieee39())
+    for case in cases:
+        report = grid_fit_report(case)
+        print(f"\n{case.name}: the fitted model's command range {report.command_range:g} pu\n")
+        print(report.validation_table())
+    print("\n| case | filters | family | fitted: severity | ANDES: tripped | ANDES: outside "
           "samples | ANDES: peak abs ROCOF (pu/s) |")
     print("|---|---|---|---|---|---|---|")
-    for case in (GridCase.kundur(), GridCase.ieee39()):
+    for case in cases:
         fit = grid_design(case)
-        for kind in ("contract", "coupled"):
-            filters = {0: kind, 1: kind}
+        unbounded = CoupledFilter(fit, lfc.RelaySettings(), control_period=0.01,
+                                  u_min=-np.inf, u_max=np.inf)
+        for kind in ("contract", "coupled", "coupled, no range"):
+            filters = {a: unbounded if kind == "coupled, no range" else kind for a in range(2)}
             for family in MULTI_FAMILIES:
                 found = coordinated_search(fit, filters, family, duration=20.0, maxiter=2,
                                            popsize=4, jobs=1)
@@ -132,7 +143,7 @@ def andes() -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--andes", action="store_true",
-                        help="also the red team's winners replayed on ANDES (about 10 min)")
+                        help="also the red team's winners replayed on ANDES (about 20 min)")
     args = parser.parse_args()
     grids()
     tightness()

@@ -59,12 +59,22 @@ class MultiAreaParams:
     k_agc : tuple of float, optional
         AGC integral gain on ACE of each area (1/s), in [0, 1e9].  Default
         ``k_i / B_i``: one area is then exactly :func:`lfc.simulate`'s loop.
+    command_range : float, optional
+        Each area's command magnitude (pu) within which this model describes the
+        plant it stands for, > 0.  Default ∞: the model is the plant (the
+        presets, any grid simulated on this model).  A model fitted to ANDES
+        carries the range it was validated on there
+        (:func:`lfc.testbed.grid_fit.validated_range`: beyond it ANDES' tie-lines
+        are far from linear).  The coupled certificate keeps every area's command
+        within ``±command_range`` (its ``u_min``, ``u_max``,
+        :class:`lfc.filters.coupled.CoupledOptions`).
     """
 
     areas: tuple[LFCParams, ...]
     tie: tuple[tuple[int, int, float], ...] = ()
     bias: tuple[float, ...] | None = None
     k_agc: tuple[float, ...] | None = None
+    command_range: float = math.inf
 
     def __post_init__(self) -> None:
         areas = tuple(self.areas) if isinstance(self.areas, (list, tuple)) else ()
@@ -101,6 +111,11 @@ class MultiAreaParams:
             ties.append((i, j, coef))
         object.__setattr__(self, "areas", areas)
         object.__setattr__(self, "tie", tuple(ties))
+        check_number("command_range", self.command_range)
+        if not self.command_range > 0:
+            raise ValueError(f"command_range must be > 0 pu (math.inf: no range), got "
+                             f"{self.command_range!r}")
+        object.__setattr__(self, "command_range", float(self.command_range))
         for name, low, strict in (("bias", 0.0, True), ("k_agc", 0.0, False)):
             value = getattr(self, name)
             if value is None:

@@ -200,7 +200,7 @@ def test_on_andes_the_contracts_trip_nothing_and_the_fit_eats_little_margin():
     suite, in ``python bench/survey_grid_certificates.py --andes``, which prints
     what the fit's mismatch eats on both, and its contracts on ANDES under a
     red-team winner in ``tests/test_coupled.py::
-    test_finding_on_andes_ieee39_the_red_teams_winner_trips_the_coupled_filters``),
+    test_on_andes_ieee39_the_red_teams_winner_trips_the_coupled_filters_only_beyond_the_range``),
     chapter 09's coordinated attack
     (a 0.6 pu, 0.5 Hz sinusoid on both areas' commands) and a -2.5 pu bias on both
     ACE signals, each with a -0.05 pu load step in area 1 at 3.37 s: with the

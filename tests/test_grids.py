@@ -191,6 +191,30 @@ def test_the_ieee39_fit_reports_errors_below_the_case_datas(fit39):
     assert 5 < fit39.T < 100 and fit39.tie_error < 0.4
 
 
+@pytest.mark.parametrize("name, expected", [("kundur", 0.1), ("ieee39", 0.2)])
+def test_the_fitted_models_command_range_is_where_andes_follows_it(name, expected, fit, fit39):
+    """The fitted model's command range (``grid_fit.validated_range``): opposite
+    command steps of either sign, doubling from 0.05 pu, until ANDES trips or its
+    peak frequency deviation exceeds twice the model's in an area.  Measured:
+    Kundur holds to 0.1 pu (ANDES' peak 0.8-1.7 times the model's) and fails at
+    0.2 pu (2.2, area 0 up and area 1 down: more power over its 400 MW tie); the
+    IEEE 39-bus system holds to 0.2 pu (at most 0.8) and trips at 0.4 pu with area
+    0 down and area 1 up.  Every run up to the range passes, both signs; the last
+    run, on the next rung, fails; the design model carries the range."""
+    report = {"kundur": fit, "ieee39": fit39}[name]
+    assert report.command_range == expected
+    assert report.params.command_range == expected
+    *passed, last = report.validation
+    assert ({(step, sign) for step, sign, *_ in passed if step <= expected}
+            == {(step, sign) for step in grid_fit.VALID_STEPS if step <= expected
+                for sign in (1, -1)})
+    for step, sign, ratio, tripped in passed:
+        assert not tripped and max(ratio) <= grid_fit.VALID_RATIO, (step, sign)
+    step, _, ratio, tripped = last
+    assert step == 2 * expected and (tripped or max(ratio) > grid_fit.VALID_RATIO)
+    assert "| 0.05 | + / − |" in report.validation_table()
+
+
 def test_a_tgov1n_area_command_enters_after_the_droop(fit39):
     """Without AGC, a 0.02 pu command step in the 39-bus system's area 0: in
     steady state its turbines give the command plus their droop response,

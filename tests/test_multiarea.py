@@ -1,5 +1,7 @@
 """Interconnected areas: the model, AGC, the engine, and a filter at every area."""
 
+import math
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -145,6 +147,9 @@ def test_discretization_matches_the_continuous_model():
     (dict(areas=(lfc.LFCParams(),) * 2, bias=(1.0,)), r"bias must be 2 numbers in \[1e-09"),
     (dict(areas=(lfc.LFCParams(),) * 2, bias=(1.0, 0.0)), r"bias must be 2 numbers in \[1e-09"),
     (dict(areas=(lfc.LFCParams(),) * 2, k_agc=(1.0, -1.0)), r"k_agc must be 2 numbers in \[0,"),
+    (dict(areas=(lfc.LFCParams(),) * 2, command_range=0.0), r"command_range must be > 0 pu"),
+    (dict(areas=(lfc.LFCParams(),) * 2, command_range=-0.1), r"command_range must be > 0 pu"),
+    (dict(areas=(lfc.LFCParams(),) * 2, command_range=math.nan), r"command_range must be > 0 pu"),
 ])
 def test_bad_grid_names_the_parameter(kwargs, message):
     with pytest.raises(ValueError, match=message):

@@ -62,13 +62,20 @@ most ``load_bound`` and the noise's part of the error lies in its ellipsoid at
 ``confidence`` at each certification, no relay trips.  The held re-check (B, C)
 is not proven on an estimate: ``outside`` flags are measured.
 
+**Where the model holds.**  Every command stays within ``±command_range`` of
+the design model (:class:`lfc.multiarea.MultiAreaParams`; ∞ but for a model
+fitted to ANDES, whose range :func:`lfc.testbed.grid_fit.validated_range`
+measures).  Without it the filters certify, on a fitted model, commands that
+push gigawatts over a tie the model treats as linear.
+
 **Not covered.**  Other estimators (refused), plants other
 than the design grid, an area without this filter.  On ANDES (``lfc.simulate``
 of a ``GridCase``) the filters read each area's metered states and tie-line
 export (:meth:`CoupledFilter.grid_state`) and the certificate is the fitted
-model's: measured there, not proven — and broken there: on the IEEE 39-bus
-system a red-team attack found against the fitted model trips ROCOF on ANDES
-(``tests/test_coupled.py::test_finding_on_andes_ieee39_the_red_teams_winner_trips_the_coupled_filters``).
+model's: measured there, not proven.  Without the command range a red-team
+attack found against the IEEE 39-bus system's fitted model trips ROCOF on ANDES;
+within it the winners trip nothing there, though ``outside`` is flagged
+(``tests/test_coupled.py::test_on_andes_ieee39_the_red_teams_winner_trips_the_coupled_filters_only_beyond_the_range``).
 """
 
 from __future__ import annotations
@@ -130,7 +137,10 @@ class CoupledOptions:
     margin : float
         Extra fractional tightening of every limit, in [0, 1).  Default 0.
     u_min, u_max : float
-        Actuator limits on every area's command (pu), ``u_min <= 0 <= u_max``.
+        Limits on every area's command (pu), ``u_min <= 0 <= u_max``.
+        :class:`CoupledFilter`'s default: ``∓params.command_range`` (the range
+        its design model holds in, :class:`lfc.multiarea.MultiAreaParams`; ∓∞
+        but for a model fitted to ANDES).
     control_period : float
         Period of the calls (s), in (0, 1].  Default 0.01 s.
     noise_std : (float, float) or None
@@ -789,6 +799,8 @@ class CoupledFilter:
         if not isinstance(relays, RelaySettings):
             raise ValueError(f"relays must be a RelaySettings, got {relays!r}")
         self.params, self.relays = params, relays
+        # the model holds within its command range: the commands stay there
+        options = {"u_min": -params.command_range, "u_max": params.command_range, **options}
         self.options = CoupledOptions(**options)
         self.cert = CoupledSet(params, relays, self.options)
         self.data, self.kalman = self.cert.data, self.cert.kalman

@@ -36,6 +36,9 @@ from lfc.testbed.grid import GridCase, case_design
 
 FIT_STEP = 0.02      # pu of the area base (36 MW in Kundur's), small enough to stay linear
 FIT_DURATION = 30.0  # s: the turbines' 7 s lag settles
+VALID_STEPS = (0.05, 0.1, 0.2, 0.4, 0.8)   # pu: the ladder of opposite command steps
+VALID_RATIO = 2.0    # ANDES' peak |dw_meas| at most this times the model's, per area
+VALID_DURATION = 10.0  # s: each rung's run (the inter-area swing peaks within 3 s)
 # The measurement lags are the BusFreq / BusROCOF settings, known exactly: not fitted.
 # Time constants stay >= 0.05 s: without that bound the fit trades the turbines'
 # lead-lag for a governor lag of microseconds, a model too stiff to certify.
@@ -55,17 +58,36 @@ class GridFit:
         Fitted tie-line coefficient (pu power per pu frequency per s, area base).
     tie_error : float
         RMS residual of the tie-line fit over its peak.
+    command_range : float
+        Each area's command magnitude (pu) within which the fitted model was
+        found to describe ANDES (:func:`validated_range`).
+    validation : tuple of tuple
+        The ladder's rungs as run: ``(step, sign, ratio per area, tripped)``,
+        ``step`` in pu (area 0's command ``sign * step``, area 1's the opposite),
+        ``ratio`` ANDES' peak ``|dw_meas|`` over the model's.
     """
 
     areas: tuple[FitReport, ...]
     T: float
     tie_error: float
+    command_range: float
+    validation: tuple[tuple[float, int, tuple[float, ...], bool], ...]
 
     @property
     def params(self) -> MultiAreaParams:
-        """The fitted two-area design model."""
+        """The fitted two-area design model, with its command range."""
         return MultiAreaParams(areas=tuple(r.params for r in self.areas),
-                               tie=((0, 1, self.T),))
+                               tie=((0, 1, self.T),), command_range=self.command_range)
+
+    def validation_table(self) -> str:
+        """Markdown: the ladder of :func:`validated_range`, one row per run."""
+        rows = ["| step (pu) | area 0 / area 1 | ANDES' peak Δω over the model's, per area | "
+                "ANDES tripped |",
+                "|---|---|---|---|"]
+        rows += [f"| {step:g} | {'+' if sign > 0 else '−'} / {'−' if sign > 0 else '+'} | "
+                 f"{', '.join(f'{r:.2f}' for r in ratio)} | {tripped} |"
+                 for step, sign, ratio, tripped in self.validation]
+        return "\n".join(rows)
 
     def table(self) -> str:
         """Markdown: each area's fit table, then the tie-line's."""
@@ -117,7 +139,43 @@ def fit_grid(case: GridCase | None = None) -> GridFit:
     p, i = np.concatenate(p), np.concatenate(i)
     T = float(p @ i / (i @ i))
     error = float(np.sqrt(np.mean((p - T * i) ** 2)) / np.abs(p).max())
-    return GridFit(tuple(reports), T, error)
+    fitted = MultiAreaParams(areas=tuple(r.params for r in reports), tie=((0, 1, T),))
+    command_range, validation = validated_range(case, fitted)
+    return GridFit(tuple(reports), T, error, command_range, validation)
+
+
+def validated_range(case: GridCase, params: MultiAreaParams) -> tuple[float, tuple]:
+    """How far the design model ``params`` describes ``case`` on ANDES (module
+    docstring): ``(command_range, rungs)``, the largest rung of ``VALID_STEPS``
+    (pu) at which, at it and below, opposite command steps of either sign trip
+    nothing on ANDES and move each area's peak ``|dw_meas|`` at most
+    ``VALID_RATIO`` times the model's (``FIT_STEP``, the fit's own step, if the
+    first rung fails), and every rung run (:attr:`GridFit.validation`).  Stops
+    at the first rung that fails; ANDES' runs stop at a trip, and one that does
+    not converge counts as tripped."""
+    from lfc.simulate_multiarea import simulate_grid_linear
+    from lfc.testbed.grid_plant import simulate_andes_grid
+    from lfc.testbed.loop import TestbedError
+
+    valid, rungs = FIT_STEP, []
+    for step in VALID_STEPS:
+        for sign in (1, -1):
+            attacks = {0: {"pc": Step(sign * step, 1.0)}, 1: {"pc": Step(-sign * step, 1.0)}}
+            model = simulate_grid_linear(params, duration=VALID_DURATION, attacks=attacks)
+            try:
+                real = simulate_andes_grid(params, duration=VALID_DURATION, case=case,
+                                           attacks=attacks, stop_on_trip=True)
+                peaks, tripped = [a.metrics()["max_abs_dw_meas"] for a in real.areas], \
+                    real.tripped
+            except TestbedError:
+                peaks, tripped = [math.inf] * params.n_areas, True
+            ratio = tuple(float(p / m.metrics()["max_abs_dw_meas"])
+                          for p, m in zip(peaks, model.areas))
+            rungs.append((step, sign, ratio, bool(tripped)))
+            if tripped or max(ratio) > VALID_RATIO:
+                return valid, tuple(rungs)
+        valid = step
+    return valid, tuple(rungs)
 
 
 def grid_fit_report(case: GridCase | None = None) -> GridFit:
@@ -133,12 +191,15 @@ def grid_design(case: GridCase | None = None) -> MultiAreaParams:
 
 def _encode(fit: GridFit) -> dict:
     return {"areas": [encode_report(r) for r in fit.areas], "T": fit.T,
-            "tie_error": fit.tie_error}
+            "tie_error": fit.tie_error, "command_range": fit.command_range,
+            "validation": [[s, g, list(r), t] for s, g, r, t in fit.validation]}
 
 
 def _decode(data: dict) -> GridFit:
     return GridFit(tuple(decode_report(r) for r in data["areas"]), float(data["T"]),
-                     float(data["tie_error"]))
+                   float(data["tie_error"]), float(data["command_range"]),
+                   tuple((float(s), int(g), tuple(map(float, r)), bool(t))
+                         for s, g, r, t in data["validation"]))
 
 
 def _check(case: GridCase, fit: GridFit) -> None:
@@ -153,6 +214,9 @@ def _check(case: GridCase, fit: GridFit) -> None:
         raise ValueError(f"T must be a finite number > 0, got {fit.T!r}")
     if not (math.isfinite(fit.tie_error) and fit.tie_error >= 0):
         raise ValueError(f"tie_error must be a finite number >= 0, got {fit.tie_error!r}")
+    if fit.command_range not in (FIT_STEP,) + VALID_STEPS or not fit.validation:
+        raise ValueError(f"command_range must be FIT_STEP or a rung of VALID_STEPS, with the "
+                         f"rungs run, got {fit.command_range!r} and {len(fit.validation)} rungs")
 
 
 @lru_cache(maxsize=4)
