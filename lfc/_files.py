@@ -8,10 +8,14 @@ import contextlib
 import fcntl
 import functools
 import hashlib
+import json
 import os
+import sys
 import uuid
+import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 
 def replace_atomic(path: Path, write: Callable[[Path], None]) -> None:
@@ -60,3 +64,75 @@ def code_digest(*packages: str) -> str:
     for path in paths:
         digest.update(path.relative_to(root).as_posix().encode() + path.read_bytes())
     return digest.hexdigest()
+
+
+# -- stored results: a JSON payload and its SHA-256, named by a key of their inputs -----
+def content_key(*parts: object) -> str:
+    """SHA-256 of ``parts`` (bytes as they are, anything else as sorted JSON) and
+    of what every result here depends on besides its inputs: every source file of
+    the package (:func:`code_digest`), the pinned environment (``environment.txt``),
+    the Python version and the BLAS kernel asked for (``OPENBLAS_CORETYPE``)."""
+    digest = hashlib.sha256()
+    for part in parts:
+        digest.update(part if isinstance(part, bytes)
+                      else json.dumps(part, sort_keys=True, default=str).encode())
+    digest.update(code_digest("*").encode())
+    env = Path(__file__).resolve().parents[1] / "environment.txt"
+    digest.update(env.read_bytes() if env.exists() else b"")
+    digest.update(f"{sys.version}|{os.environ.get('OPENBLAS_CORETYPE', '')}".encode())
+    return digest.hexdigest()
+
+
+def cache_folder() -> Path:
+    """Where stored results are kept: ``$LFC_CACHE_DIR``, default ``~/.cache/lfc-scc``."""
+    return Path(os.environ.get("LFC_CACHE_DIR") or Path.home() / ".cache" / "lfc-scc")
+
+
+def read_stored(path: Path, decode: Callable[[dict], Any],
+                check: Callable[[Any], None] = lambda value: None) -> Any:
+    """The value stored at ``path`` (:func:`write_stored`); None if absent, damaged
+    (its SHA-256) or not sane (``check`` raises ``ValueError``), the last two with a
+    ``RuntimeWarning`` naming the file."""
+    if not path.exists():
+        return None
+    try:
+        stored = json.loads(path.read_text())
+        payload = stored["payload"]
+        if hashlib.sha256(payload.encode()).hexdigest() != stored["sha256"]:
+            raise ValueError("checksum mismatch")
+        value = decode(json.loads(payload))
+        check(value)
+        return value
+    except (OSError, ValueError, KeyError, TypeError) as err:
+        warnings.warn(f"damaged cache file {path} ({err}); computing it again", RuntimeWarning,
+                      stacklevel=2)
+        return None
+
+
+def write_stored(path: Path, value: Any, encode: Callable[[Any], dict]) -> None:
+    """Store ``encode(value)`` (JSON) with its SHA-256 at ``path``, atomically; a
+    file that cannot be written is skipped with a ``RuntimeWarning``."""
+    payload = json.dumps(encode(value), sort_keys=True)
+    text = json.dumps({"payload": payload,
+                       "sha256": hashlib.sha256(payload.encode()).hexdigest()})
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_atomic(path, text)
+    except OSError as err:
+        warnings.warn(f"could not write cache file {path} ({err})", RuntimeWarning,
+                      stacklevel=2)
+
+
+def cached(path: Path, compute: Callable[[], Any], encode: Callable[[Any], dict],
+           decode: Callable[[dict], Any], check: Callable[[Any], None] = lambda value: None
+           ) -> Any:
+    """``compute()`` read from ``path`` (:func:`read_stored`), or computed and
+    stored there (:func:`write_stored`) when the file is absent, damaged or not
+    sane.  ``path`` must name everything the value depends on (a key of its
+    inputs and of the sources: :func:`code_digest`), so that a stale file is
+    never found."""
+    value = read_stored(path, decode, check)
+    if value is None:
+        value = compute()
+        write_stored(path, value, encode)
+    return value

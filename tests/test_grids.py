@@ -13,6 +13,7 @@ import pandas as pd
 import pytest
 
 import lfc
+from lfc._files import read_stored, write_stored
 from lfc.multiarea import MultiAreaParams
 from lfc.testbed import GridCase, build_grid, case_design, grid_fit_report
 from lfc.testbed import fit as fitting
@@ -48,14 +49,14 @@ def test_the_fit_cache_round_trips_exactly(fit, tmp_path, monkeypatch):
     monkeypatch.setenv("LFC_CACHE_DIR", str(tmp_path))
     path = fitting._cache_path(CASE, "grid-fit")
     assert path.parent == tmp_path
-    fitting._write_report(path, fit, grid_fit._encode)
+    write_stored(path, fit, grid_fit._encode)
     check = functools.partial(grid_fit._check, CASE)
-    assert fitting._read_report(path, grid_fit._decode, check) == fit
+    assert read_stored(path, grid_fit._decode, check) == fit
     stored = json.loads(path.read_text())
     stored["payload"] = stored["payload"].replace('"T": ', '"T": 1')    # a changed value
     path.write_text(json.dumps(stored))
     with pytest.warns(RuntimeWarning, match="damaged cache file"):
-        assert fitting._read_report(path, grid_fit._decode, check) is None
+        assert read_stored(path, grid_fit._decode, check) is None
 
 
 @pytest.mark.parametrize("damage, reason", [
@@ -77,7 +78,7 @@ def test_a_cached_fit_with_a_valid_checksum_but_insane_values_is_refit(fit, tmp_
     path.write_text(json.dumps({"payload": payload,
                                 "sha256": hashlib.sha256(payload.encode()).hexdigest()}))
     with pytest.warns(RuntimeWarning, match=f"damaged cache file .*{reason}"):
-        assert fitting._read_report(path, grid_fit._decode,
+        assert read_stored(path, grid_fit._decode,
                                     functools.partial(grid_fit._check, CASE)) is None
 
 

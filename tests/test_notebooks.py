@@ -291,11 +291,44 @@ def test_quick_writes_its_figures_under_build_never_into_figures(tmp_path):
         runner.reproduce(["fig4"], "testbed", quick=True, build_dir=tmp_path / "b")
 
 
-def test_sweep_table_and_resume(tmp_path):
+def test_a_cached_frame_is_computed_once_per_inputs_and_read_back_exactly(tmp_path,
+                                                                         monkeypatch):
+    """``cached_frame`` (chapter 02's edge scan): the second call with the same
+    inputs reads the stored frame back (values with NaN, strings, integers,
+    booleans, a repeated index, dtypes: equal), other inputs compute again, and a
+    damaged file is computed again with a warning naming it."""
+    from lfc.repro.notebook import cached_frame
+    monkeypatch.setenv("LFC_CACHE_DIR", str(tmp_path))
+    calls = []
+
+    def compute():
+        calls.append(1)
+        return pd.DataFrame({"run": ["10 s", "10 s", "30 s"], "x": [0.27, float("nan"), 1.96],
+                             "n": [273, 0, 18], "b": [True, False, True]}, index=[0, 1, 0])
+
+    first = cached_frame("scan", {"amplitudes": [0.2, 3.0, 0.01], "alpha": 3.0}, compute)
+    again = cached_frame("scan", {"amplitudes": [0.2, 3.0, 0.01], "alpha": 3.0}, compute)
+    assert len(calls) == 1 and again.equals(first) and again.index.equals(first.index)
+    assert list(again.dtypes) == list(first.dtypes)
+    cached_frame("scan", {"amplitudes": [0.2, 3.0, 0.01], "alpha": 20.0}, compute)
+    assert len(calls) == 2
+    stored, _ = sorted(tmp_path.glob("scan-*.json"))
+    stored.write_text(stored.read_text().replace("0.27", "0.28"))
+    with pytest.warns(RuntimeWarning, match=f"damaged cache file {stored}"):
+        for alpha in (3.0, 20.0):
+            assert cached_frame("scan", {"amplitudes": [0.2, 3.0, 0.01], "alpha": alpha},
+                                compute).equals(first)
+    assert len(calls) == 3                                   # the damaged one only
+
+
+def test_sweep_table_and_resume(tmp_path, monkeypatch):
     nb = runner.NOTEBOOKS_DIR / runner.FIGURES["fig4"]
     out = tmp_path / "sweep"
     grid = {"alpha": [3.0, 20.0], "duration": [2.0]}
+    monkeypatch.setenv("LFC_CACHE_DIR", str(tmp_path / "cache"))
     table = runner.sweep(nb, grid, out)
+    scans = {p: p.stat().st_mtime_ns for p in (tmp_path / "cache").glob("fig4-edges-*.json")}
+    assert len(scans) == 2                                               # one per alpha
     assert len(table) == 8 and set(table.panel) == {"a", "b", "c", "d"}
     assert set(table.alpha) == {3.0, 20.0}
     assert {"first_trip_relay", "first_trip_t", "max_abs_rocof_meas"} <= set(table.columns)
@@ -310,6 +343,8 @@ def test_sweep_table_and_resume(tmp_path):
         if path != lost:
             assert path.stat().st_mtime_ns == mtime
     assert lost.exists()
+    assert scans == {p: p.stat().st_mtime_ns                        # the rerun read its scan
+                     for p in (tmp_path / "cache").glob("fig4-edges-*.json")}   # back
     # the table plotted: one line per panel, labelled axes with units, the relay dashed
     from lfc.repro.cli import main
     assert main(["plot-sweep", str(out / "sweep.csv"), "-x", "alpha", "-y",

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import lfc
+from lfc._files import read_stored, write_stored
 from lfc.experiments.scenarios import ATTACK_START, FIG4_AMPLITUDE
 from lfc.model import STATES
 from lfc.simulate import METRIC_KEYS
@@ -41,9 +42,9 @@ def test_builds_power_flow_converges_and_starts_at_nominal():
 def test_the_fit_is_cached_on_disk_checked_and_refit_when_damaged(fit, tmp_path, monkeypatch):
     monkeypatch.setenv("LFC_CACHE_DIR", str(tmp_path))
     path = fitting._cache_path(CASE)
-    assert path.parent == tmp_path and fitting._read_report(path) is None
-    fitting._write_report(path, fit)
-    assert fitting._read_report(path) == fit                      # exact round trip
+    assert path.parent == tmp_path and read_stored(path, fitting.decode_report, fitting.check_report) is None
+    write_stored(path, fit, fitting.encode_report)
+    assert read_stored(path, fitting.decode_report, fitting.check_report) == fit                      # exact round trip
     other = MicrogridCase(droop=0.04)
     assert fitting._cache_path(other) != path                     # another case, another file
     text = path.read_text()
@@ -51,12 +52,12 @@ def test_the_fit_is_cached_on_disk_checked_and_refit_when_damaged(fit, tmp_path,
         assert damaged != text
         path.write_text(damaged)
         with pytest.warns(RuntimeWarning, match="damaged cache file .*testbed-fit"):
-            assert fitting._read_report(path) is None
+            assert read_stored(path, fitting.decode_report, fitting.check_report) is None
     fitting._fitted.cache_clear()
     try:
         with pytest.warns(RuntimeWarning, match="damaged"):
             assert fitting.fit_report(CASE) == fit                # refit, and rewritten
-        assert fitting._read_report(path) == fit
+        assert read_stored(path, fitting.decode_report, fitting.check_report) == fit
     finally:
         fitting._fitted.cache_clear()
 

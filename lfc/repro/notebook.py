@@ -7,6 +7,7 @@ import ast
 import json
 import math
 import re
+from collections.abc import Callable
 from dataclasses import replace
 from numbers import Integral, Real
 from pathlib import Path
@@ -21,7 +22,7 @@ from lfc.model import LFCParams
 from lfc.relays import RelaySettings
 from lfc.simulate import SimResult
 
-__all__ = ["PLANTS", "PLANT_LABELS", "check_parameters", "check_plant",
+__all__ = ["PLANTS", "PLANT_LABELS", "cached_frame", "check_parameters", "check_plant",
            "figure_name", "markdown_table", "notebook_parameters", "readme_mismatches",
            "record_claims", "save_table", "setup", "sync_readme", "update_markdown_section",
            "write_metrics"]
@@ -291,3 +292,31 @@ def update_markdown_section(path: str | Path, name: str, text: str) -> None:
         raise ValueError(f"{path} has no {start} ... {end} section")
     head, rest = doc.split(start, 1)
     path.write_text(f"{head}{start}\n{text.strip()}\n{end}{rest.split(end, 1)[1]}")
+
+
+def cached_frame(name: str, inputs: dict, compute: Callable[[], pd.DataFrame]) -> pd.DataFrame:
+    """``compute()``, kept on disk: a later call with the same ``inputs`` reads it
+    back instead of computing it again.
+
+    For a scan that a sweep over other parameters would otherwise redo on every
+    run (chapter 02's edge scan).  The frame is stored as JSON with its SHA-256
+    (:func:`lfc._files.cached`) in ``$LFC_CACHE_DIR`` (default
+    ``~/.cache/lfc-scc``), in a file named by ``name`` and a key of ``inputs``
+    (JSON-encodable, or their ``str``) and of the package's sources, the pinned
+    environment, Python and the BLAS kernel (:func:`lfc._files.content_key`): a
+    stale file is never found, a damaged one is recomputed with a warning.  The
+    frame read back equals the one computed: values, column names, dtypes and
+    index."""
+    from lfc._files import cache_folder, cached, content_key
+
+    def encode(frame: pd.DataFrame) -> dict:
+        return {"columns": list(frame.columns), "index": frame.index.tolist(),
+                "dtypes": [str(t) for t in frame.dtypes],
+                "data": frame.astype(object).where(frame.notna(), None).to_numpy().tolist()}
+
+    def decode(data: dict) -> pd.DataFrame:
+        frame = pd.DataFrame(data["data"], columns=data["columns"], index=data["index"])
+        return frame.astype(dict(zip(frame.columns, data["dtypes"])))
+
+    path = cache_folder() / f"{name}-{content_key(name, inputs)[:16]}.json"
+    return cached(path, compute, encode, decode)

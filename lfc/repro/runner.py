@@ -17,7 +17,6 @@ import os
 import re
 import shutil
 import signal
-import sys
 import tempfile
 import threading
 import time
@@ -32,7 +31,7 @@ from jupyter_client.manager import KernelManager
 from tqdm.auto import tqdm
 
 from lfc._validate import check_count
-from lfc._files import code_digest, folder_lock, write_atomic
+from lfc._files import content_key, folder_lock, write_atomic
 from lfc._pool import completed
 from lfc.experiments.scenarios import ALL_PLANTS
 from lfc.repro.manifest import CHAPTERS
@@ -180,17 +179,10 @@ CACHE_FILE = "cache.json"     # in a run's results folder: its key and the files
 
 def run_key(notebook: Path, parameters: dict) -> str:
     """SHA-256 of what a notebook run's outputs depend on: the notebook, its
-    parameters, every source file of the package, the pinned environment
-    (``environment.txt``), the Python version and the BLAS kernel asked for
-    (``OPENBLAS_CORETYPE``).  Its ANDES runs are among them: they depend on
-    nothing else."""
-    digest = hashlib.sha256(notebook.read_bytes())
-    digest.update(json.dumps(parameters, sort_keys=True, default=str).encode())
-    digest.update(code_digest("*").encode())
-    env = ROOT / "environment.txt"
-    digest.update(env.read_bytes() if env.exists() else b"")
-    digest.update(f"{sys.version}|{os.environ.get('OPENBLAS_CORETYPE', '')}".encode())
-    return digest.hexdigest()
+    parameters, and (:func:`lfc._files.content_key`) every source file of the
+    package, the pinned environment, the Python version and the BLAS kernel asked
+    for.  Its ANDES runs are among them: they depend on nothing else."""
+    return content_key(notebook.read_bytes(), parameters)
 
 
 def _hash(path: Path) -> str:

@@ -20,10 +20,8 @@ file is recomputed with a ``RuntimeWarning`` that names it).
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 import os
-import warnings
 from dataclasses import asdict, dataclass, replace
 from functools import lru_cache
 from pathlib import Path
@@ -33,6 +31,7 @@ import control as ct
 import numpy as np
 from scipy.optimize import least_squares
 
+from lfc._files import cache_folder, cached, code_digest
 from lfc._format import number
 from lfc.model import LFCParams, lfc_model
 from lfc.signals import Step
@@ -172,12 +171,10 @@ def _cache_path(case: object, kind: str = "testbed-fit") -> Path:
     """The cache file of ``case``'s fit (module docstring)."""
     import andes
 
-    from lfc._files import code_digest
     # a fit computed under another BLAS kernel differs in its last bits: not shared
     blas = os.environ.get("OPENBLAS_CORETYPE", "")
     key = hashlib.sha256((repr(case) + andes.__version__ + code_digest("testbed") + blas).encode())
-    folder = Path(os.environ.get("LFC_CACHE_DIR") or Path.home() / ".cache" / "lfc-scc")
-    return folder / f"{kind}-{key.hexdigest()[:16]}.json"
+    return cache_folder() / f"{kind}-{key.hexdigest()[:16]}.json"
 
 
 def encode_report(report: FitReport) -> dict:
@@ -202,42 +199,6 @@ def check_report(report: FitReport) -> None:
                              f"{value!r}")
 
 
-def _read_report(path: Path, decode: Callable[[dict], Any] = decode_report,
-                 check: Callable[[Any], None] = check_report) -> Any:
-    """The cached fit at ``path``; None if absent, damaged or not sane (``check``
-    raises ``ValueError``; with a warning)."""
-    if not path.exists():
-        return None
-    try:
-        stored = json.loads(path.read_text())
-        payload = stored["payload"]
-        if hashlib.sha256(payload.encode()).hexdigest() != stored["sha256"]:
-            raise ValueError("checksum mismatch")
-        report = decode(json.loads(payload))
-        check(report)
-        return report
-    except (OSError, ValueError, KeyError, TypeError) as err:
-        warnings.warn(f"damaged cache file {path} ({err}); fitting again", RuntimeWarning,
-                      stacklevel=2)
-        return None
-
-
-def _write_report(path: Path, report: Any,
-                  encode: Callable[[Any], dict] = encode_report) -> None:
-    """Write atomically (:func:`lfc._files.write_atomic`); a cache that cannot be
-    written is skipped with a warning."""
-    from lfc._files import write_atomic
-    payload = json.dumps(encode(report), sort_keys=True)
-    text = json.dumps({"payload": payload,
-                       "sha256": hashlib.sha256(payload.encode()).hexdigest()})
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        write_atomic(path, text)
-    except OSError as err:
-        warnings.warn(f"could not write cache file {path} ({err})", RuntimeWarning,
-                      stacklevel=2)
-
-
 def cached_fit(case: object, kind: str, fit: Callable[[Any], Any],
                encode: Callable[[Any], dict] = encode_report,
                decode: Callable[[dict], Any] = decode_report,
@@ -245,9 +206,5 @@ def cached_fit(case: object, kind: str, fit: Callable[[Any], Any],
     """``fit(case)`` read from its cache file (:func:`_cache_path`), or computed
     and written there when the file is absent, damaged (its checksum) or not
     physically sane (``check(case, report)`` raises ``ValueError``)."""
-    path = _cache_path(case, kind)
-    report = _read_report(path, decode, lambda r: check(case, r))
-    if report is None:
-        report = fit(case)
-        _write_report(path, report, encode)
-    return report
+    return cached(_cache_path(case, kind), lambda: fit(case), encode, decode,
+                  lambda report: check(case, report))
