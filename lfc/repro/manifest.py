@@ -82,7 +82,7 @@ CHAPTERS = (
              "freeform_duration": 2.0, "freeform_maxiter": 1, "map_amplitudes": [0.5, 1.0],
              "map_freqs": [0.3, 1.0], "plant_steps": [5e-4, 1e-3], "n_interior": 1,
              "n_box_attacks": 2, "box_duration": 5.0, "n_noise_seeds": 2, "noise_hours": 0.05,
-             "margins": [0.1, 0.3], "load_steps": [0.1], "load_bounds": [0.1],
+             "margins": [0.1, 0.3], "load_steps": [0.1], "load_bounds": [0.1], "load_instants": 2,
              "testbed": False,
              "check_claims": False}),
     Chapter("multiarea", "09_multi_area.ipynb",
