@@ -291,6 +291,18 @@ def test_quick_writes_its_figures_under_build_never_into_figures(tmp_path):
         runner.reproduce(["fig4"], "testbed", quick=True, build_dir=tmp_path / "b")
 
 
+def test_the_tutorials_attack_waveform_is_a_parameter(tmp_path):
+    """Chapter 01 takes ``waveform`` ("sinusoid" or "square"): a square wave runs
+    (figures and metrics written, the parameter recorded); another name fails
+    with a ValueError listing the two."""
+    run_chapter("tutorial", tmp_path, waveform="square", check_claims=False)
+    metrics = json.loads((tmp_path / "res" / "metrics.json").read_text())
+    assert {panel["parameters"]["waveform"] for panel in metrics.values()} == {"square"}
+    import papermill as pm
+    with pytest.raises(pm.PapermillExecutionError, match="waveform must be one of"):
+        run_chapter("tutorial", tmp_path / "bad", waveform="sawtooth", check_claims=False)
+
+
 def test_a_cached_frame_is_computed_once_per_inputs_and_read_back_exactly(tmp_path,
                                                                          monkeypatch):
     """``cached_frame`` (chapter 02's edge scan): the second call with the same
