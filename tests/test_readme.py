@@ -107,3 +107,34 @@ def test_the_readmes_quick_start_runs_and_stops_the_attack(tmp_path, monkeypatch
     assert not metrics["tripped"] and metrics["alarms"] > 0
     assert {p.name for p in (tmp_path / "build" / "run").iterdir()} >= {
         "trace.csv", "controls.csv", "trips.csv", "alarms.csv", "metrics.json"}
+
+
+def test_a_reader_goes_from_the_readme_to_a_modified_attack_without_touching_figures():
+    """The path a newcomer takes (walked once by an agent session that had never seen
+    the project, acting as a reader: 5.5 minutes from the README to a modified attack;
+    a person's time is not measured): the README sends them to chapter
+    01, whose "What to try next" gives a papermill command that changes the attack
+    (a square wave, α = 3).  Run exactly as written from the repository's root, it
+    executes, writes its figure under ``build/figures`` and changes no tracked file."""
+    import json
+    import shlex
+    import subprocess
+    import sys
+
+    readme = README.read_text()
+    assert "notebooks/01_tutorial_cbf_lfc.ipynb" in readme.split("## Quick start", 1)[1]
+    nb = json.loads((runner.NOTEBOOKS_DIR / "01_tutorial_cbf_lfc.ipynb").read_text())
+    last = "".join(nb["cells"][-1]["source"])
+    assert last.startswith("## What to try next")
+    command = last.split("```bash\n", 1)[1].split("```", 1)[0].splitlines()[0:2]
+    words = shlex.split(" ".join(line.rstrip("\\") for line in command))
+    assert words[0] == "papermill" and "waveform" in words
+    tracked = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
+                             cwd=runner.ROOT, capture_output=True, text=True).stdout
+    figure = runner.ROOT / "build" / "figures" / "tutorial_attack.png"
+    figure.unlink(missing_ok=True)
+    subprocess.run([sys.executable, "-m", *words], cwd=runner.ROOT, check=True,
+                   capture_output=True, timeout=600)
+    assert figure.stat().st_size > 10_000
+    assert subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
+                          cwd=runner.ROOT, capture_output=True, text=True).stdout == tracked
