@@ -41,12 +41,18 @@ def folder_lock(folder: Path) -> Iterator[None]:
     missing) while the block runs: a second run that wants the same folder waits,
     then finds the first one's results.  Released when the process ends, however."""
     folder.mkdir(parents=True, exist_ok=True)
-    with open(folder / ".lock", "w") as handle:
-        fcntl.flock(handle, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(handle, fcntl.LOCK_UN)
+    with open(folder / ".lock", "w") as handle, _held(handle):
+        yield
+
+
+@contextlib.contextmanager
+def _held(handle) -> Iterator[None]:
+    """An exclusive ``flock`` on the open file ``handle`` while the block runs."""
+    fcntl.flock(handle, fcntl.LOCK_EX)
+    try:
+        yield
+    finally:
+        fcntl.flock(handle, fcntl.LOCK_UN)
 
 
 @functools.lru_cache(maxsize=None)
@@ -128,11 +134,30 @@ def cached(path: Path, compute: Callable[[], Any], encode: Callable[[Any], dict]
            ) -> Any:
     """``compute()`` read from ``path`` (:func:`read_stored`), or computed and
     stored there (:func:`write_stored`) when the file is absent, damaged or not
-    sane.  ``path`` must name everything the value depends on (a key of its
+    sane — by one process at a time: another that wants the same file meanwhile
+    waits for it and reads it.  ``path`` must name everything the value depends on (a key of its
     inputs and of the sources: :func:`code_digest`), so that a stale file is
     never found."""
     value = read_stored(path, decode, check)
-    if value is None:
-        value = compute()
-        write_stored(path, value, encode)
+    if value is not None:
+        return value
+    with _computing(path):       # another process computing it: wait, then read its result
+        value = read_stored(path, decode, check)
+        if value is None:
+            value = compute()
+            write_stored(path, value, encode)
     return value
+
+
+@contextlib.contextmanager
+def _computing(path: Path) -> Iterator[None]:
+    """Hold an exclusive lock on ``<path>.lock`` while the block runs (two processes
+    that want the same result compute it once); without a writable folder, no lock."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        handle = open(path.with_name(path.name + ".lock"), "w")
+    except OSError:
+        yield
+        return
+    with handle, _held(handle):
+        yield

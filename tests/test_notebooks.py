@@ -333,6 +333,28 @@ def test_a_cached_frame_is_computed_once_per_inputs_and_read_back_exactly(tmp_pa
     assert len(calls) == 3                                   # the damaged one only
 
 
+def test_two_processes_that_want_one_stored_result_compute_it_once(tmp_path):
+    """``lfc._files.cached`` (the fits, the edge scan): two processes asking for the
+    same missing file at once — the suite's workers and the notebooks' kernels
+    each need the IEEE 39-bus fit — compute it once; the other waits and reads it."""
+    import subprocess
+    import sys
+    script = (
+        "import sys, time\n"
+        "from pathlib import Path\n"
+        "from lfc._files import cached\n"
+        "def compute():\n"
+        "    Path(sys.argv[2]).write_text('computed')\n"
+        "    time.sleep(1.0)\n"
+        "    return {'value': 1}\n"
+        "print(cached(Path(sys.argv[1]), compute, lambda v: v, lambda d: d))\n")
+    store = tmp_path / "result-0123.json"
+    runs = [subprocess.Popen([sys.executable, "-c", script, str(store), str(tmp_path / f"ran-{i}")],
+                             stdout=subprocess.PIPE, text=True) for i in range(2)]
+    assert [r.communicate(timeout=120)[0].strip() for r in runs] == ["{'value': 1}"] * 2
+    assert len(list(tmp_path.glob("ran-*"))) == 1
+
+
 def test_sweep_table_and_resume(tmp_path, monkeypatch):
     nb = runner.NOTEBOOKS_DIR / runner.FIGURES["fig4"]
     out = tmp_path / "sweep"
