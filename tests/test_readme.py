@@ -109,13 +109,15 @@ def test_the_readmes_quick_start_runs_and_stops_the_attack(tmp_path, monkeypatch
         "trace.csv", "controls.csv", "trips.csv", "alarms.csv", "metrics.json"}
 
 
-def test_a_reader_goes_from_the_readme_to_a_modified_attack_without_touching_figures():
+def test_a_reader_goes_from_the_readme_to_a_modified_attack_without_touching_figures(tmp_path):
     """The path a newcomer takes (walked once by an agent session that had never seen
     the project, acting as a reader: 5.5 minutes from the README to a modified attack;
     a person's time is not measured): the README sends them to chapter
     01, whose "What to try next" gives a papermill command that changes the attack
-    (a square wave, α = 3).  Run exactly as written from the repository's root, it
-    executes, writes its figure under ``build/figures`` and changes no tracked file."""
+    (a square wave, α = 3) after ``mkdir -p build``.  Run as written from a folder
+    that holds the notebooks and no ``build/`` (as a fresh clone: papermill does not
+    create its output's folder), it executes, writes its figure under
+    ``build/figures`` and changes no tracked file."""
     import json
     import shlex
     import subprocess
@@ -126,15 +128,23 @@ def test_a_reader_goes_from_the_readme_to_a_modified_attack_without_touching_fig
     nb = json.loads((runner.NOTEBOOKS_DIR / "01_tutorial_cbf_lfc.ipynb").read_text())
     last = "".join(nb["cells"][-1]["source"])
     assert last.startswith("## What to try next")
-    command = last.split("```bash\n", 1)[1].split("```", 1)[0].splitlines()[0:2]
-    words = shlex.split(" ".join(line.rstrip("\\") for line in command))
-    assert words[0] == "papermill" and "waveform" in words
+    block = last.split("```bash\n", 1)[1].split("```", 1)[0]
+    commands = block.replace("\\\n", " ").splitlines()[:2]     # mkdir, then papermill
+    assert commands[0] == "mkdir -p build" and commands[1].startswith("papermill ")
+    words = shlex.split(commands[1])
+    assert "waveform" in words
     tracked = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
                              cwd=runner.ROOT, capture_output=True, text=True).stdout
     figure = runner.ROOT / "build" / "figures" / "tutorial_attack.png"
     figure.unlink(missing_ok=True)
-    subprocess.run([sys.executable, "-m", *words], cwd=runner.ROOT, check=True,
-                   capture_output=True, timeout=600)
+    # as in a fresh clone, where build/ does not exist yet: the commands run from a
+    # folder that has the notebooks and nothing else
+    (tmp_path / "notebooks").symlink_to(runner.NOTEBOOKS_DIR)
+    subprocess.run(shlex.split(commands[0]), cwd=tmp_path, check=True)
+    run = subprocess.run([sys.executable, "-m", *words], cwd=tmp_path, capture_output=True,
+                         text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert (tmp_path / "build" / "01.ipynb").exists()
     assert figure.stat().st_size > 10_000
     assert subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
                           cwd=runner.ROOT, capture_output=True, text=True).stdout == tracked
