@@ -138,9 +138,6 @@ def cached(path: Path, compute: Callable[[], Any], encode: Callable[[Any], dict]
     waits for it and reads it.  ``path`` must name everything the value depends on (a key of its
     inputs and of the sources: :func:`code_digest`), so that a stale file is
     never found."""
-    value = read_stored(path, decode, check)
-    if value is not None:
-        return value
     with _computing(path):       # another process computing it: wait, then read its result
         value = read_stored(path, decode, check)
         if value is None:

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from lfc._files import cache_folder, cached, content_key
 from lfc._format import STABLE_DIGITS, count, number
 from lfc._validate import check_number
 from lfc.experiments.deviations import DEVIATIONS
@@ -307,8 +308,6 @@ def cached_frame(name: str, inputs: dict, compute: Callable[[], pd.DataFrame]) -
     stale file is never found, a damaged one is recomputed with a warning.  The
     frame read back equals the one computed: values, column names, dtypes and
     index."""
-    from lfc._files import cache_folder, cached, content_key
-
     def encode(frame: pd.DataFrame) -> dict:
         return {"columns": list(frame.columns), "index": frame.index.tolist(),
                 "dtypes": [str(t) for t in frame.dtypes],
