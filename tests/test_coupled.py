@@ -260,10 +260,20 @@ def test_finding_on_two_lightly_damped_areas_agc_restores_in_up_to_a_minute():
     25-43 s (42.6 s after the ACE bias when measured), with the coupled
     certificate 31-60 s (four of five attacks beyond 40 s).  The same step
     without an attack is restored in 29 s with or without the contracts (they
-    never act on it)."""
+    never act on it).
+
+    Why (measured here): the goal is beyond this grid's AGC itself, which
+    restores a legitimate 0.1 pu step, no attack, no filter, in 42.7 s (0.05 pu
+    in 32 s); and what an attack leaves behind is larger.  The attacks on AGC's
+    own inputs (the square on ω_ref, the ACE bias) leave 0.29-0.50 pu in its
+    integrators at the control centre (the filters never see them: the commands
+    they produce after the attack are legitimate AGC), to be unwound at AGC's
+    pace; under the sinusoids the coupled certificate, which lets the grid go to
+    its relay limits, leaves the lightly damped mode ringing (|Δω| 0.004-0.007 pu
+    at the attack's end, 8-14 times the restoration tolerance)."""
     grid = MultiAreaParams.two_area(LIGHT)
     attacks = ended(2, 11.0)
-    late = {}
+    late, residue = {}, {}
     for kind in ("contract", "coupled"):
         every = {a: kind for a in range(2)}
         times = []
@@ -275,14 +285,23 @@ def test_finding_on_two_lightly_damped_areas_agc_restores_in_up_to_a_minute():
                 assert not res.alarms.outside.any() and (res.alarms.empty
                                                          or res.alarms.t.max() < 12.5), key
             times.append(restored_after(r.trace, 2, 11.0))
+            tr, i = r.trace, int(np.searchsorted(r.trace.t, 11.0))   # the attack's end
+            residue[kind, key] = max(abs(tr[f"pc_ref_{a}"].iat[i] - tr[f"pc_ref_{a}"].iat[-1])
+                                     for a in range(2))    # AGC's integrator, to be unwound
         late[kind] = sum(t > 40.0 for t in times)
         assert 20.0 < min(times) and max(times) < {"contract": 45.0, "coupled": 65.0}[kind], kind
     assert late == {"contract": 1, "coupled": 4}
+    on_inputs = ("square on area 0's ω_ref", "bias on every ACE")
+    assert min(residue["coupled", k] for k in on_inputs) > 0.25
+    assert residue["contract", "bias on every ACE"] > 0.25
     step = {1: lfc.Step(-STEP, start=1.0)}
     alone = simulate_grid_linear(grid, duration=60.0, loads=step, anti_windup=True,
                                  filters={0: "contract", 1: "contract"})
     assert all(res.alarms.empty for res in alone.areas)
     assert 25.0 < restored_after(alone.trace, 2, 1.0) < 35.0
+    agc = simulate_grid_linear(grid, duration=100.0, loads={1: lfc.Step(0.1, start=1.0)},
+                               anti_windup=True)
+    assert not agc.tripped and 40.0 < restored_after(agc.trace, 2, 1.0) < 45.0
 
 
 def test_finding_a_lightly_damped_area_flags_outside_but_trips_nothing():
