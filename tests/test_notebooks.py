@@ -537,9 +537,13 @@ def test_the_claims_verdict_explains_a_documented_deviation_on_the_page(tmp_path
     claim = "with SCC no relay trips"
     verdict = record_claims(tmp_path, {claim: False, "another": True}, check=True,
                             plant="testbed", metrics=fig5_metrics("OF2", 0.0361))
-    assert verdict.columns.tolist() == ["claim", "reproduced", "why not"]
-    assert verdict.reproduced.tolist() == ["no (documented)", "yes"]
-    assert "1.0361 pu" in verdict["why not"][0] and verdict["why not"][1] == ""
+    table = verdict.table
+    assert table.columns.tolist() == ["claim", "reproduced", "why not"]
+    assert table.reproduced.tolist() == ["no (documented)", "yes"]
+    assert "1.0361 pu" in table["why not"][0] and table["why not"][1] == ""
+    shown = verdict._repr_markdown_().splitlines()      # the page: a markdown table
+    assert shown[0] == "| claim | reproduced | why not |" and len(shown) == 4
+    assert shown[3] == "| another | yes |  |" and repr(verdict) == "\n".join(shown)
 
 
 @pytest.mark.long(65)

@@ -8,7 +8,7 @@ import json
 import math
 import re
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from numbers import Integral, Real
 from pathlib import Path
 
@@ -182,14 +182,34 @@ def write_metrics(results_dir: str | Path, runs: dict[str, SimResult],
     return path
 
 
+@dataclass(frozen=True)
+class Verdict:
+    """A chapter's claims as the page shows them (a markdown table, readable in
+    the notebook's file too).
+
+    Attributes
+    ----------
+    table : pandas.DataFrame
+        ``claim``, ``reproduced`` (``"yes"``, ``"no (documented)"`` or ``"no"``)
+        and ``why not`` (a documented deviation's explanation, with this run's
+        numbers; empty otherwise).
+    """
+
+    table: pd.DataFrame
+
+    def _repr_markdown_(self) -> str:
+        return markdown_table(self.table)
+
+    def __repr__(self) -> str:
+        return self._repr_markdown_()
+
+
 def record_claims(results_dir: str | Path, claims: dict[str, bool], check: bool,
                   plant: str = "linear", metrics: dict[str, dict] | None = None
-                  ) -> pd.DataFrame:
+                  ) -> Verdict:
     """Write ``claims.json`` (claim -> holds) and ``deviations.json`` (failed
     claims that match a documented :class:`Deviation`: claim -> why, with this
-    run's numbers from ``metrics``); return the verdict as a table for the page:
-    ``claim``, ``reproduced`` (``"yes"``, ``"no (documented)"`` or ``"no"``) and
-    ``why not`` (a documented deviation's explanation, with this run's numbers).
+    run's numbers from ``metrics``); return the :class:`Verdict` for the page.
 
     With ``check``, raise ``AssertionError`` on a failed claim that is not a
     documented deviation or fails in another way than documented, and on a
@@ -213,8 +233,8 @@ def record_claims(results_dir: str | Path, claims: dict[str, bool], check: bool,
                              "and docs/testbed.md: " + "; ".join(stale))
     verdict = ["yes" if ok else "no (documented)" if k in deviations else "no"
                for k, ok in claims.items()]
-    return pd.DataFrame({"claim": list(claims), "reproduced": verdict,
-                         "why not": [deviations.get(k, "") for k in claims]})
+    return Verdict(pd.DataFrame({"claim": list(claims), "reproduced": verdict,
+                                 "why not": [deviations.get(k, "") for k in claims]}))
 
 
 def markdown_table(table, digits: int = STABLE_DIGITS) -> str:
@@ -224,7 +244,7 @@ def markdown_table(table, digits: int = STABLE_DIGITS) -> str:
     printed as 1)."""
     def cell(v) -> str:
         if isinstance(v, bool) or not isinstance(v, Real):      # numpy's bool is no Real
-            return str(v)
+            return str(v).replace("|", "\\|")
         return count(v, digits) if isinstance(v, Integral) else number(float(v), digits)
     lines = ["| " + " | ".join(map(str, table.columns)) + " |",
              "|" + "---|" * len(table.columns)]
