@@ -160,3 +160,27 @@ def test_no_two_pages_of_the_full_book_share_a_file():
     labels = [figure_name(c.name, p) for c in CHAPTERS for p in c.plants]
     assert len(set(labels)) == len(labels) and "wire" in labels
     assert not any(label == "introduction" or label.startswith("appendix-") for label in labels)
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="Chromium is not installed")
+def test_the_book_prints_to_one_pdf_with_its_equations_and_figures_offline(book):
+    """``build_book(pdf=True)``'s printer: every page in reading order, one PDF, with
+    the network blocked; MathJax typesets the equations (its STIX fonts are
+    embedded: raw TeX would be in the text fonts only) and the figures are in it."""
+    from lfc.repro.book import print_pdf
+    names = [book.parent / f"{p}.html" for p in PAGES]
+    pdf = print_pdf(names, book.parent / "book.pdf")
+    data = pdf.read_bytes()
+    assert data.startswith(b"%PDF-")
+    assert len(re.findall(rb"/Type\s*/Page\b", data)) >= len(PAGES)   # each from a new sheet
+    assert b"STIXMathJax_Main" in data                                  # typeset equations
+    assert len(re.findall(rb"/Subtype\s*/Image", data)) >= 1            # the chapter's figure
+    printed = (book.parent / "print.html").read_text()
+    assert printed.count('break-before: page') == len(PAGES) - 1
+    assert '<nav class="book">' not in printed and str(runner.ROOT) not in printed
+
+
+def test_printing_without_a_browser_says_what_to_install(book, tmp_path):
+    from lfc.repro.book import BookError, print_pdf
+    with pytest.raises(BookError, match="needs Chromium.*apt-get install chromium"):
+        print_pdf([book], tmp_path / "b.pdf", browser="no-such-browser-here")

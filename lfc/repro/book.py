@@ -12,6 +12,11 @@ gallery, each figure linking to its chapter, and whether the chapter's claims
 were reproduced.  Every page has previous / contents / next links.  MathJax
 (2.7, from the ``jupyter-server-mathjax`` package) is copied beside the pages,
 so equations render with no network; nothing is fetched from a CDN.
+
+``python -m lfc book --pdf`` also prints the whole book, in reading order, to
+``build/book/lfc-scc-book.pdf`` with headless Chromium (its ``print.html``: every
+page one after another, each from a new sheet), the equations typeset by the
+bundled MathJax with the network blocked.
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ import html
 import json
 import re
 import shutil
+import subprocess
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -120,13 +126,15 @@ def appendix_title(name: str) -> str:
 
 def build_book(only: list[str] | None = None, build_dir: Path = runner.ROOT / "build",
                figures_dir: Path = runner.ROOT / "figures",
-               appendices: tuple[str, ...] = APPENDICES) -> Path:
+               appendices: tuple[str, ...] = APPENDICES, pdf: bool = False) -> Path:
     """Render the book; return the path of its ``index.html``.
 
     ``only``: a subset of the chapters (``lfc.repro.manifest``).  A chapter whose
     executed notebook under ``build_dir/reproduce/`` is missing or not
     :func:`complete` is executed first (figures to ``figures_dir``, as ``python
     -m lfc reproduce``).  ``appendices``: the ``docs/`` pages to include.
+    ``pdf``: then print it to ``lfc-scc-book.pdf`` beside the index
+    (:func:`print_pdf`).
 
     Raises
     ------
@@ -181,7 +189,63 @@ def build_book(only: list[str] | None = None, build_dir: Path = runner.ROOT / "b
     if failed:
         raise BookError(f"{len(failed)} chapter(s) failed, the rest of the book is in {index}: "
                         + "; ".join(failed))
+    if pdf:
+        print_pdf([out / p.href for p in pages], out / PDF_NAME)
     return index
+
+
+#: The book's PDF, beside its index.
+PDF_NAME = "lfc-scc-book.pdf"
+#: The browsers :func:`print_pdf` looks for, in order.
+BROWSERS = ("chromium", "chromium-browser", "google-chrome")
+#: A page of the book in print begins on a new sheet.
+_SHEET = '<section style="break-before: page">{}</section>'
+_NAV = re.compile(r'<nav class="book">.*?</nav>', re.S)
+
+
+def print_pdf(pages: list[Path], pdf: Path, browser: str | None = None,
+              timeout: float = 300.0) -> Path:
+    """Print ``pages`` (the book's HTML pages, in reading order, all in one folder
+    with their ``figures/`` and ``mathjax/``) to ``pdf`` with headless Chromium:
+    one ``print.html`` beside them holds every page's body without its
+    navigation, each from a new sheet, under the first page's head (styles and
+    MathJax); Chromium runs with every host name unresolvable, so nothing is
+    fetched, and gives MathJax up to 60 s of page time to typeset.
+
+    Raises
+    ------
+    BookError
+        If no browser of :data:`BROWSERS` is installed (or ``browser`` is not an
+        executable), or Chromium fails or writes no PDF.
+    """
+    exe = shutil.which(browser) if browser else next(
+        (found for b in BROWSERS if (found := shutil.which(b))), None)
+    if exe is None:
+        raise BookError(f"printing the book needs Chromium ({browser or ' or '.join(BROWSERS)} "
+                        "not found; on Debian: apt-get install chromium)")
+    folder = pages[0].parent
+    first = pages[0].read_text(encoding="utf-8")
+    body_tag = re.search(r"<body[^>]*>", first)
+    bodies = []
+    for page in pages:
+        text = page.read_text(encoding="utf-8")
+        start = re.search(r"<body[^>]*>", text).end()
+        bodies.append(_NAV.sub("", text[start:text.rindex("</body>")]))
+    printed = folder / "print.html"
+    printed.write_text(first[:body_tag.start()] + body_tag.group(0) + bodies[0]
+                       + "".join(_SHEET.format(b) for b in bodies[1:]) + "</body></html>",
+                       encoding="utf-8")
+    pdf = Path(pdf).resolve()
+    pdf.unlink(missing_ok=True)
+    done = subprocess.run([exe, "--headless", "--no-sandbox", "--disable-gpu",
+                           "--no-pdf-header-footer", "--host-resolver-rules=MAP * ~NOTFOUND",
+                           "--virtual-time-budget=60000", f"--print-to-pdf={pdf}",
+                           printed.resolve().as_uri()],
+                          capture_output=True, text=True, timeout=timeout)
+    if done.returncode or not pdf.exists() or pdf.stat().st_size == 0:
+        raise BookError(f"Chromium could not print {printed} (exit {done.returncode}): "
+                        f"{done.stderr.strip()[-500:]}")
+    return pdf
 
 
 def _exporter():

@@ -131,6 +131,8 @@ def _parser() -> argparse.ArgumentParser:
                     help=f"a subset of {list(runner.FIGURES)}")
     bk.add_argument("--figures-dir", type=_folder, default=runner.ROOT / "figures")
     bk.add_argument("--build-dir", type=_folder, default=runner.ROOT / "build")
+    bk.add_argument("--pdf", action="store_true",
+                    help="also print the book to build/book/lfc-scc-book.pdf (needs Chromium)")
     wr = sub.add_parser(
         "wire", help="runs over Modbus/TCP or DNP3 on loopback: control centre, man in "
         "the middle, generator", formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -314,9 +316,11 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "plot-sweep":
             return _plot_sweep(args)
         if args.command == "book":
-            from lfc.repro.book import build_book
-            index = build_book(args.only, args.build_dir, args.figures_dir)
+            from lfc.repro.book import PDF_NAME, build_book
+            index = build_book(args.only, args.build_dir, args.figures_dir, pdf=args.pdf)
             print(f"the book: {index}")
+            if args.pdf:
+                print(f"its PDF: {index.with_name(PDF_NAME)}")
             return 0
         table = runner.sweep(args.notebook, _grid(args.param), args.out, args.jobs,
                              executor=_executor(args.dask))
