@@ -562,3 +562,21 @@ def test_wire_notebook_shows_its_figures_and_its_claims_hold(tmp_path):
     the attack equals the simulation, trips without the filter, not with it; the
     operator's estimate recovers it)."""
     run_chapter("wire", tmp_path, check_claims=True)
+
+
+def test_a_notebook_runs_kernel_gets_the_environment_it_is_given(tmp_path):
+    """``runner.execute(env=...)``: how ``reproduce`` tells a notebook's kernel (and
+    its worker processes) where ANDES reports its seconds; then
+    ``runner.andes_seconds`` sums the lines (0 for none)."""
+    import nbformat
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(
+        "import os\nfrom pathlib import Path\n"
+        "Path(os.environ['LFC_ANDES_CLOCK']).write_text('1.5\\n2.25\\n')")])
+    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3",
+                                 "language": "python"}
+    source = tmp_path / "env.ipynb"
+    nbformat.write(nb, source)
+    clock = tmp_path / "clock.txt"
+    runner.execute(source, tmp_path / "out.ipynb", {}, env={"LFC_ANDES_CLOCK": str(clock)})
+    assert runner.andes_seconds(clock) == 3.75
+    assert runner.andes_seconds(tmp_path / "none.txt") == 0.0

@@ -82,12 +82,16 @@ def test_the_readmes_figures_are_the_manifests():
 def test_the_timing_sections_are_a_runs_record_and_its_table_says_what_ran(tmp_path):
     """``reproduce`` writes a full run's timing (build/reproduce/timing*.md) and
     ``python -m lfc readme`` copies it; the check never compares it (times vary)."""
-    outcomes = [runner.RunOutcome("fig4", True, 12.34, {}),
+    outcomes = [runner.RunOutcome("fig4", True, 12.34, {}, andes_seconds=14.0),
                 runner.RunOutcome("redteam", True, 0.01, {}, cached=True)]
     text = runner.timing_table(outcomes, wall=20.0, cpu=35.0, jobs=2)
     assert "**20 s wall**, 35 s CPU; 1 notebook runs executed, 1 read back unchanged" in text
-    assert "| fig4 | 12.3 | executed |" in text
-    assert "| redteam | 0 | cached (unchanged) |" in text
+    assert "| fig4 | 12.3 | 14 | executed |" in text
+    assert "| redteam | 0 | 0 | cached (unchanged) |" in text
+    # ANDES' share and the floor it sets: 14 s of 35 s CPU, 7 s on 2 cores, 20 / 7
+    assert ("14 s, 40% of the CPU time; on 2 cores it alone takes at least 7 s: this run "
+            "took 2.86× that floor.") in text
+    assert "ANDES' own" not in runner.timing_table(outcomes[1:], 1.0, 1.0, 2)  # none ran
     readme = tmp_path / "README.md"
     readme.write_text("<!-- timing:start -->\nold\n<!-- timing:end -->\n")
     assert readme_mismatches(readme, tmp_path) == []

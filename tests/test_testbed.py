@@ -204,3 +204,24 @@ def test_robust_filter_with_the_fitted_models_box_holds_on_the_testbed(params, f
     assert not (fig5["tripped"] or fig4["tripped"] or load["tripped"])
     assert fig5["max_abs_dw_meas"] < 0.02 and fig4["max_abs_rocof_meas"] < 0.04
     assert load["alarms"] == 0
+
+
+def test_every_andes_run_reports_the_seconds_andes_itself_computed(params, tmp_path,
+                                                                   monkeypatch):
+    """With ``LFC_ANDES_CLOCK`` naming a file (``reproduce`` sets it per notebook
+    run), each ANDES run appends one line: the seconds ANDES took (loading,
+    initializing, stepping), less than the call's, more than none; unset, nothing
+    is written."""
+    import time
+    from lfc.testbed.loop import CLOCK_ENV
+    clock = tmp_path / "andes_seconds.txt"
+    monkeypatch.setenv(CLOCK_ENV, str(clock))
+    for _ in range(2):
+        t0 = time.perf_counter()
+        lfc.simulate(CASE, design=params, duration=0.5)
+        took = time.perf_counter() - t0
+    lines = clock.read_text().split()
+    assert len(lines) == 2 and 0.0 < float(lines[-1]) < took
+    monkeypatch.delenv(CLOCK_ENV)
+    lfc.simulate(CASE, design=params, duration=0.5)
+    assert len(clock.read_text().split()) == 2

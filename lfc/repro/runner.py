@@ -36,6 +36,7 @@ from lfc._pool import completed
 from lfc.experiments.scenarios import ALL_PLANTS
 from lfc.repro.manifest import CHAPTERS
 from lfc.repro.notebook import check_plant, check_type, figure_name, markdown_table
+from lfc.testbed.loop import CLOCK_ENV
 from lfc.warmup import compile_kernels
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -57,6 +58,7 @@ class RunOutcome:
     error: str = ""
     deviations: dict[str, str] = field(default_factory=dict)
     cached: bool = False            # nothing changed since its last run: not executed
+    andes_seconds: float = 0.0      # ANDES' own computing in this run (s, CPU; 0 if cached)
 
 
 _LIVE: set = set()                 # kernel managers whose kernel is running (stop_kernels)
@@ -150,9 +152,13 @@ class IPCKernelManager(KernelManager):
         if not self.shutting_down:
             await super()._async_interrupt_kernel()
 
+    extra_env: dict[str, str] = {}      # added to the kernel's environment (execute's env)
+
     async def _async_launch_kernel(self, kernel_cmd: list[str], **kw) -> None:
         with _LIVE_LOCK:                 # before the launch: stop_kernels waits for it
             _LIVE.add(self)
+        if self.extra_env:
+            kw["env"] = {**(kw.get("env") or os.environ), **self.extra_env}
         await super()._async_launch_kernel(kernel_cmd, **kw)
 
     async def _async_cleanup_resources(self, restart: bool = False) -> None:
@@ -163,13 +169,17 @@ class IPCKernelManager(KernelManager):
             shutil.rmtree(self._socket_dir, ignore_errors=True)
 
 
-def execute(notebook: Path, output: Path, parameters: dict) -> None:
+def execute(notebook: Path, output: Path, parameters: dict,
+            env: dict[str, str] | None = None) -> None:
     """Run ``notebook`` with papermill into ``output`` (the notebook's folder as
-    cwd; figures inline, the kernel over IPC)."""
+    cwd; figures inline, the kernel over IPC; ``env``: variables added to the
+    kernel's environment)."""
     output.parent.mkdir(parents=True, exist_ok=True)
+    manager = IPCKernelManager if not env else type(
+        "RunKernelManager", (IPCKernelManager,), {"extra_env": dict(env)})
     pm.execute_notebook(str(notebook), str(output), parameters=parameters,
                         cwd=str(notebook.parent), kernel_name="python3",
-                        kernel_manager_class=IPCKernelManager, progress_bar=False,
+                        kernel_manager_class=manager, progress_bar=False,
                         log_output=False)
 
 
@@ -232,11 +242,16 @@ def _run_one(name: str, notebook: Path, results: Path, parameters: dict,
             (results / stale).unlink(missing_ok=True)
         error = ""
         start = time.time_ns()
+        clock = results / ANDES_CLOCK     # every ANDES run of the notebook adds a line
+        results.mkdir(parents=True, exist_ok=True)
+        clock.unlink(missing_ok=True)
         try:
-            execute(notebook, results / notebook.name, parameters)
+            execute(notebook, results / notebook.name, parameters,
+                    env={CLOCK_ENV: str(clock.resolve())})
             ok = True
         except pm.PapermillExecutionError as err:
             ok, error = False, f"{err.ename}: {err.evalue}"
+        andes = andes_seconds(clock)
         claims = read_json(results / "claims.json")
         deviations = read_json(results / "deviations.json")
         held = (not parameters.get("check_claims", True)        # a quick run: not checked
@@ -246,7 +261,20 @@ def _run_one(name: str, notebook: Path, results: Path, parameters: dict,
             record = {"key": key, "figures": _written(figures, start) if figures.is_dir()
                       else {}, "results": {p.name: _hash(p) for p in files if p.is_file()}}
             write_atomic(results / CACHE_FILE, json.dumps(record, indent=1))
-    return RunOutcome(name, ok and held, time.perf_counter() - t0, claims, error, deviations)
+    return RunOutcome(name, ok and held, time.perf_counter() - t0, claims, error, deviations,
+                      andes_seconds=andes)
+
+
+ANDES_CLOCK = "andes_seconds.txt"   # in a run's results folder (lfc.testbed.loop.CLOCK_ENV)
+
+
+def andes_seconds(clock: Path) -> float:
+    """The seconds ANDES computed in one notebook run: the sum of the lines its
+    ANDES runs appended to ``clock`` (0 if it ran none)."""
+    try:
+        return sum(float(line) for line in clock.read_text().split())
+    except FileNotFoundError:
+        return 0.0
 
 
 def read_json(path: Path) -> dict:
@@ -402,6 +430,7 @@ def times_table(outcomes: list[RunOutcome]) -> pd.DataFrame:
     """Wall time of each notebook run (s), longest first, and whether it ran or
     was read from the cache."""
     return (pd.DataFrame([{"notebook": o.name, "wall time (s)": round(o.seconds, 1),
+                           "ANDES (s)": round(o.andes_seconds, 1),
                            "run": "cached (unchanged)" if o.cached else "executed"}
                           for o in outcomes])
             .sort_values("wall time (s)", ascending=False, ignore_index=True))
@@ -413,7 +442,8 @@ TIMING_FILES = {False: "timing.md", True: "timing_rerun.md"}   # in build/reprod
 def timing_table(outcomes: list[RunOutcome], wall: float, cpu: float, jobs: int) -> str:
     """A full run's timing as markdown, for the README's ``timing`` (a run that
     executed notebooks) or ``timing_rerun`` section (every notebook read back):
-    the machine, the commit, wall and CPU time (s), each notebook's time."""
+    the machine, the commit, wall and CPU time (s), ANDES' own computing and the
+    floor it sets on ``jobs`` cores (s), each notebook's time."""
     import subprocess
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
                             capture_output=True, text=True).stdout.strip() or "unknown"
@@ -422,6 +452,13 @@ def timing_table(outcomes: list[RunOutcome], wall: float, cpu: float, jobs: int)
             f"{os.cpu_count()} cores, {time.strftime('%Y-%m-%d')}: **{wall:.0f} s wall**, "
             f"{cpu:.0f} s CPU; {len(outcomes) - cached} notebook runs executed, {cached} read "
             f"back unchanged.")
+    andes = sum(o.andes_seconds for o in outcomes)
+    if andes > 0:
+        floor = andes / jobs
+        head += (f" ANDES' own computing (loading, initializing and stepping its cases, "
+                 f"not our per-step callback): {andes:.0f} s, {andes / cpu:.0%} of the CPU "
+                 f"time; on {jobs} cores it alone takes at least {floor:.0f} s: this run "
+                 f"took {wall / floor:.2f}× that floor.")
     return head + "\n\n" + markdown_table(times_table(outcomes), digits=4) + "\n"
 
 

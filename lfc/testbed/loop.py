@@ -18,6 +18,8 @@ ANDES case is one such class.
 from __future__ import annotations
 
 import math
+import os
+import time
 from pathlib import Path
 from typing import Protocol
 
@@ -32,6 +34,22 @@ from lfc.testbed.andes_setup import quiet_load
 
 # columns of AndesPlant.measure, per area
 MEASURED = ("dPg", "dPm", "dw", "dw_meas", "rocof_meas", "p_load", "p_tie", "p_net")
+
+#: An environment variable naming a file to which every ANDES run appends, as one
+#: line, the seconds ANDES itself computed: loading and setting up the case,
+#: initializing and stepping it, but not :class:`AndesLoop`'s per-step callback
+#: (the meters, relays and generator sides).  ``python -m lfc reproduce`` sets it
+#: for each notebook run, to report ANDES' share of the time (the run's floor).
+CLOCK_ENV = "LFC_ANDES_CLOCK"
+
+
+def record_andes_seconds(seconds: float) -> None:
+    """Append ``seconds`` (s) to the file :data:`CLOCK_ENV` names, if it names one
+    (one short line per write: processes that share the file do not interleave)."""
+    path = os.environ.get(CLOCK_ENV)
+    if path:
+        with open(path, "a", encoding="ascii") as clock:
+            clock.write(f"{seconds:.6f}\n")
 
 
 class TestbedError(RuntimeError):
@@ -146,7 +164,10 @@ class AndesLoop:
         self.network = network
         self.bank = (RelayBank(relays, plant.n_areas)
                      if check_flag("stop_on_trip", stop_on_trip) else None)
+        t0 = time.perf_counter()
         self.ss = plant.build()
+        self._andes_seconds = time.perf_counter() - t0    # ANDES' own, reported by run
+        self._callback_seconds = 0.0
         self.rows: list[list[float]] = []
         self.stopped: tuple | None = None
         self.next_j = 0
@@ -156,14 +177,21 @@ class AndesLoop:
     def run(self, duration: float, step: float) -> bool:
         """Integrate to ``duration``; return True if the plant's protection
         ended a first pass (:class:`BreakerOpens`)."""
-        init_tds(self.ss, duration, step)
-        self.plant.attach(self.ss)
+        t0, t_end = time.perf_counter(), None
         try:
-            self._log(run_tds(self.ss, duration, self._callback))  # the final accepted state
+            init_tds(self.ss, duration, step)
+            self.plant.attach(self.ss)
+            t_end = run_tds(self.ss, duration, self._callback)
+            self._andes_seconds += time.perf_counter() - t0 - self._callback_seconds
+            self._log(t_end)        # the final accepted state
         except BreakerOpens:
             return True
         except Stop:
             pass
+        finally:
+            if t_end is None:       # ANDES stopped early: count it to here
+                self._andes_seconds += time.perf_counter() - t0 - self._callback_seconds
+            record_andes_seconds(self._andes_seconds)
         return False
 
     def trips(self, t: np.ndarray) -> list[pd.DataFrame]:
@@ -192,9 +220,13 @@ class AndesLoop:
         return self._load_at[1]
 
     def _callback(self, t_attempt, system) -> None:
-        t_next = float(t_attempt)
-        self._log(max(t_next - self.ss.TDS.h, 0.0))
-        self.plant.set_load(self.ss, self._p_load(t_next))
+        t0 = time.perf_counter()
+        try:
+            t_next = float(t_attempt)
+            self._log(max(t_next - self.ss.TDS.h, 0.0))
+            self.plant.set_load(self.ss, self._p_load(t_next))
+        finally:
+            self._callback_seconds += time.perf_counter() - t0
 
     def _log(self, t: float) -> None:
         """Record the accepted state at ``t`` (once), protect, check the relays,
