@@ -89,7 +89,7 @@ def test_the_timing_sections_are_a_runs_record_and_its_table_says_what_ran(tmp_p
     assert "| fig4 | 12.3 | 14 | executed |" in text
     assert "| redteam | 0 | 0 | cached (unchanged) |" in text
     # ANDES' share and the floor it sets: 14 s of 35 s CPU, 7 s on 2 cores, 20 / 7
-    assert ("14 s, 40% of the CPU time; on 2 cores it alone takes at least 7 s: this run "
+    assert ("14 s CPU, 40% of the run's; on 2 cores it alone takes at least 7 s: this run "
             "took 2.86× that floor.") in text
     assert "ANDES' own" not in runner.timing_table(outcomes[1:], 1.0, 1.0, 2)  # none ran
     readme = tmp_path / "README.md"

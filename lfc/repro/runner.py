@@ -58,7 +58,7 @@ class RunOutcome:
     error: str = ""
     deviations: dict[str, str] = field(default_factory=dict)
     cached: bool = False            # nothing changed since its last run: not executed
-    andes_seconds: float = 0.0      # ANDES' own computing in this run (s, CPU; 0 if cached)
+    andes_seconds: float = 0.0      # ANDES' own CPU time in this run (s; 0 if cached)
 
 
 _LIVE: set = set()                 # kernel managers whose kernel is running (stop_kernels)
@@ -269,7 +269,7 @@ ANDES_CLOCK = "andes_seconds.txt"   # in a run's results folder (lfc.testbed.loo
 
 
 def andes_seconds(clock: Path) -> float:
-    """The seconds ANDES computed in one notebook run: the sum of the lines its
+    """The CPU seconds ANDES took in one notebook run: the sum of the lines its
     ANDES runs appended to ``clock`` (0 if it ran none)."""
     try:
         return sum(float(line) for line in clock.read_text().split())
@@ -456,8 +456,8 @@ def timing_table(outcomes: list[RunOutcome], wall: float, cpu: float, jobs: int)
     if andes > 0:
         floor = andes / jobs
         head += (f" ANDES' own computing (loading, initializing and stepping its cases, "
-                 f"not our per-step callback): {andes:.0f} s, {andes / cpu:.0%} of the CPU "
-                 f"time; on {jobs} cores it alone takes at least {floor:.0f} s: this run "
+                 f"not our per-step callback): {andes:.0f} s CPU, {andes / cpu:.0%} of the "
+                 f"run's; on {jobs} cores it alone takes at least {floor:.0f} s: this run "
                  f"took {wall / floor:.2f}× that floor.")
     return head + "\n\n" + markdown_table(times_table(outcomes), digits=4) + "\n"
 

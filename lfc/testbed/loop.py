@@ -36,7 +36,8 @@ from lfc.testbed.andes_setup import quiet_load
 MEASURED = ("dPg", "dPm", "dw", "dw_meas", "rocof_meas", "p_load", "p_tie", "p_net")
 
 #: An environment variable naming a file to which every ANDES run appends, as one
-#: line, the seconds ANDES itself computed: loading and setting up the case,
+#: line, the CPU seconds ANDES itself took (its process's, so runs in parallel
+#: on shared cores are not counted twice): loading and setting up the case,
 #: initializing and stepping it, but not :class:`AndesLoop`'s per-step callback
 #: (the meters, relays and generator sides).  ``python -m lfc reproduce`` sets it
 #: for each notebook run, to report ANDES' share of the time (the run's floor).
@@ -164,9 +165,9 @@ class AndesLoop:
         self.network = network
         self.bank = (RelayBank(relays, plant.n_areas)
                      if check_flag("stop_on_trip", stop_on_trip) else None)
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         self.ss = plant.build()
-        self._andes_seconds = time.perf_counter() - t0    # ANDES' own, reported by run
+        self._andes_seconds = time.process_time() - t0    # ANDES' own, reported by run
         self._callback_seconds = 0.0
         self.rows: list[list[float]] = []
         self.stopped: tuple | None = None
@@ -177,12 +178,12 @@ class AndesLoop:
     def run(self, duration: float, step: float) -> bool:
         """Integrate to ``duration``; return True if the plant's protection
         ended a first pass (:class:`BreakerOpens`)."""
-        t0, t_end = time.perf_counter(), None
+        t0, t_end = time.process_time(), None
         try:
             init_tds(self.ss, duration, step)
             self.plant.attach(self.ss)
             t_end = run_tds(self.ss, duration, self._callback)
-            self._andes_seconds += time.perf_counter() - t0 - self._callback_seconds
+            self._andes_seconds += time.process_time() - t0 - self._callback_seconds
             self._log(t_end)        # the final accepted state
         except BreakerOpens:
             return True
@@ -190,7 +191,7 @@ class AndesLoop:
             pass
         finally:
             if t_end is None:       # ANDES stopped early: count it to here
-                self._andes_seconds += time.perf_counter() - t0 - self._callback_seconds
+                self._andes_seconds += time.process_time() - t0 - self._callback_seconds
             record_andes_seconds(self._andes_seconds)
         return False
 
@@ -220,13 +221,13 @@ class AndesLoop:
         return self._load_at[1]
 
     def _callback(self, t_attempt, system) -> None:
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         try:
             t_next = float(t_attempt)
             self._log(max(t_next - self.ss.TDS.h, 0.0))
             self.plant.set_load(self.ss, self._p_load(t_next))
         finally:
-            self._callback_seconds += time.perf_counter() - t0
+            self._callback_seconds += time.process_time() - t0
 
     def _log(self, t: float) -> None:
         """Record the accepted state at ``t`` (once), protect, check the relays,
