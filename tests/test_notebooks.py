@@ -223,7 +223,7 @@ def test_reproduce_never_reports_claims_of_an_earlier_run(tmp_path, monkeypatch)
     results.mkdir(parents=True)
     (results / "claims.json").write_text(json.dumps({"a claim of an earlier run": True}))
 
-    def fails_early(notebook, output, parameters):
+    def fails_early(notebook, output, parameters, env=None):
         raise runner.pm.PapermillExecutionError(0, 1, "", "ImportError", "broken", [])
     monkeypatch.setattr(runner, "execute", fails_early)
     outcome, = runner.reproduce(["fig4"], "linear", figures_dir=tmp_path / "fig",
