@@ -184,3 +184,5 @@ def test_printing_without_a_browser_says_what_to_install(book, tmp_path):
     from lfc.repro.book import BookError, print_pdf
     with pytest.raises(BookError, match="needs Chromium.*apt-get install chromium"):
         print_pdf([book], tmp_path / "b.pdf", browser="no-such-browser-here")
+    with pytest.raises(ValueError, match="pages must name at least one page"):
+        print_pdf([], tmp_path / "b.pdf")

@@ -580,3 +580,7 @@ def test_a_notebook_runs_kernel_gets_the_environment_it_is_given(tmp_path):
     runner.execute(source, tmp_path / "out.ipynb", {}, env={"LFC_ANDES_CLOCK": str(clock)})
     assert runner.andes_seconds(clock) == 3.75
     assert runner.andes_seconds(tmp_path / "none.txt") == 0.0
+    clock.write_text("1.5\n2.2")                       # the last write cut short: counted
+    assert runner.andes_seconds(clock) == 3.7
+    clock.write_text("1.5\n2.\n")                      # cut inside a number: left out
+    assert runner.andes_seconds(clock) == 1.5

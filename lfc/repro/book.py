@@ -214,10 +214,14 @@ def print_pdf(pages: list[Path], pdf: Path, browser: str | None = None,
 
     Raises
     ------
+    ValueError
+        If ``pages`` is empty.
     BookError
         If no browser of :data:`BROWSERS` is installed (or ``browser`` is not an
         executable), or Chromium fails or writes no PDF.
     """
+    if not pages:
+        raise ValueError("pages must name at least one page of the book")
     exe = shutil.which(browser) if browser else next(
         (found for b in BROWSERS if (found := shutil.which(b))), None)
     if exe is None:

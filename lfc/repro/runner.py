@@ -270,11 +270,13 @@ ANDES_CLOCK = "andes_seconds.txt"   # in a run's results folder (lfc.testbed.loo
 
 def andes_seconds(clock: Path) -> float:
     """The CPU seconds ANDES took in one notebook run: the sum of the lines its
-    ANDES runs appended to ``clock`` (0 if it ran none)."""
+    ANDES runs appended to ``clock`` (0 if it ran none; a line cut short by a
+    killed process is not a number and is left out)."""
     try:
-        return sum(float(line) for line in clock.read_text().split())
+        lines = clock.read_text(encoding="ascii", errors="replace").split()
     except FileNotFoundError:
         return 0.0
+    return sum(float(x) for x in lines if re.fullmatch(r"\d+\.\d+", x))
 
 
 def read_json(path: Path) -> dict:
