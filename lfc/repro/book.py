@@ -227,15 +227,12 @@ def print_pdf(pages: list[Path], pdf: Path, browser: str | None = None,
     if exe is None:
         raise BookError(f"printing the book needs Chromium ({browser or ' or '.join(BROWSERS)} "
                         "not found; on Debian: apt-get install chromium)")
-    folder = pages[0].parent
-    first = pages[0].read_text(encoding="utf-8")
+    texts = [page.read_text(encoding="utf-8") for page in pages]
+    bodies = [_NAV.sub("", text[re.search(r"<body[^>]*>", text).end():text.rindex("</body>")])
+              for text in texts]
+    first = texts[0]
     body_tag = re.search(r"<body[^>]*>", first)
-    bodies = []
-    for page in pages:
-        text = page.read_text(encoding="utf-8")
-        start = re.search(r"<body[^>]*>", text).end()
-        bodies.append(_NAV.sub("", text[start:text.rindex("</body>")]))
-    printed = folder / "print.html"
+    printed = pages[0].parent / "print.html"
     printed.write_text(first[:body_tag.start()] + body_tag.group(0) + bodies[0]
                        + "".join(_SHEET.format(b) for b in bodies[1:]) + "</body></html>",
                        encoding="utf-8")

@@ -243,7 +243,6 @@ def _run_one(name: str, notebook: Path, results: Path, parameters: dict,
         error = ""
         start = time.time_ns()
         clock = results / ANDES_CLOCK     # every ANDES run of the notebook adds a line
-        results.mkdir(parents=True, exist_ok=True)
         clock.unlink(missing_ok=True)
         try:
             execute(notebook, results / notebook.name, parameters,

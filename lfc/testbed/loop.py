@@ -178,21 +178,20 @@ class AndesLoop:
     def run(self, duration: float, step: float) -> bool:
         """Integrate to ``duration``; return True if the plant's protection
         ended a first pass (:class:`BreakerOpens`)."""
-        t0, t_end = time.process_time(), None
+        t0 = time.process_time()
         try:
-            init_tds(self.ss, duration, step)
-            self.plant.attach(self.ss)
-            t_end = run_tds(self.ss, duration, self._callback)
-            self._andes_seconds += time.process_time() - t0 - self._callback_seconds
+            try:
+                init_tds(self.ss, duration, step)
+                self.plant.attach(self.ss)
+                t_end = run_tds(self.ss, duration, self._callback)
+            finally:                # to the end, or to where a trip or breaker stopped it
+                self._andes_seconds += time.process_time() - t0 - self._callback_seconds
+                record_andes_seconds(self._andes_seconds)
             self._log(t_end)        # the final accepted state
         except BreakerOpens:
             return True
         except Stop:
             pass
-        finally:
-            if t_end is None:       # ANDES stopped early: count it to here
-                self._andes_seconds += time.process_time() - t0 - self._callback_seconds
-            record_andes_seconds(self._andes_seconds)
         return False
 
     def trips(self, t: np.ndarray) -> list[pd.DataFrame]:
