@@ -2,6 +2,7 @@
 and the appendices, and an index with the contents and the figure gallery, checked in a
 real browser (headless Chromium) with the network blocked."""
 
+import fcntl
 import html as htmllib
 import re
 import shutil
@@ -20,14 +21,24 @@ from lfc.repro.cli import main
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
 
-@pytest.fixture(scope="module")
-def book(tmp_path_factory):
-    """The book of two chapters; the kalman one executed by the book itself."""
-    tmp = tmp_path_factory.mktemp("book")
-    assert main(["reproduce", "--only", "tutorial", "--plant", "linear",
-                 "--figures-dir", str(tmp / "fig"), "--build-dir", str(tmp / "build")]) == 0
-    index = build_book(["tutorial", "kalman"], tmp / "build", tmp / "fig")
-    return index
+@pytest.fixture(scope="session")
+def book(tmp_path_factory, worker_id):
+    """The book of two chapters; the kalman one executed by the book itself.  Built
+    once per test session: pytest-xdist's workers share it (the first builds it
+    under a lock, the others wait and read it; the tests only read it)."""
+    base = tmp_path_factory.getbasetemp()
+    tmp = (base.parent if worker_id != "master" else base) / "book"
+    with open(f"{tmp}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not (tmp / "built").exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+            assert main(["reproduce", "--only", "tutorial", "--plant", "linear",
+                         "--figures-dir", str(tmp / "fig"),
+                         "--build-dir", str(tmp / "build")]) == 0
+            index = build_book(["tutorial", "kalman"], tmp / "build", tmp / "fig")
+            (tmp / "built").write_text(str(index))
+        fcntl.flock(lock, fcntl.LOCK_UN)
+    return Path((tmp / "built").read_text())
 
 
 PAGES = ["introduction", "tutorial", "kalman", *(f"appendix-{a}" for a in APPENDICES)]

@@ -9,6 +9,7 @@ import functools
 import hashlib
 import json
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -268,3 +269,16 @@ def test_andes_warnings_become_one_summary_line_per_case(monkeypatch, capsys):
     # outside a load, ANDES' warnings reach sys.stderr as it is now (here: the test's)
     logging.getLogger("andes").warning("a warning after the load")
     assert "a warning after the load" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("duration", [1.6, 1.605])
+def test_a_run_whose_steps_fall_a_rounding_short_of_its_end_completes(duration):
+    """Found: 0.005 s added 320 times falls 2e-16 s short of 1.6 s, and ANDES then
+    integrated the last 2e-16 s; with the IEEE 39-bus system's stabilizers
+    (input filters with zero time constants) Newton's method fails on a step that
+    short, and an attacked run of 1.6 s raised ``TestbedError``.  The sliver is
+    not integrated (``lfc.testbed.loop.SLIVER``): the run ends at its duration."""
+    r = lfc.simulate(IEEE39, design=case_design(IEEE39), duration=duration,
+                     attacks={1: {"pc": lfc.Sinusoid(0.6, 0.5, start=1.0)}})
+    assert r.trace.t.iat[-1] == duration and len(r.trace) == round(duration / 0.005) + 1
+    assert np.isfinite(r.trace.filter(like="dw_meas").to_numpy()).all()
