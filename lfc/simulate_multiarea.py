@@ -102,7 +102,9 @@ def area_filter(params: MultiAreaParams, area: int,
     """The filter of ``area``: ``"paper"`` (the paper's SCC at α = 20 and its
     default reading, on the area's model; build a :class:`SafetyFilter` for
     another α), ``"certified"`` (the certified
-    filter of the area's model with ``load_bound`` = :func:`tie_step_bound`),
+    filter of the area's model with ``load_bound`` = :func:`tie_step_bound` and
+    the grid's ``command_range`` as its actuator limits ``u_min``, ``u_max``: a
+    model fitted to ANDES describes it only there; none on the linear presets),
     ``"coupled"`` (the grid's coupled certificate with its default options,
     :mod:`lfc.filters.coupled`: the same object for every area, which must all
     have it; with ``noise_std``, the measurement noise of its grid Kalman
@@ -125,9 +127,10 @@ def area_filter(params: MultiAreaParams, area: int,
         return SafetyFilter(model, relays, alpha=PAPER_ALPHA)
     if kind == "certified":
         bound = tie_step_bound(params, area, relays, control_period)
+        span = params.command_range          # where a fitted model describes its plant
         try:
             return SafetyFilter(model, relays, method="certified", load_bound=bound,
-                                control_period=control_period)
+                                control_period=control_period, u_min=-span, u_max=span)
         except ValueError as err:
             raise ValueError(f"filters[{area}]='certified' cannot be built: its tie-line bound "
                              f"load_bound={bound:.4g} pu (control_period * sum T_ij * 2 F) is "

@@ -478,8 +478,9 @@ def test_on_andes_ieee39_the_red_teams_winner_trips_the_coupled_filters_only_bey
       ANDES after ``outside`` flags (peak 0.45 pu/s when measured): the filters
       hold commands of about -1 and +0.65 pu (5 and 3 GW the opposite ways), far
       beyond where the linear tie describes ANDES', whose machines then swing
-      apart.  The per-area certified filters, which have no range, trip on that
-      winner too; the contracts (boxes of ±0.15 pu) do not."""
+      apart.  The per-area certified filters, kept within the same range
+      (``simulate_multiarea.area_filter``), trip nothing on that winner (without
+      the range they tripped on it too); nor do the contracts (boxes of ±0.15 pu)."""
     from lfc.experiments.redteam import coordinated_attacks, coordinated_search
     from lfc.testbed import GridCase, grid_design
     case = GridCase.ieee39()
@@ -501,7 +502,12 @@ def test_on_andes_ieee39_the_red_teams_winner_trips_the_coupled_filters_only_bey
             assert first_outside < first_trip
         else:
             assert max(float(a.controls.pc.abs().max()) for a in r.areas) <= 0.2
-    for kind, trips in (("certified", True), ("contract", False)):
-        other = lfc.simulate(case, duration=20.0, filters={0: kind, 1: kind}, anti_windup=True,
-                             attacks=replay, stop_on_trip=True)
+    from lfc.simulate_multiarea import tie_step_bound
+    per_area_unbounded = {a: lfc.SafetyFilter(area, RELAYS, method="certified",
+                                              load_bound=tie_step_bound(design, a, RELAYS, 0.01),
+                                              control_period=0.01)
+                          for a, area in enumerate(design.areas)}
+    for kind, trips in (("certified", False), ("contract", False), (per_area_unbounded, True)):
+        other = lfc.simulate(case, duration=20.0, filters={0: kind, 1: kind} if isinstance(
+            kind, str) else kind, anti_windup=True, attacks=replay, stop_on_trip=True)
         assert other.tripped == trips, kind

@@ -128,9 +128,13 @@ def test_multi_area_notebook_on_the_ieee39_testbed(tmp_path):
     """Notebook 09 on ANDES' IEEE 39-bus system, claims checked: AGC restores the
     schedule, every attack trips without filters, the certified filters stop
     them all and flag nothing — all 13 claims hold, no deviation.  A finding,
-    pinned: there assumption (c) of the guarantee fails (the machines' output
-    moves by more than ``load_bound`` within a control period under the
-    sinusoids), so the result is measured, not proven."""
+    pinned: with the certified filters' commands kept within the fitted model's
+    range (±0.2 pu, their actuator limits) assumption (c) of the guarantee holds
+    on ANDES (the machines' output moves by at most 0.61 ``load_bound`` within a
+    control period when measured); without the range it failed under the
+    sinusoids (up to 1.7 ``load_bound``: commands beyond where the model
+    describes ANDES).  Assumption (a) does not hold (ANDES is not the model), so
+    the result is measured, not proven."""
     run_chapter("multiarea", tmp_path, "ieee39", paper_alphas=ONE_ALPHA)
     claims = json.loads((tmp_path / "res" / "claims.json").read_text())
     assert len(claims) == 12 and all(claims.values())
@@ -138,9 +142,9 @@ def test_multi_area_notebook_on_the_ieee39_testbed(tmp_path):
     assert "| M (s) |" in (tmp_path / "fig" / "ieee39_fit.md").read_text()
     metrics = json.loads((tmp_path / "res" / "metrics.json").read_text())
     assert metrics["single/none/area0"]["parameters"]["attacked_area"] == 1
-    for attack in ("single", "coordinated"):
+    for attack in ("single", "coordinated", "ACE"):
         runs = [metrics[f"{attack}/certified/area{a}"] for a in range(2)]
-        assert max(r["disturbance_step"] / r["load_bound"] for r in runs) > 1.0
+        assert max(r["disturbance_step"] / r["load_bound"] for r in runs) < 1.0
         assert not any(r["tripped"] or r["outside"] for r in runs)
 
 
