@@ -9,8 +9,12 @@ and the restoration after every attack run with both grid certificates in
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 import scipy.sparse as sp
 from scipy.optimize import linprog
 
@@ -97,18 +101,33 @@ def test_the_design_keeps_every_output_within_its_limit_and_says_what_it_costs()
     """On the presets, Kundur's and the IEEE 39-bus system's areas as fitted to
     ANDES, a ring and a chain of four and a lightly damped area: every bound is
     within its limit and the binding one meets it (the linear program's
-    optimum); the boxes and rates measured (pu, pu/s) are pinned to a range."""
+    optimum), unless the box is the grid's ``command_range``; the boxes and
+    rates measured (pu, pu/s) are pinned to a range.  On Kundur's fitted model
+    the range binds: without it the box would be 0.29 pu at 0.51 pu/s; within
+    ±0.1 pu the box's own bound keeps ROCOF at a third of its limit whatever the
+    rate, so the rate is 2 x 0.1 pu per period (no constraint: it crosses the
+    box in one period) and the bounds take 41 % (frequency) and 32 % (ROCOF) of
+    the limits."""
     light = MultiAreaParams.two_area(LIGHT)
     expected = {"two-area": (MultiAreaParams.two_area(), 0.15, 0.22),
-                "three-area": (THREE, 0.16, 0.12), "kundur": (kundur(), 0.29, 0.51),
+                "three-area": (THREE, 0.16, 0.12), "kundur": (kundur(), 0.0999, 19.9),
                 "ieee39": (ieee39(), 0.15, 0.25), "ring of 4": (ring(4), 0.085, 0.11),
                 "chain of 4": (ring(4, chain=True), 0.084, 0.11),
                 "lightly damped": (light, 0.36, 0.025)}
     for name, (grid, box, rate) in expected.items():
         share = contract_design(grid, RELAYS)
-        assert np.all(share.use() <= 1.0) and share.use().max() > 1 - 1e-5, name
+        at_range = np.all(share.half_width >= grid.command_range * (1 - 1e-5))
+        assert share.command_range == min(grid.command_range, 1e6), name
+        assert np.all(share.half_width <= grid.command_range), name
+        assert np.all(share.use() <= 1.0) and (share.use().max() > 1 - 1e-5 or at_range), name
         assert np.all(share.half_width >= box) and share.half_width.max() < 1.1 * box, name
         assert np.all(share.rate >= rate) and share.rate.max() < 1.1 * rate, name
+    share = contract_design(kundur(), RELAYS)
+    assert np.all(share.rate * PERIOD <= 2 * share.command_range)
+    assert np.allclose(share.use().max(axis=0), [0.42, 0.32], atol=0.01)
+    wide = contract_design(dataclasses.replace(kundur(), command_range=np.inf), RELAYS)
+    assert np.all(wide.half_width > 0.29) and np.all(wide.rate > 0.51)
+    assert wide.use().max() > 1 - 1e-5
 
 
 def test_a_step_of_exactly_load_bound_just_after_a_control_sample_trips_nothing():
@@ -241,3 +260,30 @@ def test_the_red_teams_winner_on_the_fitted_model_replayed_on_andes_trips_nothin
                      filters={0: "contract", 1: "contract"})
     assert not r.tripped
     assert [int(a.alarms.outside.sum()) for a in r.areas] == [0, 0]
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 4), st.integers(1, 4), st.integers(0, 2**32 - 1),
+       st.sampled_from([0.5, 3.0, 1e6]))
+def test_each_share_the_smaller_of_two_bounds_keeps_every_output_within_its_room(
+        outputs, inputs, seed, upper):
+    """The design's search (``_largest_of_smaller``): for any nonnegative gains
+    and offsets and a positive room, the ``x`` it returns lies in ``[0, upper]``
+    and keeps ``sum_j min(first x_j + first_offset, second x_j + second_offset)``
+    within the room on every output; and its smallest entry is the largest
+    common value that fits (0.1 % more on every entry does not fit, unless that
+    is beyond ``upper``): the largest, not just a fit."""
+    from lfc.filters.contract import _largest_of_smaller
+    rng = np.random.default_rng(seed)
+    shape = (outputs, inputs)
+    first, second = rng.uniform(0, 2, shape), rng.uniform(0.01, 2, shape)
+    first_offset = rng.uniform(0, 0.1, shape) * rng.integers(0, 2, shape)
+    second_offset = rng.uniform(0, 0.1, shape) * rng.integers(0, 2, shape)
+    room = np.minimum(first_offset, second_offset).sum(axis=1) + rng.uniform(0.01, 2, outputs)
+    x = _largest_of_smaller(first, first_offset, second, second_offset, room, upper)
+    assert np.all(x >= 0) and np.all(x <= upper)
+    used = np.minimum(first * x + first_offset, second * x + second_offset).sum(axis=1)
+    assert np.all(used <= room * (1 + 1e-9))
+    common = min(x.min() * 1.001, upper) * np.ones(inputs)
+    more = np.minimum(first * common + first_offset, second * common + second_offset)
+    assert np.any(more.sum(axis=1) > room) or x.min() * 1.001 >= upper

@@ -21,21 +21,25 @@ that area, and the interval is never empty.
 an input (the tie-line flows states of the model, not disturbances), every area's
 measured frequency and ROCOF is, from an equilibrium,
 ``y_o = sum_j h_oj * u_j + sum_j s^L_oj * dp_j``.  A command held between samples
-is a sum of steps ``du_k`` at the samples, ``|du_k| <= r_j T``.  ROCOF, by the
-rate: ``|h_oj * u_j|(t) <= r_j T sup_phi sum_k |s_oj(phi + k T)|`` with ``s_oj``
-the step response, which settles to 0 for ROCOF
-(:func:`~lfc.filters.responses.rate_gains`).  Frequency, by the smaller of two
-bounds: the box's, ``a_j int |h_oj|`` (the L1 norm,
-:func:`~lfc.filters.responses.load_gains` ``"band"``: any signal within the
-box), and the rate's, ``|s_oj(inf)| a_j + r_j T sup_phi sum_k |s_oj(phi + k T) -
+is a sum of steps ``du_k`` at the samples, ``|du_k| <= r_j T``.  Each command's
+share of ROCOF and of frequency is the smaller of two bounds (:func:`rocof_bound`,
+:func:`frequency_bound`).  By the box: ``a_j int |h_oj|`` (the L1 norm,
+:func:`~lfc.filters.responses.load_gains` ``"band"``: any signal within the box).
+By the rate: for ROCOF ``r_j T sup_phi sum_k |s_oj(phi + k T)|`` with ``s_oj`` the
+step response, which settles to 0 (:func:`~lfc.filters.responses.rate_gains`);
+for frequency ``|s_oj(inf)| a_j + r_j T sup_phi sum_k |s_oj(phi + k T) -
 s_oj(inf)|`` (the settled part plus what the steps move around it: no resonance
-faster than the rate allows) — :func:`frequency_bound`.  Loads whose total
+faster than the rate allows).  Loads whose total
 variation summed over the areas is ``V`` move ``y_o`` by at most ``V max_j sup
-|s^L_oj|`` (``"steps"``).  The rates are the largest (a linear program: the
-smallest as large as possible, then the others) with the ROCOF bounds within
-``rocof_limit``; then the boxes at those rates with the frequency bounds within
-``F`` (the largest common box by bisection, the others by a linear program), each
-limit times ``1 - margin`` with room for a total load variation ``load_bound``.
+|s^L_oj|`` (``"steps"``).  The rates are the largest with the ROCOF bounds within
+``rocof_limit`` at the widest boxes (the grid's ``command_range``: a model fitted
+to ANDES describes it only there; none on the linear presets, where the rates
+alone bound ROCOF); then the boxes, at most that range, at those rates with the
+frequency bounds within ``F`` (each time the common value by bisection, the
+others by a linear program), each limit times ``1 - margin`` with room for a
+total load variation ``load_bound``.  On Kundur's fitted model the range binds:
+a box of ±0.1 pu keeps ROCOF within a third of its limit at any rate, so the
+contract is the box alone.
 
 **Guarantee (proven).**  For the design grid, starting from an equilibrium
 with every area's filter keeping its contract (this filter at every area, with
@@ -107,6 +111,9 @@ class Contract:
     rocof_gain : ndarray (n_areas, n_areas)
         ``[i, j]``: how far a command of area ``j`` moving by at most 1 pu/s can
         move area ``i``'s measured ROCOF (pu/s per pu/s).
+    rocof_box_gain : ndarray (n_areas, n_areas)
+        ``[i, j]``: how far a command of area ``j`` within ±1 pu can move area
+        ``i``'s measured ROCOF (pu/s per pu; the L1 norm).
     load_gain : ndarray (n_areas, 2)
         Per area, frequency and ROCOF moved per pu of the loads' total variation.
     limits : ndarray (2,)
@@ -115,6 +122,9 @@ class Contract:
         The proven bound on each area's measured frequency (pu) and ROCOF (pu/s).
     load_bound, control_period : float
         The loads' total variation covered (pu) and the control period (s).
+    command_range : float
+        The widest box the design allowed (pu): the grid's ``command_range``
+        (where a fitted model describes its plant), or ``MAX_ABS_INPUT``.
     """
 
     half_width: np.ndarray
@@ -123,11 +133,13 @@ class Contract:
     settled_gain: np.ndarray
     transient_gain: np.ndarray
     rocof_gain: np.ndarray
+    rocof_box_gain: np.ndarray
     load_gain: np.ndarray
     limits: np.ndarray
     bound: np.ndarray
     load_bound: float
     control_period: float
+    command_range: float
 
     def use(self) -> np.ndarray:
         """The fraction of each limit the bound takes (n_areas, 2), at most 1."""
@@ -143,41 +155,61 @@ def frequency_bound(box_gain: np.ndarray, settled: np.ndarray, transient: np.nda
     return np.minimum(box_gain * half, settled * half + transient * rate).sum(axis=1)
 
 
-def _largest(gains: np.ndarray, room: np.ndarray) -> np.ndarray:
-    """The largest ``x >= 0`` with ``gains @ x <= room``: the smallest entry as
-    large as possible, then the sum at that smallest (two linear programs)."""
+def rocof_bound(box_gain: np.ndarray, settled: np.ndarray, moving: np.ndarray,
+                half: np.ndarray, rate: np.ndarray) -> np.ndarray:
+    """Per output, the most commands within boxes ``half`` moving at rates
+    ``rate`` move ROCOF: each command's share is the smaller of its box bound
+    ``box_gain a`` and its rate bound ``moving r``, plus ``settled a`` (ROCOF's
+    step response settles to 0: rounding)."""
+    return (np.minimum(box_gain * half, moving * rate) + settled * half).sum(axis=1)
+
+
+def _largest(gains: np.ndarray, room: np.ndarray, upper: float) -> np.ndarray:
+    """The largest ``x`` in ``[0, upper]`` with ``gains @ x <= room``: the
+    smallest entry as large as possible, then the sum at that smallest (two
+    linear programs)."""
     n = gains.shape[1]
     first = linprog(np.r_[np.zeros(n), -1.0],
                     A_ub=np.block([[gains, np.zeros((len(gains), 1))],
                                     [-np.eye(n), np.ones((n, 1))]]),
-                    b_ub=np.r_[room, np.zeros(n)], bounds=[(0, None)] * (n + 1), method="highs")
+                    b_ub=np.r_[room, np.zeros(n)], bounds=[(0, upper)] * (n + 1),
+                    method="highs")
     if first.status != 0:   # pragma: no cover - x = 0 is feasible and room bounds it
         raise ValueError(f"the contract's linear program failed: {first.message}")
     second = linprog(-np.ones(n), A_ub=gains, b_ub=room,
-                     bounds=[(first.x[-1] * (1 - 1e-9), None)] * n, method="highs")
+                     bounds=[(first.x[-1] * (1 - 1e-9), upper)] * n, method="highs")
     if second.status != 0:  # pragma: no cover
         raise ValueError(f"the contract's linear program failed: {second.message}")
     return second.x * (1 - NUMERIC_MARGIN)
 
 
-def _largest_boxes(box_gain: np.ndarray, settled: np.ndarray, transient: np.ndarray,
-                   rate: np.ndarray, room: np.ndarray) -> np.ndarray:
-    """The largest boxes at rates ``rate`` with :func:`frequency_bound` within
-    ``room``: the common box as large as possible (the bound grows with every box:
-    bisection), then, each command's share taken by the bound smaller there, the
-    others as large as possible (:func:`_largest`)."""
-    def fits(t: float) -> bool:
-        return bool(np.all(frequency_bound(box_gain, settled, transient, t, rate) <= room))
+def _largest_of_smaller(first: np.ndarray, first_offset: np.ndarray, second: np.ndarray,
+                        second_offset: np.ndarray, room: np.ndarray, upper: float
+                        ) -> np.ndarray:
+    """The largest ``x`` in ``[0, upper]`` with, per output ``o``,
+    ``sum_j min(first_oj x_j + first_offset_oj, second_oj x_j + second_offset_oj)
+    <= room_o`` (each command's share bounded by the smaller of two bounds, both
+    growing with ``x_j``): the common ``x`` as large as possible (bisection), then,
+    each share taken by the bound smaller there (a valid bound for every ``x``,
+    so the constraint becomes linear), the others as large as possible
+    (:func:`_largest`)."""
+    def bound(x: float) -> np.ndarray:
+        return np.minimum(first * x + first_offset, second * x + second_offset)
 
-    lo, hi = 0.0, 1.0
-    while fits(hi) and hi < MAX_ABS_INPUT:
-        lo, hi = hi, 2.0 * hi
-    for _ in range(100):
+    def fits(x: float) -> bool:
+        return bool(np.all(bound(x).sum(axis=1) <= room))
+
+    lo, hi = 0.0, min(1.0, upper)
+    while fits(hi) and hi < upper:
+        lo, hi = hi, min(2.0 * hi, upper)
+    if fits(hi):
+        lo = hi
+    for _ in range(100 if lo < hi else 0):
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if fits(mid) else (lo, mid)
-    by_box = box_gain * lo <= settled * lo + transient * rate
-    offset = np.where(by_box, 0.0, transient * rate).sum(axis=1)
-    return np.minimum(_largest(np.where(by_box, box_gain, settled), room - offset), MAX_ABS_INPUT)
+    by_first = first * lo + first_offset <= second * lo + second_offset
+    offset = np.where(by_first, first_offset, second_offset).sum(axis=1)
+    return np.minimum(_largest(np.where(by_first, first, second), room - offset, upper), upper)
 
 
 @functools.lru_cache(maxsize=16)
@@ -187,7 +219,8 @@ def contract_design(params: MultiAreaParams | LFCParams, relays: RelaySettings, 
     """Every area's contract on ``params`` (module docstring): the largest rates
     that keep every measured ROCOF within ``rocof_limit``, then the largest boxes
     that keep every measured frequency within ``F`` at those rates, each with room
-    for loads of total variation ``load_bound``.
+    for loads of total variation ``load_bound``, every box within the grid's
+    ``command_range`` (pu; where a fitted model describes its plant).
 
     Parameters
     ----------
@@ -219,7 +252,10 @@ def contract_design(params: MultiAreaParams | LFCParams, relays: RelaySettings, 
     n_a = grid.n_areas
     C = output_rows(n_a, len(A))
     limits = np.array([relays.F, relays.rocof_limit]) * (1 - margin) * (1 - NUMERIC_MARGIN)
+    reach = min(grid.command_range, MAX_ABS_INPUT)    # pu: the most a command can be
     box_gain = np.array([load_gains(A, Bu[:, j], C[0::2])["band"] for j in range(n_a)]).T
+    rocof_box_gain = np.array([load_gains(A, Bu[:, j], C[1::2])["band"]
+                               for j in range(n_a)]).T
     gains = [rate_gains(A, Bu[:, j], C, control_period) for j in range(n_a)]
     moving = np.array([g for g, _ in gains]).T        # (outputs, areas): per pu/s
     settled = np.array([s for _, s in gains]).T       # (outputs, areas): per pu
@@ -231,17 +267,24 @@ def contract_design(params: MultiAreaParams | LFCParams, relays: RelaySettings, 
         raise ValueError(f"load_bound={load_bound:g} pu takes the whole of area {i}'s "
                          f"{('frequency', 'ROCOF')[o]} limit ({load_bound * load[i, o]:.3g} "
                          f"of {limits[o]:.3g}); lower load_bound")
-    # ROCOF settles to 0 (``settled[1::2]`` is rounding): bounded by the rates alone
-    rate = _largest(moving[1::2], room[:, 1] - settled[1::2].sum(axis=1) * MAX_ABS_INPUT)
-    half = _largest_boxes(box_gain, settled[0::2], moving[0::2], rate, room[:, 0])
+    # ROCOF, each share the smaller of the box's bound at the widest box (``reach``)
+    # and the rate's; it settles to 0 (``settled[1::2]`` is rounding).  A rate of
+    # 2 reach / T crosses any box in one period: no faster rate is a constraint.
+    rate = _largest_of_smaller(np.zeros_like(rocof_box_gain), rocof_box_gain * reach,
+                               moving[1::2], np.zeros_like(rocof_box_gain),
+                               room[:, 1] - settled[1::2].sum(axis=1) * reach,
+                               2.0 * reach / control_period)
+    half = _largest_of_smaller(box_gain, np.zeros_like(box_gain), settled[0::2],
+                               moving[0::2] * rate, room[:, 0], reach)
     bound = np.column_stack([
         frequency_bound(box_gain, settled[0::2], moving[0::2], half, rate),
-        moving[1::2] @ rate + settled[1::2] @ half]) + load_bound * load
-    arrays = (half, rate, box_gain, settled[0::2], moving[0::2], moving[1::2], load, limits,
-              bound)
+        rocof_bound(rocof_box_gain, settled[1::2], moving[1::2], half, rate)]) \
+        + load_bound * load
+    arrays = (half, rate, box_gain, settled[0::2], moving[0::2], moving[1::2],
+              rocof_box_gain, load, limits, bound)
     for a in arrays:
         a.setflags(write=False)   # shared by every caller (cached)
-    return Contract(*arrays, float(load_bound), float(control_period))
+    return Contract(*arrays, float(load_bound), float(control_period), float(reach))
 
 
 @dataclass(frozen=True)
