@@ -147,26 +147,28 @@ def ended(n: int, stop: float) -> dict:
 
 
 @pytest.mark.parametrize("kind", ["coupled", "contract"])
-@pytest.mark.parametrize("name", ["two-area", "three-area"])
+@pytest.mark.parametrize("name", ["two-area", "three-area", "kundur", "ieee39"])
 def test_after_every_attack_agc_restores_frequency_and_schedules(name, kind):
-    """With anti-windup, 40 s after each attack ends (10 s long, a -0.05 pu step in
-    area 1 during it; every attack of the battery on the two-area preset, the ACE
+    """With anti-windup, within 40 s of each attack's end (10 s long, a -0.05 pu
+    step in area 1 during it; every attack of the battery on the two-area preset
+    and on Kundur's and the IEEE 39-bus system's areas as fitted to ANDES, the ACE
     bias on the three-area one): every area's frequency and tie-line export are
-    back at schedule (|dw| < 5e-4 pu = 0.03 Hz, |export| < 5e-3 pu; AGC alone,
-    without filters, leaves 1.6e-3 pu after the ACE bias when measured), nothing
-    tripped, no filter flagged ``outside``, and the filters fell silent within 5 s
-    of the attack's end (1.5 s at most when measured); with the coupled
-    certificate or the contract at every area."""
-    grid = MultiAreaParams.two_area() if name == "two-area" else THREE
+    back at schedule for good (|dw| < 5e-4 pu = 0.03 Hz, |export| < 5e-3 pu; AGC
+    alone, without filters, leaves 1.6e-3 pu after the ACE bias on two areas when
+    measured; on the fitted models 11-31 s when measured, the attacks on AGC's
+    inputs the slowest), nothing tripped, no filter flagged ``outside``, and the
+    filters fell silent within 5 s of the attack's end (2.7 s at most when
+    measured); with the coupled certificate or the contract at every area."""
+    grid = {"two-area": MultiAreaParams.two_area, "three-area": lambda: THREE,
+            "kundur": kundur, "ieee39": ieee39}[name]()
     every = {a: kind for a in range(grid.n_areas)}
     attacks = ended(grid.n_areas, 11.0)
-    for key in attacks if name == "two-area" else ["bias on every ACE"]:
+    for key in ["bias on every ACE"] if name == "three-area" else attacks:
         r = simulate_grid_linear(grid, duration=51.0, attacks=attacks[key], filters=every,
                                  loads={1: lfc.Step(-STEP, start=5.001)}, anti_windup=True)
         assert not r.tripped, key
-        end = r.trace.iloc[-1]
+        assert restored_after(r.trace, grid.n_areas, 11.0) < 40.0, key
         for a in range(grid.n_areas):
-            assert abs(end[f"dw_meas_{a}"]) < 5e-4 and abs(end[f"p_tie_{a}"]) < 5e-3, key
             alarms = r.areas[a].alarms
             assert not alarms.outside.any() and (alarms.empty or alarms.t.max() < 16.0), key
 
