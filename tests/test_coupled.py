@@ -306,6 +306,39 @@ def test_finding_on_two_lightly_damped_areas_agc_restores_in_up_to_a_minute():
     assert not agc.tripped and 40.0 < restored_after(agc.trace, 2, 1.0) < 45.0
 
 
+
+def test_finding_on_a_chain_of_four_a_square_on_wref_leaves_agc_a_minute_of_unwinding():
+    """Finding, pinned (measured): on a chain of four areas (the three-area
+    preset's, T = 2 pu) the battery's other four attacks are restored within 29 s
+    of their end with the contracts and 35 s with the coupled certificate (when
+    measured; a ring of four: all five within 34 s), but after the square on
+    area 0's ω_ref (10 s long, a -0.05 pu step in area 1 during
+    it, anti-windup on) the coupled certificate's run is back at schedule only
+    50-65 s after the attack's end (59.7 s when measured), the contracts' in
+    35-45 s (40.6 s); nothing trips, no ``outside``.  Why: the attack on AGC's own
+    frequency reference leaves 0.29 pu in area 0's integrator at the control
+    centre when it ends (the contracts, whose box is ±0.085 pu, let 0.09 pu
+    through), which AGC unwinds at its pace: it restores a legitimate 0.1 pu
+    step, no attack, no filter, in 35 s on this grid.  The same finding as on
+    two lightly damped areas: what an attack on AGC's inputs leaves is beyond
+    what a generator-side filter sees."""
+    chain = ring(4, chain=True)
+    attack = ended(4, 11.0)["square on area 0's ω_ref"]
+    late, residue = {}, {}
+    for kind in ("coupled", "contract"):
+        r = simulate_grid_linear(chain, duration=81.0, attacks=attack,
+                                 filters={a: kind for a in range(4)},
+                                 loads={1: lfc.Step(-STEP, start=5.001)}, anti_windup=True)
+        assert not r.tripped and not any(res.alarms.outside.any() for res in r.areas)
+        late[kind] = restored_after(r.trace, 4, 11.0)
+        i = int(np.searchsorted(r.trace.t, 11.0))
+        residue[kind] = abs(r.trace.pc_ref_0.iat[i] - r.trace.pc_ref_0.iat[-1])
+    assert 50.0 < late["coupled"] < 65.0 and 35.0 < late["contract"] < 45.0
+    assert residue["coupled"] > 0.25 and 0.05 < residue["contract"] < 0.1
+    agc = simulate_grid_linear(chain, duration=80.0, loads={1: lfc.Step(-0.1, start=1.0)},
+                               anti_windup=True)
+    assert not agc.tripped and 30.0 < restored_after(agc.trace, 4, 1.0) < 40.0
+
 def test_finding_a_lightly_damped_area_flags_outside_but_trips_nothing():
     """Finding, pinned: with ``load_bound = recheck_bound`` = 0.05 pu (nothing for
     the held level to absorb) the filter builds on the lightly damped grid; over
