@@ -7,6 +7,9 @@ Prints, from one run:
   (``"contract"``) at every area of rings of 6 and 10 areas and a chain of 6
   (the three-area preset's areas in turn, T = 2 pu): runs, runs with a trip,
   runs with an ``outside`` flag;
+* with ``--chain10``: both certificates on a chain of 10 areas (the three-area
+  preset's areas in turn, T = 2 pu): design time, box and rate or terminal set,
+  the contract's full battery and the coupled certificate's at one instant;
 * how tight theorem D's bound is: the most any command sequence within the
   contracts moves each output at 30 s (the linear program of
   ``tests/test_contract.py``), as a share of the bound's part for the commands,
@@ -29,7 +32,7 @@ Prints, from one run:
 
 ``docs/coupled-certificate.md`` quotes its numbers.
 
-Run: python bench/survey_grid_certificates.py [--andes]
+Run: python bench/survey_grid_certificates.py [--andes] [--chain10]
 """
 
 from __future__ import annotations
@@ -59,6 +62,30 @@ def grids() -> None:
         runs, tripped, outside = battery(grid, "contract", anti_windup=(True,))
         print(f"| {name} | {runs} | {tripped} | {outside} | {time.perf_counter() - t0:.0f} s |",
               flush=True)
+
+
+def chain10() -> None:
+    from lfc.filters.contract import contract_design
+    from lfc.filters.coupled import CoupledFilter
+    chain = ring(10, chain=True)
+    print("\n| chain of 10 | built in | box, rate | runs | with a trip | with an outside flag "
+          "| time |")
+    print("|---|---|---|---|---|---|---|")
+    t0 = time.perf_counter()
+    share = contract_design(chain, RELAYS)
+    built = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    runs, tripped, outside = battery(chain, "contract", anti_windup=(True,))
+    print(f"| contract | {built:.0f} s | ±{share.half_width.min():.3f} pu, "
+          f"{share.rate.min():.3f} pu/s | {runs} | {tripped} | {outside} | "
+          f"{time.perf_counter() - t0:.0f} s |", flush=True)
+    t0 = time.perf_counter()
+    filt = CoupledFilter(chain, RELAYS)
+    built = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    runs, tripped, outside = battery(chain, filt, instants=(3.37,), anti_windup=(True,))
+    print(f"| coupled (one instant) | {built:.0f} s | terminal set {filt.cert.terminal} | {runs} "
+          f"| {tripped} | {outside} | {time.perf_counter() - t0:.0f} s |\n", flush=True)
 
 
 def tightness() -> None:
@@ -144,8 +171,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--andes", action="store_true",
                         help="also the red team's winners replayed on ANDES (about 20 min)")
+    parser.add_argument("--chain10", action="store_true",
+                        help="also both certificates on a chain of 10 areas (about 25 min)")
     args = parser.parse_args()
     grids()
+    if args.chain10:
+        chain10()
     tightness()
     if args.andes:
         mismatch()

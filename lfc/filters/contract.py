@@ -68,6 +68,7 @@ measured there, not proven.
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -113,7 +114,9 @@ class Contract:
         move area ``i``'s measured ROCOF (pu/s per pu/s).
     rocof_box_gain : ndarray (n_areas, n_areas)
         ``[i, j]``: how far a command of area ``j`` within ±1 pu can move area
-        ``i``'s measured ROCOF (pu/s per pu; the L1 norm).
+        ``i``'s measured ROCOF (pu/s per pu; the L1 norm); ``inf`` on a grid
+        without a ``command_range``, whose boxes are never small enough for this
+        bound to be the smaller (not computed).
     load_gain : ndarray (n_areas, 2)
         Per area, frequency and ROCOF moved per pu of the loads' total variation.
     limits : ndarray (2,)
@@ -254,8 +257,9 @@ def contract_design(params: MultiAreaParams | LFCParams, relays: RelaySettings, 
     limits = np.array([relays.F, relays.rocof_limit]) * (1 - margin) * (1 - NUMERIC_MARGIN)
     reach = min(grid.command_range, MAX_ABS_INPUT)    # pu: the most a command can be
     box_gain = np.array([load_gains(A, Bu[:, j], C[0::2])["band"] for j in range(n_a)]).T
-    rocof_box_gain = np.array([load_gains(A, Bu[:, j], C[1::2])["band"]
-                               for j in range(n_a)]).T
+    # the box's bound on ROCOF matters only within a range (at 1e6 pu it never binds)
+    rocof_box_gain = (np.array([load_gains(A, Bu[:, j], C[1::2])["band"] for j in range(n_a)]).T
+                      if math.isfinite(grid.command_range) else np.full((n_a, n_a), np.inf))
     gains = [rate_gains(A, Bu[:, j], C, control_period) for j in range(n_a)]
     moving = np.array([g for g, _ in gains]).T        # (outputs, areas): per pu/s
     settled = np.array([s for _, s in gains]).T       # (outputs, areas): per pu
