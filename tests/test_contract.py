@@ -20,6 +20,7 @@ from scipy.optimize import linprog
 
 import lfc
 from lfc import MultiAreaParams
+from lfc.filters.base import MAX_ABS_INPUT
 from lfc.filters.contract import ContractOptions, contract_design
 from lfc.filters.coupled import output_rows, reduced_model
 from lfc.filters.responses import load_gains, responses
@@ -117,7 +118,7 @@ def test_the_design_keeps_every_output_within_its_limit_and_says_what_it_costs()
     for name, (grid, box, rate) in expected.items():
         share = contract_design(grid, RELAYS)
         at_range = np.all(share.half_width >= grid.command_range * (1 - 1e-5))
-        assert share.command_range == min(grid.command_range, 1e6), name
+        assert share.command_range == min(grid.command_range, MAX_ABS_INPUT), name
         assert np.all(share.half_width <= grid.command_range), name
         assert np.all(share.use() <= 1.0) and (share.use().max() > 1 - 1e-5 or at_range), name
         assert np.all(share.half_width >= box) and share.half_width.max() < 1.1 * box, name

@@ -253,6 +253,13 @@ def restored_after(trace, n_areas: int, end: float) -> float:
     return float(trace.t[bad].max()) - end
 
 
+def agc_residue(trace, areas, end: float) -> float:
+    """The most AGC's command in ``areas`` still had to unwind at ``end`` s: its
+    change from then to the run's end (pu), the largest over the areas."""
+    i = int(np.searchsorted(trace.t, end))
+    return max(abs(trace[f"pc_ref_{a}"].iat[i] - trace[f"pc_ref_{a}"].iat[-1]) for a in areas)
+
+
 def test_finding_on_two_lightly_damped_areas_agc_restores_in_up_to_a_minute():
     """Finding, pinned (measured): on two lightly damped areas (ratio 0.03), after
     each attack of the battery (10 s long, a -0.05 pu step in area 1 during it,
@@ -287,9 +294,7 @@ def test_finding_on_two_lightly_damped_areas_agc_restores_in_up_to_a_minute():
                 assert not res.alarms.outside.any() and (res.alarms.empty
                                                          or res.alarms.t.max() < 12.5), key
             times.append(restored_after(r.trace, 2, 11.0))
-            tr, i = r.trace, int(np.searchsorted(r.trace.t, 11.0))   # the attack's end
-            residue[kind, key] = max(abs(tr[f"pc_ref_{a}"].iat[i] - tr[f"pc_ref_{a}"].iat[-1])
-                                     for a in range(2))    # AGC's integrator, to be unwound
+            residue[kind, key] = agc_residue(r.trace, range(2), 11.0)   # the attack's end
         late[kind] = sum(t > 40.0 for t in times)
         assert 20.0 < min(times) and max(times) < {"contract": 45.0, "coupled": 65.0}[kind], kind
     assert late == {"contract": 1, "coupled": 4}
@@ -304,7 +309,6 @@ def test_finding_on_two_lightly_damped_areas_agc_restores_in_up_to_a_minute():
     agc = simulate_grid_linear(grid, duration=100.0, loads={1: lfc.Step(0.1, start=1.0)},
                                anti_windup=True)
     assert not agc.tripped and 40.0 < restored_after(agc.trace, 2, 1.0) < 45.0
-
 
 
 def test_finding_on_a_chain_of_four_a_square_on_wref_leaves_agc_a_minute_of_unwinding():
@@ -331,13 +335,13 @@ def test_finding_on_a_chain_of_four_a_square_on_wref_leaves_agc_a_minute_of_unwi
                                  loads={1: lfc.Step(-STEP, start=5.001)}, anti_windup=True)
         assert not r.tripped and not any(res.alarms.outside.any() for res in r.areas)
         late[kind] = restored_after(r.trace, 4, 11.0)
-        i = int(np.searchsorted(r.trace.t, 11.0))
-        residue[kind] = abs(r.trace.pc_ref_0.iat[i] - r.trace.pc_ref_0.iat[-1])
+        residue[kind] = agc_residue(r.trace, [0], 11.0)
     assert 50.0 < late["coupled"] < 65.0 and 35.0 < late["contract"] < 45.0
     assert residue["coupled"] > 0.25 and 0.05 < residue["contract"] < 0.1
     agc = simulate_grid_linear(chain, duration=80.0, loads={1: lfc.Step(-0.1, start=1.0)},
                                anti_windup=True)
     assert not agc.tripped and 30.0 < restored_after(agc.trace, 4, 1.0) < 40.0
+
 
 def test_finding_a_lightly_damped_area_flags_outside_but_trips_nothing():
     """Finding, pinned: with ``load_bound = recheck_bound`` = 0.05 pu (nothing for
