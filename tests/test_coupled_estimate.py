@@ -18,7 +18,7 @@ from scipy.stats import chi2
 import lfc
 from lfc import MultiAreaParams
 from lfc.filters.coupled import CoupledFilter, CoupledOptions, _load_error_steps
-from lfc.simulate_multiarea import simulate_grid_linear
+from lfc.simulate_multiarea import simulate_grid_linear, simulate_grid_table
 from test_coupled import RELAYS, THREE, battery, ieee39, kundur
 from test_coupled_baseline import attacks
 
@@ -121,6 +121,53 @@ def test_the_battery_on_the_estimate_trips_nothing(name):
     assert outside <= {"three-area": 0, "kundur": 10, "ieee39": 4}[name]
 
 
+def outside_runs(grid: MultiAreaParams, filt: CoupledFilter, loads: list) -> tuple[int, int, int]:
+    """``(runs, runs with a trip, runs with an outside flag)`` over the battery's five
+    attacks x ``loads`` (each a ``{area: signal}``), on the estimate, with anti-windup."""
+    every = {a: filt for a in range(grid.n_areas)}
+    scenarios = [{"attacks": attack, "loads": load, "filters": every, "anti_windup": True,
+                  **ESTIMATE} for attack in attacks(grid.n_areas).values() for load in loads]
+    runs = simulate_grid_table(grid, scenarios, duration=20.0).groupby("scenario").agg(
+        tripped=("tripped", "any"), outside=("outside", "sum"))
+    return len(runs), int(runs.tripped.sum()), int((runs.outside > 0).sum())
+
+
+@pytest.mark.parametrize("name", ["two-area", "kundur"])
+def test_the_widened_held_level_flags_nothing_within_the_bound_and_misses_what_lies_beyond(name):
+    """Theorem C' (``held_level="widened"``) at its worst case: load paths of total
+    variation exactly ``load_bound - recheck_bound`` = 0.05 pu — a step landing 1 ms
+    after a control sample (the estimator sees it only at the next one), every 0.5 s
+    of the five attacks, in every area, both signs — flag no ``outside`` and trip
+    nothing, where the sharp level flags it with nothing wrong (the battery: 1 of 80
+    runs on two areas, 5 of 80 on Kundur).  On two areas also pulses of ±0.025 pu
+    lasting 0.05 and 0.3 s (the same total variation).  Measured once, 0 / 0 too:
+    pulses of 0.01–1 s, ramps over 0.1 and 1 s, 0.025 pu steps in both areas up to
+    1 s apart and ten noise seeds (820 runs on each grid).  The price, a finding:
+    beyond the bound the widened level is blind — on two areas the 0.1 pu steps of
+    four runs trip ROCOF with no ``outside`` (the sharp level flags every run that
+    trips; the commands are the same, only the flag differs), and on Kundur steps of
+    0.06, 0.1 and 0.2 pu flag nothing (the sharp level: all 80 runs of each)."""
+    grid = MultiAreaParams.two_area() if name == "two-area" else kundur()
+    horizon = 8.0 if name == "two-area" else 12.0
+    widened = CoupledFilter(grid, RELAYS, noise_std=NOISE, horizon=horizon,
+                            held_level="widened")
+    instants = np.round(np.arange(1.0, 6.0, 0.5) + 0.001, 6)
+    steps = [{a: lfc.Step(sign * 0.05, start=t)} for a in range(grid.n_areas)
+             for t in instants for sign in (1, -1)]
+    assert outside_runs(grid, widened, steps) == (200, 0, 0)
+    if name == "kundur":
+        return
+    pulses = [{a: lfc.Step(sign * 0.025, start=t, stop=t + width)} for a in range(2)
+              for t in instants[::3] for sign in (1, -1) for width in (0.05, 0.3)]
+    assert outside_runs(grid, widened, pulses) == (160, 0, 0)
+    beyond = [{a: lfc.Step(sign * 0.1, start=t)} for a in range(2)
+              for t in instants[::3] for sign in (1, -1)]
+    sharp = CoupledFilter(grid, RELAYS, noise_std=NOISE)
+    runs, tripped, outside = outside_runs(grid, sharp, beyond)
+    assert (runs, tripped) == (80, 4) and outside >= tripped
+    assert outside_runs(grid, widened, beyond) == (80, 4, 0)
+
+
 def test_it_refuses_what_its_error_bound_does_not_cover():
     """A filter built for the estimate needs ``estimator="kalman"`` and noise no
     larger than it was built for; one built for the exact state refuses an
@@ -137,6 +184,10 @@ def test_it_refuses_what_its_error_bound_does_not_cover():
                      noise_std=(2e-4, 1e-3))
     with pytest.raises(ValueError, match="confidence"):
         CoupledOptions(confidence=0.99)
+    with pytest.raises(ValueError, match="held_level='widened' has no effect"):
+        CoupledOptions(held_level="widened")
+    with pytest.raises(ValueError, match="held_level must be one of"):
+        CoupledOptions(noise_std=NOISE, held_level="wide")
     with pytest.raises(ValueError, match="noise_std"):
         CoupledOptions(noise_std=(-1.0, 1e-3))
     r = lfc.simulate(grid, duration=2.0, filters={0: "coupled", 1: "coupled"},

@@ -59,8 +59,14 @@ ROCOF and tie-line export; its error is independent of every command and attack
 (a noise part plus a part linear in the loads), and the certificate is tightened
 by both.  Proven (theorem A'): if the loads' total variation over the run is at
 most ``load_bound`` and the noise's part of the error lies in its ellipsoid at
-``confidence`` at each certification, no relay trips.  The held re-check (B, C)
-is not proven on an estimate: ``outside`` flags are measured.
+``confidence`` at each certification, no relay trips.  Theorem B (a held check
+proves the coming period safe) is not proven on an estimate.  The held
+re-check's level is a choice (``held_level``): ``"sharp"`` (default) flags
+``outside`` early when the loads move beyond the bounds, and sometimes with
+nothing wrong (measured); ``"widened"`` is proven (theorem C') never to flag it
+while the loads' total variation over the run is at most ``load_bound -
+recheck_bound`` and the noise's part lies in its ellipsoid at the certification
+and the re-check, and misses moderate excesses.
 
 **Where the model holds.**  Every command stays within ``±command_range`` of
 the design model (:class:`lfc.multiarea.MultiAreaParams`; ∞ but for a model
@@ -110,6 +116,7 @@ EXPORT_STD = 1e-4    # pu: the grid Kalman filter's noise model of the metered t
 
 
 TERMINALS = ("auto", "lyapunov", "sdp")
+HELD_LEVELS = ("sharp", "widened")
 Q_FLOORS = (1e-12, 1e-6, 1e-5, 1e-4)   # shaped_terminal's floors on Q's eigenvalues, in turn
 
 
@@ -152,6 +159,16 @@ class CoupledOptions:
         Probability, in (0, 1), that the estimate's error lies in the ellipsoid
         the certificate covers (chi-square of the error covariance's dimension).
         Default 0.9999.  Only with ``noise_std``.
+    held_level : {"sharp", "widened"}
+        The held re-check's level on the estimate (``docs/coupled-certificate.md``,
+        "With estimates").  ``"sharp"`` (default): the exact state's, tightened by
+        the noise's part of the error; it flags ``outside`` early when the loads
+        move beyond the bounds, and sometimes with nothing wrong (just after a
+        load step the estimator has not yet seen).  ``"widened"``: widened by what
+        the error may move the re-check; proven never to flag ``outside`` while the
+        loads' total variation is at most ``load_bound - recheck_bound`` and the
+        noise's part lies in its ellipsoid (theorem C'), but blind to moderate
+        excesses (a 0.1 pu step that trips, unflagged).  Only with ``noise_std``.
     terminal : {"auto", "lyapunov", "sdp"}
         The terminal ellipsoid: ``"lyapunov"`` solves ``A'P + PA = -W`` (W from
         the relay limits); ``"sdp"`` shapes it (:func:`shaped_terminal`) so that a
@@ -170,6 +187,7 @@ class CoupledOptions:
     control_period: float = 0.01
     noise_std: tuple[float, float] | None = None
     confidence: float = 0.9999
+    held_level: str = "sharp"
     terminal: str = "auto"
 
     def __post_init__(self) -> None:
@@ -197,6 +215,12 @@ class CoupledOptions:
         if self.noise_std is not None:
             object.__setattr__(self, "noise_std", check_noise_std("noise_std", self.noise_std))
         check_range("confidence", self.confidence, 0.0, 1.0)
+        if self.held_level not in HELD_LEVELS:
+            raise ValueError(f"held_level must be one of {HELD_LEVELS}, got "
+                             f"{self.held_level!r}")
+        if self.noise_std is None and self.held_level != "sharp":
+            raise ValueError(f"held_level={self.held_level!r} has no effect without noise_std "
+                             f"(the exact state): leave it at its default")
         if self.noise_std is None and self.confidence != 0.9999:
             raise ValueError(f"confidence={self.confidence!r} has no effect without noise_std "
                              f"(the exact state): leave it at its default")
@@ -383,6 +407,7 @@ class CoupledSet:
         kappa_e = math.sqrt(chi2.ppf(o.confidence, len(cov))) if cov is not None else 0.0
         est, est0 = np.zeros(tau.shape), np.zeros(len(limits))
         load_rows, load_0 = np.broadcast_to(load, tau.shape), load
+        g, g0 = np.zeros(tau.shape), np.zeros(len(limits))
         if cov is not None:
             w = np.concatenate([G, Hl], axis=2)                      # (n, outputs, n_r + n_a)
             est = kappa_e * np.sqrt(np.einsum("tij,jk,tik->ti", w, cov, w))
@@ -392,17 +417,23 @@ class CoupledSet:
             # the certification moves row i by at most V g_i, the loads after it by
             # at most V' load: with V + V' <= load_bound, max(g_i, load) covers both
             steps = _load_error_steps(self.kalman, A, Bl, o.control_period)
-            load_rows = np.maximum(load, 1.01 * _sup_abs(w, steps))
-            load_0 = np.maximum(load, 1.01 * _sup_abs(w0, steps))
+            g, g0 = 1.01 * _sup_abs(w, steps), 1.01 * _sup_abs(w0, steps)
+            load_rows, load_0 = np.maximum(load, g), np.maximum(load, g0)
         self.budget = {"load": _by_kind(o.load_bound * load),
                        "re-check": _by_kind(o.recheck_bound * again),
                        "between samples": _by_kind(t_max + tau0),
                        "estimate": _by_kind(np.max(est + o.load_bound * (load_rows - load),
                                                    axis=0))}
+        # the held level: theorem B's less the noise's part ("sharp"), or theorem
+        # C''s ("widened"): wider by what the estimate's error may move a row at the
+        # re-check, its noise's part and its loads' part (a total variation of at
+        # most load_bound - recheck_bound, the assumption of C')
+        spent = 1.01 * (o.load_bound - o.recheck_bound)   # what the held level absorbs
+        widened = o.held_level == "widened"
         bound_new = limits - o.load_bound * load_rows - t_max - tau - est   # (n, outputs)
-        bound_held = held - t_max - est
+        bound_held = held - t_max + (est + spent * g if widened else -est)
         y0_new = limits - o.load_bound * load_0 - t_max - tau0 - est0
-        y0_held = held - tau0 - est0
+        y0_held = held - tau0 + (est0 + spent * g0 if widened else -est0)
         if np.any(bound_new <= 0) or np.any(y0_new <= 0) or np.any(bound_held <= 0):
             raise ValueError(f"the tightenings leave nothing of the relay limits: "
                              f"{self._describe()}; lower load_bound or tightening")
@@ -423,8 +454,8 @@ class CoupledSet:
         # kappa in the ellipsoid's norm (which only decreases along e^{At})
         # (plus 1 %, as the load gains: a step of exactly that size lands the
         # equilibrium on the held level's boundary, where rounding would decide)
-        spent = 1.01 * (o.load_bound - o.recheck_bound)
-        drift = spent * float(np.max(np.abs(dw_p)))
+        dw_peak = float(np.max(np.abs(dw_p)))      # equilibrium frequency per pu of load
+        drift = spent * dw_peak
         hold = held - t_max                                # room at each level, per output
         shapes = ("lyapunov", "sdp") if o.terminal == "auto" else (o.terminal,)
         for shape in shapes:
@@ -470,8 +501,17 @@ class CoupledSet:
                    f"recheck_bound (0: no such absorption)" if spent > 0 else "")
             raise ValueError(f"the tightenings leave no room for the terminal set: "
                              f"{self._describe()}; lower load_bound or tightening{why}")
-        rho = {"new": r - err_t, "held": r + spent * kappa - err_t}
-        half = {"new": h - err_eq, "held": h + drift - err_eq}
+        # the held level: theorem C's less the noise's part ("sharp"), or C''s
+        # ("widened"), which adds the error at the re-check (noise err_*, loads g_*)
+        # to the error at the certification (the loads before it: g_*; the noise:
+        # in the new level) and the loads' move after it (kappa, dw_peak)
+        if widened:
+            rho = {"new": r - err_t, "held": r + err_t + spent * max(2 * g_t, kappa + g_t)}
+            half = {"new": h - err_eq,
+                    "held": h + err_eq + spent * max(2 * g_eq, dw_peak + g_eq)}
+        else:
+            rho = {"new": r - err_t, "held": r + spent * kappa - err_t}
+            half = {"new": h - err_eq, "held": h + drift - err_eq}
         if rho["new"] <= 0 or half["new"] <= 0:
             raise ValueError(f"the estimate's error moves the state at the horizon by "
                              f"{err_t:.3g} in the terminal set's norm (radius {r:.3g}) and the "
