@@ -13,7 +13,7 @@ from lfc.experiments import scenarios
 from lfc.repro import runner
 from lfc.repro.cli import main
 from lfc.repro.manifest import CHAPTERS, chapter
-from lfc.repro.notebook import record_claims
+from lfc.repro.notebook import check_parameters, record_claims
 from lfc.simulate import METRIC_KEYS
 
 PANELS = {"tutorial": {"no_scc", "scc"}, "fig4": {"a", "b", "c", "d"},
@@ -440,6 +440,19 @@ def test_a_notebook_run_directly_fails_fast_on_an_unknown_parameter(tmp_path):
     assert len(ran) == 1        # the error is in the first cell after the parameters
 
 
+def test_a_mistyped_parameter_says_how_to_give_it_with_papermill():
+    """papermill's ``-p name "[0.2, 3.0]"`` passes the list as a string: the error
+    says to give it with ``-y`` (a new reader hit the earlier hint, which said -p);
+    a number given with ``-r`` (a string) is told to use ``-p``."""
+    history = ["amplitudes = [0.1, 0.5]\ncheck_claims = True",
+               "# Parameters\namplitudes = \"[0.2, 3.0]\"\ncheck_claims = \"False\"\n"]
+    with pytest.raises(ValueError, match=re.escape('-y "amplitudes: [0.1, 0.5]"')):
+        check_parameters({"In": history, "amplitudes": "[0.2, 3.0]", "check_claims": True})
+    with pytest.raises(ValueError, match="with -p \\(typed\\), not -r"):
+        check_parameters({"In": history, "amplitudes": [0.2], "check_claims": "False"})
+    check_parameters({"In": history, "amplitudes": [0.2, 3.0], "check_claims": False})
+
+
 def test_reproduce_rejects_unknown_figure():
     with pytest.raises(ValueError, match="unknown figure"):
         runner.reproduce(["fig9"])
@@ -548,6 +561,9 @@ def test_the_claims_verdict_explains_a_documented_deviation_on_the_page(tmp_path
     shown = verdict._repr_markdown_().splitlines()      # the page: a markdown table
     assert shown[0] == "| claim | reproduced | why not |" and len(shown) == 4
     assert shown[3] == "| another | yes |  |" and repr(verdict) == "\n".join(shown)
+    # unchecked (other parameters, --quick): it does not say "reproduced"
+    unchecked = record_claims(tmp_path, {"another": True}, check=False).table
+    assert unchecked.columns.tolist() == ["claim", "holds in this run (not checked)", "why not"]
 
 
 @pytest.mark.long(65)
