@@ -168,6 +168,26 @@ def test_the_widened_held_level_flags_nothing_within_the_bound_and_misses_what_l
     assert outside_runs(grid, widened, beyond) == (80, 4, 0)
 
 
+@pytest.mark.parametrize("family", ["sinusoid on P_c", "square on ω_ref", "bias on ACE",
+                                    "ramp on ω_ref"])
+def test_the_red_teams_coordinated_search_on_the_estimate_trips_nothing_and_flags_nothing(family):
+    """The red team's coordinated search (both areas at once, maximizing the worst
+    relay severity; ``tests/test_coupled.py`` runs it on the exact state) against
+    the coupled filters on their grid Kalman estimate, with noise, at both held
+    levels: its worst attack stays inside every relay (severity 0.29–0.66 when
+    measured) and no filter flags ``outside`` at it."""
+    from lfc.experiments.redteam import coordinated_search
+    grid = MultiAreaParams.two_area()
+    for level in ("sharp", "widened"):
+        filt = CoupledFilter(grid, RELAYS, noise_std=NOISE, held_level=level)
+        found = coordinated_search(grid, {0: filt, 1: filt}, family, duration=20.0,
+                                   maxiter=2, popsize=4, jobs=1,
+                                   scenario={**ESTIMATE, "anti_windup": True})
+        assert not found["tripped"] and found["severity"] < 1.0 and found["outside"] == 0
+    with pytest.raises(ValueError, match="scenario must not set attacks"):
+        coordinated_search(grid, {0: filt, 1: filt}, family, scenario={"attacks": {}})
+
+
 def test_it_refuses_what_its_error_bound_does_not_cover():
     """A filter built for the estimate needs ``estimator="kalman"`` and noise no
     larger than it was built for; one built for the exact state refuses an

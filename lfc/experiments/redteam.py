@@ -338,7 +338,8 @@ def freeform_search(params: LFCParams, defender: Defender, *, amplitude: float =
 def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
                        relays: RelaySettings | None = None, duration: float = 20.0,
                        seed: int = 0, maxiter: int = 5, popsize: int = 5,
-                       jobs: int = 2, control_period: float = 0.01) -> dict:
+                       jobs: int = 2, control_period: float = 0.01,
+                       scenario: dict | None = None) -> dict:
     """Worst coordinated attack of one family (``MULTI_FAMILIES``) on an
     interconnected grid: differential evolution over the family's parameters in
     every area at once (an area may get amplitude 0: single-area attacks are
@@ -346,15 +347,22 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
 
     ``filters`` is :func:`lfc.simulate`'s ``{area: "paper" |
     "certified" | "coupled" | filter}``, built once for the controller period
-    ``control_period`` (s).  Returns the family, the worst severity, the area it
-    is reached in, whether any area tripped, the attack per area (text) and its
-    parameters ``theta`` (:func:`coordinated_attacks` rebuilds it).
+    ``control_period`` (s).  ``scenario``: more keys of every run (e.g.
+    ``{"estimator": "kalman", "noise_std": (1e-4, 1e-3)}``; not ``attacks`` or
+    ``filters``).  Returns the family, the worst severity, the area it is reached
+    in, whether any area tripped, the samples any filter flagged ``outside``
+    (summed over the areas), the attack per area (text) and its parameters
+    ``theta`` (:func:`coordinated_attacks` rebuilds it).
     """
     if not isinstance(params, MultiAreaParams):
         raise ParameterTypeError(f"params must be a MultiAreaParams (a grid; one area: "
                                  f"family_search), got {type(params).__name__}")
     filters = check_area_keys(filters, params.n_areas, "filters")
     check_choice("family", family, tuple(MULTI_FAMILIES))
+    scenario = {} if scenario is None else dict(scenario)
+    if {"attacks", "filters"} & set(scenario):
+        raise ValueError(f"scenario must not set attacks or filters (the search sets them), "
+                         f"got keys {sorted(scenario)}")
     check_search(duration=duration, seed=seed, maxiter=maxiter, popsize=popsize, relays=relays)
     check_count("jobs", jobs)
     relays = relays_or_default(relays)
@@ -365,7 +373,7 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
 
     def run(thetas: np.ndarray) -> pd.DataFrame:
         out = simulate_many(
-            params, [{"attacks": coordinated_attacks(family, th, n, duration),
+            params, [{**scenario, "attacks": coordinated_attacks(family, th, n, duration),
                       "filters": filters} for th in thetas.T],
             duration=duration, relays=relays, jobs=jobs, control_period=control_period)
         out["severity"] = severity(out, relays)
@@ -380,7 +388,7 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
     best = run(sol.x[:, None])
     worst = best.loc[best.severity.idxmax()]
     return {"search": family, "severity": float(worst.severity), "area": int(worst.area),
-            "tripped": bool(best.tripped.any()),
+            "tripped": bool(best.tripped.any()), "outside": int(best.outside.sum()),
             "attack": "; ".join(f"area {a}: " + ", ".join(f"{v:.4g}" for v in
                                                            sol.x[k * a:k * (a + 1)])
                                 for a in range(n)),
