@@ -19,7 +19,7 @@ import time
 import numpy as np
 
 from lfc import LFCParams, RelaySettings, SafetyFilter, Square, simulate
-from lfc.filters.certified import clear_built_sets
+from lfc.filters.base import clear_built
 
 REPEAT = 5
 NOISE = (1e-4, 1e-3)
@@ -44,7 +44,7 @@ def build(options: dict, repeat: int) -> tuple[SafetyFilter, float]:
     """The filter and the median time to build it (s)."""
     times = []
     for _ in range(repeat):
-        clear_built_sets()          # time the construction, not the process's shared set
+        clear_built()               # time the construction, not the process's shared set
         t0 = time.perf_counter()
         filt = SafetyFilter(LFCParams(), RelaySettings(), method="certified", **options)
         times.append(time.perf_counter() - t0)

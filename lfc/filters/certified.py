@@ -102,7 +102,6 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections import OrderedDict
 from dataclasses import dataclass, fields, replace
 from numbers import Real
 from typing import ClassVar
@@ -117,8 +116,8 @@ from lfc._validate import (check_nonnegative, check_pair, check_positive, check_
                            is_sequence)
 from lfc.estimation import KalmanFilter, check_noise_std, measurement_std
 from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, OUTSIDE, Backend, Options,
-                              applied_flags, check_limits, given, hold_invalid, option,
-                              valid_input)
+                              applied_flags, built_once, check_limits, given, hold_invalid,
+                              option, valid_input)
 from lfc.filters.responses import L1_HORIZON, load_gains, period_step_gain
 from lfc.model import LFCParams, lfc_matrices, output_matrix
 from lfc.relays import RelaySettings
@@ -694,34 +693,6 @@ def _check_stable(plants: list[LFCParams]) -> None:
                              f"(eigenvalue real part {growth:.3g} 1/s >= 0); narrow the box")
 
 
-_SETS: OrderedDict[str, CertifiedSet] = OrderedDict()   # built_set's, most recent last
-SETS_KEPT = 16
-
-
-def built_set(params: LFCParams, relays: RelaySettings,
-              options: CertifiedOptions) -> CertifiedSet:
-    """``CertifiedSet(params, relays, **options.as_dict())``, built once per process
-    for the same arguments and shared by the filters that ask for it (the last
-    ``SETS_KEPT``).  The key is the arguments' ``repr`` (every value exactly: a
-    float's ``repr`` round-trips); a set is never changed after construction, and
-    each filter packs its own data array from it.  A robust set takes seconds to
-    build, and notebooks and tests build the same one again (measured: 65 of 148 s
-    of construction repeated in six test files)."""
-    key = repr((type(params), params, relays, options))
-    if key in _SETS:
-        _SETS.move_to_end(key)
-        return _SETS[key]
-    cert = _SETS[key] = CertifiedSet(params, relays, **options.as_dict())
-    while len(_SETS) > SETS_KEPT:
-        _SETS.popitem(last=False)
-    return cert
-
-
-def clear_built_sets() -> None:
-    """Forget every set :func:`built_set` keeps (a benchmark timing construction)."""
-    _SETS.clear()
-
-
 class CertifiedFilter(Backend):
     """The certified filter (method ``"certified"``), options
     :class:`CertifiedOptions`: clip to the certified interval of
@@ -732,7 +703,8 @@ class CertifiedFilter(Backend):
     def __init__(self, params: LFCParams, relays: RelaySettings,
                  options: CertifiedOptions) -> None:
         super().__init__(params, relays, options)
-        self.cert = built_set(params, relays, options)
+        self.cert = built_once(lambda: CertifiedSet(params, relays, **options.as_dict()),
+                               CertifiedSet, params, relays, options)
         self.data = self.cert.pack()
 
     def reason(self, flags: int) -> str:

@@ -97,7 +97,8 @@ from scipy.stats import chi2
 from lfc._jit import inline, jit, maxnum, minnum
 from lfc._validate import check_nonnegative, check_positive, check_range
 from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, MAX_ABS_INPUT, OUTSIDE,
-                              applied_flags, check_limits, hold_invalid, valid_input)
+                              applied_flags, built_once, check_limits, hold_invalid,
+                              valid_input)
 from lfc.filters.certified import (NUMERIC_MARGIN, _curvature_gains, _expm_at,
                                    _intersample, _merge_intervals, _pair, grid, rate_bound)
 from lfc.filters.responses import load_gains, period_step_gain
@@ -841,8 +842,9 @@ class CoupledFilter:
         self.params, self.relays = params, relays
         # the model holds within its command range: the commands stay there
         options = {"u_min": -params.command_range, "u_max": params.command_range, **options}
-        self.options = CoupledOptions(**options)
-        self.cert = CoupledSet(params, relays, self.options)
+        self.options = o = CoupledOptions(**options)
+        self.cert = built_once(lambda: CoupledSet(params, relays, o), CoupledSet, params,
+                               relays, o)
         self.data, self.kalman = self.cert.data, self.cert.kalman
 
     def __repr__(self) -> str:
