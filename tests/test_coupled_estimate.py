@@ -19,6 +19,7 @@ from scipy.stats import chi2
 
 import lfc
 from lfc import MultiAreaParams
+from lfc.filters.base import OUTSIDE
 from lfc.filters.coupled import CoupledFilter, CoupledOptions, _load_error_steps
 from lfc.simulate_multiarea import simulate_grid_linear, simulate_grid_table
 from test_coupled import RELAYS, THREE, battery, ieee39, kundur
@@ -223,9 +224,10 @@ def test_the_red_teams_coordinated_search_on_the_estimate_trips_nothing_and_flag
 def test_it_refuses_what_its_error_bound_does_not_cover():
     """A filter built for the estimate needs ``estimator="kalman"`` and noise no
     larger than it was built for; one built for the exact state refuses an
-    estimator; ``confidence`` without ``noise_std`` is an error; the string
-    ``"coupled"`` with ``estimator="kalman"`` builds the estimating filter for the
-    simulation's noise."""
+    estimator; ``confidence`` or ``held_level`` without ``noise_std`` is an error;
+    the string ``"coupled"`` with ``estimator="kalman"`` builds the estimating filter
+    for the simulation's noise.  An ``outside`` flag's reason says what it may mean
+    at the filter's held level."""
     grid = MultiAreaParams.two_area()
     filt = CoupledFilter(grid, RELAYS, noise_std=NOISE)
     both = {0: filt, 1: filt}
@@ -236,6 +238,9 @@ def test_it_refuses_what_its_error_bound_does_not_cover():
                      noise_std=(2e-4, 1e-3))
     with pytest.raises(ValueError, match="confidence"):
         CoupledOptions(confidence=0.99)
+    assert "not yet seen a load step" in filt.reason(OUTSIDE)       # what outside may mean
+    assert "noise left its ellipsoid" in WIDENED.reason(OUTSIDE)
+    assert "not yet seen" not in CoupledFilter(grid, RELAYS).reason(OUTSIDE)
     with pytest.raises(ValueError, match="held_level='widened' has no effect"):
         CoupledOptions(held_level="widened")
     with pytest.raises(ValueError, match="held_level must be one of"):

@@ -912,8 +912,14 @@ class CoupledFilter:
         if flags & INVALID:
             return "invalid input (non-finite or beyond 1e6); last certified command held"
         if flags & OUTSIDE:
-            return ("no command is certified and the vector held fails its own check (the "
-                    "loads moved by more than the bounds); last certified command held")
+            why = {None: "the loads moved by more than the bounds",
+                   "sharp": "the loads moved by more than the bounds, or the estimator has "
+                            "not yet seen a load step",
+                   "widened": "the loads moved by more than the bounds, or the estimate's "
+                              "noise left its ellipsoid"}
+            level = None if self.kalman is None else self.options.held_level
+            return (f"no command is certified and the vector held fails its own check "
+                    f"({why[level]}); last certified command held")
         if flags & ACTIVE and not flags & BIND_CERT:
             return "no new command is certified from this state; last certified command held"
         return "command clipped to the certified interval" if flags & ACTIVE else ""
