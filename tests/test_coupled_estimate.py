@@ -172,8 +172,11 @@ def test_the_widened_held_level_flags_nothing_within_the_bound_and_misses_what_l
     assert outside_runs(grid, widened, beyond) == (80, 4, 0)
 
 
-WIDENED = CoupledFilter(MultiAreaParams.two_area(), RELAYS, noise_std=NOISE,
-                        held_level="widened")
+def widened() -> CoupledFilter:
+    """The two-area preset's filter on the estimate at the widened held level (built
+    once per process: :func:`lfc.filters.base.built_once`)."""
+    return CoupledFilter(MultiAreaParams.two_area(), RELAYS, noise_std=NOISE,
+                         held_level="widened")
 
 
 @settings(max_examples=40)
@@ -194,8 +197,9 @@ def test_any_load_path_within_the_bound_flags_nothing_at_the_widened_level(attac
     loads = {a: lfc.Step(sign * 0.05 * w / variation, start=start,
                          stop=start + width if kind == "pulse" else math.inf)
              for a, (kind, start, width, w, sign) in enumerate(paths) if kind != "none"}
+    filt = widened()
     r = lfc.simulate(MultiAreaParams.two_area(), duration=15.0, seed=seed,
-                     attacks=attacks(2)[attack], filters={0: WIDENED, 1: WIDENED},
+                     attacks=attacks(2)[attack], filters={0: filt, 1: filt},
                      loads=loads, anti_windup=True, **ESTIMATE)
     assert not r.tripped
     assert all(res.metrics()["outside"] == 0 for res in r.areas)
@@ -239,7 +243,7 @@ def test_it_refuses_what_its_error_bound_does_not_cover():
     with pytest.raises(ValueError, match="confidence"):
         CoupledOptions(confidence=0.99)
     assert "not yet seen a load step" in filt.reason(OUTSIDE)       # what outside may mean
-    assert "noise left its ellipsoid" in WIDENED.reason(OUTSIDE)
+    assert "noise left its ellipsoid" in widened().reason(OUTSIDE)
     assert "not yet seen" not in CoupledFilter(grid, RELAYS).reason(OUTSIDE)
     with pytest.raises(ValueError, match="held_level='widened' has no effect"):
         CoupledOptions(held_level="widened")

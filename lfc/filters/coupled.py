@@ -118,6 +118,12 @@ EXPORT_STD = 1e-4    # pu: the grid Kalman filter's noise model of the metered t
 
 TERMINALS = ("auto", "lyapunov", "sdp")
 HELD_LEVELS = ("sharp", "widened")
+OUTSIDE_WHY = {   # what an outside flag may mean: the exact state, then each held level
+    None: "the loads moved by more than the bounds",
+    "sharp": "the loads moved by more than the bounds, or the estimator has not yet seen a "
+             "load step",
+    "widened": "the loads moved by more than the bounds, or the estimate's noise left its "
+               "ellipsoid"}
 Q_FLOORS = (1e-12, 1e-6, 1e-5, 1e-4)   # shaped_terminal's floors on Q's eigenvalues, in turn
 
 
@@ -506,13 +512,12 @@ class CoupledSet:
         # ("widened"), which adds the error at the re-check (noise err_*, loads g_*)
         # to the error at the certification (the loads before it: g_*; the noise:
         # in the new level) and the loads' move after it (kappa, dw_peak)
-        if widened:
-            rho = {"new": r - err_t, "held": r + err_t + spent * max(2 * g_t, kappa + g_t)}
-            half = {"new": h - err_eq,
-                    "held": h + err_eq + spent * max(2 * g_eq, dw_peak + g_eq)}
-        else:
-            rho = {"new": r - err_t, "held": r + spent * kappa - err_t}
-            half = {"new": h - err_eq, "held": h + drift - err_eq}
+        rho = {"new": r - err_t,
+               "held": (r + err_t + spent * max(2 * g_t, kappa + g_t) if widened
+                        else r + spent * kappa - err_t)}
+        half = {"new": h - err_eq,
+                "held": (h + err_eq + spent * max(2 * g_eq, dw_peak + g_eq) if widened
+                         else h + drift - err_eq)}
         if rho["new"] <= 0 or half["new"] <= 0:
             raise ValueError(f"the estimate's error moves the state at the horizon by "
                              f"{err_t:.3g} in the terminal set's norm (radius {r:.3g}) and the "
@@ -912,14 +917,9 @@ class CoupledFilter:
         if flags & INVALID:
             return "invalid input (non-finite or beyond 1e6); last certified command held"
         if flags & OUTSIDE:
-            why = {None: "the loads moved by more than the bounds",
-                   "sharp": "the loads moved by more than the bounds, or the estimator has "
-                            "not yet seen a load step",
-                   "widened": "the loads moved by more than the bounds, or the estimate's "
-                              "noise left its ellipsoid"}
             level = None if self.kalman is None else self.options.held_level
             return (f"no command is certified and the vector held fails its own check "
-                    f"({why[level]}); last certified command held")
+                    f"({OUTSIDE_WHY[level]}); last certified command held")
         if flags & ACTIVE and not flags & BIND_CERT:
             return "no new command is certified from this state; last certified command held"
         return "command clipped to the certified interval" if flags & ACTIVE else ""
