@@ -13,7 +13,9 @@ Run: python bench/bench_certified.py
 
 from __future__ import annotations
 
+import os
 import statistics
+import tempfile
 import time
 
 import numpy as np
@@ -52,6 +54,7 @@ def build(options: dict, repeat: int) -> tuple[SafetyFilter, float]:
 
 
 def main() -> None:
+    os.environ["LFC_CACHE_DIR"] = tempfile.mkdtemp(prefix="lfc-bench-")   # nothing stored read
     p = LFCParams()
     SafetyFilter(p, method="certified", noise_std=NOISE)   # imports (python-control) once
     run = simulate(p, duration=20.0, pc_attack=Square(1.0, 0.3, start=1.0),

@@ -43,6 +43,7 @@ from lfc.engine import METRICS, Scenarios
 from lfc.estimation import STD
 from lfc.filters import (CONFLICT_RULES, METHODS, OUTSIDE_RULES, PREDICTIONS, SafetyFilter,
                          options_of)
+from lfc.filters.base import built_once
 from lfc.filters.base import given as holds_value
 from lfc.model import LFCParams
 from lfc.relays import RELAY_NAMES, RelaySettings, relays_or_default
@@ -353,25 +354,18 @@ def _plant(params: LFCParams, row: dict) -> LFCParams:
     return replace(params, **own) if own else params
 
 
-_BUILT: dict = {}   # filters built in this process, by setting (a certified box takes seconds)
-
-
 def _filter(params: LFCParams, relays: RelaySettings, row: dict,
             control_period: float) -> SafetyFilter | None:
     """The row's filter (None without SCC): one object per distinct setting and
-    process, kept for later chunks (:func:`_execute` builds them before the
-    workers fork, so they inherit them)."""
+    process (:func:`~lfc.filters.base.built_once`), kept for later chunks
+    (:func:`_execute` builds them before the workers fork, so they inherit them)."""
     if pd.isna(row["alpha"]):
         return None
     method = row.get("method", "paper")
     Options = options_of(method)
     options = {**Options.from_columns(row), **Options.for_period(control_period)}
-    key = (params, relays, method, tuple(sorted(options.items())))
-    if key not in _BUILT:
-        if len(_BUILT) >= 64:
-            _BUILT.clear()
-        _BUILT[key] = SafetyFilter(params, relays, method=method, **options)
-    return _BUILT[key]
+    return built_once(lambda: SafetyFilter(params, relays, method=method, **options),
+                      "SafetyFilter", params, relays, method, sorted(options.items()))
 
 
 def simulate_table(params: LFCParams, scenarios: pd.DataFrame, *, duration: float,

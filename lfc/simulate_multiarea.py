@@ -59,7 +59,6 @@ filter's error bound does not cover the tie-line flow's inter-area swing
 
 from __future__ import annotations
 
-import functools
 import json
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -72,6 +71,7 @@ from lfc._validate import check_count, check_index
 from lfc.batch import metrics_frame
 from lfc.engine import METRICS, Scenarios, check_area_keys, sample_signal
 from lfc.filters import SafetyFilter
+from lfc.filters.base import built_once
 from lfc.filters.contract import contract_design
 from lfc.filters.coupled import CoupledFilter
 from lfc.model import STATES
@@ -140,13 +140,14 @@ def area_filter(params: MultiAreaParams, area: int,
                      f"got {kind!r}")
 
 
-@functools.lru_cache(maxsize=8)
 def coupled_filter(params: MultiAreaParams, relays: RelaySettings, control_period: float,
                    noise_std: tuple[float, float] | None = None) -> CoupledFilter:
     """The coupled certificate of ``params`` with its default options and
-    ``noise_std`` (built once per grid, relays, period and noise: its
-    construction solves linear programs)."""
-    return CoupledFilter(params, relays, control_period=control_period, noise_std=noise_std)
+    ``noise_std``: one object per grid, relays, period and noise
+    (:func:`~lfc.filters.base.built_once`), the one every area's filter must be."""
+    return built_once(lambda: CoupledFilter(params, relays, control_period=control_period,
+                                            noise_std=noise_std),
+                      "coupled_filter", params, relays, control_period, noise_std)
 
 
 def _kalman(estimator: object) -> bool:

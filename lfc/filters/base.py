@@ -12,15 +12,22 @@ compiled code the engine runs; one state is a batch of one.
 
 from __future__ import annotations
 
+import base64
+import contextlib
 import difflib
 import math
+import pickle
+import sys
+import time
 from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import MISSING, dataclass, field, fields
+from pathlib import Path
 from typing import Any, ClassVar, NamedTuple, TypeVar, get_type_hints
 
 import numpy as np
 
+from lfc._files import cache_folder, content_key, read_stored, write_stored
 from lfc._jit import inline
 from lfc._validate import ParameterTypeError, check_number, conforms, kind
 from lfc.model import LFCParams
@@ -288,25 +295,77 @@ def check_choice(name: str, value: str, allowed: tuple[str, ...]) -> None:
 
 T = TypeVar("T")
 _BUILT: OrderedDict[str, Any] = OrderedDict()     # built_once's, most recent last
-BUILT_KEPT = 16
+BUILT_KEPT = 64
+STORE_AFTER = 0.5   # s: with ``store``, a value that took this long to build is kept on disk
+STORE_LIMIT = 512e6   # bytes: beyond, the least recently written stored values are removed
 
 
-def built_once(make: Callable[[], T], *key: object) -> T:
+def built_once(make: Callable[[], T], *key: object, store: bool = False) -> T:
     """``make()``, built once per process for the same ``key`` and shared (the last
-    ``BUILT_KEPT`` kept): a certificate's rows take seconds to build (a robust set,
-    a coupled grid's), and notebooks and tests ask for the same one again
-    (measured: 65 of 148 s of certified-set construction and 25 of 67 s of
-    coupled-set construction repeated in the tests).  The key is ``key``'s
-    ``repr`` (every value exactly: a float's ``repr`` round-trips), so pass every
-    argument ``make`` reads; what ``make`` returns must never be changed after."""
-    text = repr(key)
+    ``BUILT_KEPT`` kept; the same object each time): a certificate's rows take
+    seconds to build (a robust set, a coupled grid's), and notebooks and tests ask
+    for the same one again (measured: 65 of 148 s of certified-set construction
+    and 25 of 67 s of coupled-set construction repeated in the tests).  The key is
+    ``key``'s ``repr`` (every value exactly: a float's ``repr`` round-trips, an
+    array's is printed whole with every digit), so pass every argument ``make``
+    reads; what ``make`` returns must never be changed after.
+
+    With ``store``, a value that took at least ``STORE_AFTER`` seconds to build is
+    also kept on disk (pickled, in ``$LFC_CACHE_DIR/built/``, under a key of
+    ``key`` and of the code, the environment, the Python version and the BLAS
+    kernel: :func:`lfc._files.content_key`; a damaged file is detected by its
+    SHA-256 and built again; the folder is kept under ``STORE_LIMIT`` bytes), so
+    that another process reads it instead of building it: a test worker, a
+    notebook's kernel, a papermill sweep's next run.
+    """
+    with np.printoptions(threshold=sys.maxsize, floatmode="unique"):
+        text = repr(key)          # every element of an array, every digit
     if text in _BUILT:
         _BUILT.move_to_end(text)
         return _BUILT[text]
-    made = _BUILT[text] = make()
+    made = _BUILT[text] = stored(make, text) if store else make()
     while len(_BUILT) > BUILT_KEPT:
         _BUILT.popitem(last=False)
     return made
+
+
+def stored(make: Callable[[], T], text: str) -> T:
+    """``make()`` read from the disk (:func:`built_once`'s ``store``), or built
+    and written there if it took at least ``STORE_AFTER`` seconds."""
+    path = cache_folder() / "built" / f"{content_key('built_once', text)}.json"
+    made = read_stored(path, _unpickle)
+    if made is None:
+        start = time.perf_counter()
+        made = make()
+        if time.perf_counter() - start >= STORE_AFTER:
+            write_stored(path, made, _pickle)
+            _prune(path.parent)
+    return made
+
+
+def _prune(folder: Path) -> None:
+    """Remove the least recently written files of ``folder`` until it holds at most
+    ``STORE_LIMIT`` bytes (files of earlier code are never read again)."""
+    files = []
+    for f in folder.glob("*.json"):
+        with contextlib.suppress(OSError):        # another process removed it meanwhile
+            files.append((f.stat().st_mtime, f.stat().st_size, f))
+    total = 0
+    for _, size, f in sorted(files, reverse=True):
+        total += size
+        if total > STORE_LIMIT:
+            f.unlink(missing_ok=True)
+
+
+def _pickle(value: object) -> dict:
+    return {"pickle": base64.b64encode(pickle.dumps(value, protocol=5)).decode("ascii")}
+
+
+def _unpickle(payload: dict) -> object:
+    try:
+        return pickle.loads(base64.b64decode(payload["pickle"]))
+    except (pickle.UnpicklingError, EOFError, AttributeError, ImportError) as err:
+        raise ValueError(f"cannot unpickle: {err}") from err
 
 
 def clear_built() -> None:

@@ -704,7 +704,7 @@ class CertifiedFilter(Backend):
                  options: CertifiedOptions) -> None:
         super().__init__(params, relays, options)
         self.cert = built_once(lambda: CertifiedSet(params, relays, **options.as_dict()),
-                               CertifiedSet, params, relays, options)
+                               CertifiedSet, params, relays, options, store=True)
         self.data = self.cert.pack()
 
     def reason(self, flags: int) -> str:

@@ -67,7 +67,6 @@ measured there, not proven.
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 from typing import ClassVar
@@ -78,7 +77,7 @@ from scipy.optimize import linprog
 from lfc._jit import inline
 from lfc._validate import check_nonnegative, check_positive
 from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, MAX_ABS_INPUT, Backend, Options,
-                              given, hold_invalid, option, valid_input)
+                              built_once, given, hold_invalid, option, valid_input)
 from lfc.filters.certified import NUMERIC_MARGIN
 from lfc.filters.coupled import held_grid, output_rows
 from lfc.filters.responses import load_gains, rate_gains
@@ -215,7 +214,6 @@ def _largest_of_smaller(first: np.ndarray, first_offset: np.ndarray, second: np.
     return np.minimum(_largest(np.where(by_first, first, second), room - offset, upper), upper)
 
 
-@functools.lru_cache(maxsize=16)
 def contract_design(params: MultiAreaParams | LFCParams, relays: RelaySettings, *,
                     control_period: float = 0.01, load_bound: float = 0.06,
                     margin: float = 0.0) -> Contract:
@@ -245,6 +243,14 @@ def contract_design(params: MultiAreaParams | LFCParams, relays: RelaySettings, 
         command within any box can drive it away), or the loads alone take a
         whole limit.
     """
+    return built_once(lambda: _design(params, relays, control_period, load_bound, margin),
+                      "contract_design", params, relays, control_period, load_bound,
+                      margin)
+
+
+def _design(params: MultiAreaParams | LFCParams, relays: RelaySettings, control_period: float,
+            load_bound: float, margin: float) -> Contract:
+    """:func:`contract_design`, built (shared by every caller, its arrays read-only)."""
     check_positive("control_period", control_period)
     check_nonnegative("load_bound", load_bound)
     if not 0.0 <= margin < 1.0:
@@ -287,7 +293,7 @@ def contract_design(params: MultiAreaParams | LFCParams, relays: RelaySettings, 
     arrays = (half, rate, box_gain, settled[0::2], moving[0::2], moving[1::2],
               rocof_box_gain, load, limits, bound)
     for a in arrays:
-        a.setflags(write=False)   # shared by every caller (cached)
+        a.setflags(write=False)   # shared by every caller (built_once)
     return Contract(*arrays, float(load_bound), float(control_period), float(reach))
 
 

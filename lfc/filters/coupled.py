@@ -849,7 +849,7 @@ class CoupledFilter:
         options = {"u_min": -params.command_range, "u_max": params.command_range, **options}
         self.options = o = CoupledOptions(**options)
         self.cert = built_once(lambda: CoupledSet(params, relays, o), CoupledSet, params,
-                               relays, o)
+                               relays, o, store=True)
         self.data, self.kalman = self.cert.data, self.cert.kalman
 
     def __repr__(self) -> str:
