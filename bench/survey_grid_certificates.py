@@ -20,6 +20,16 @@ Prints, from one run:
   attacks (the coordinated 0.6 pu sinusoid, a -2.5 pu ACE bias, each with a
   -0.05 pu step in area 1 at 3.37 s): ANDES' peak frequency and ROCOF over the
   fitted model's, and over the proven bound, the largest over the areas;
+* with ``--held-levels``: the coupled certificate on the grid Kalman estimate at
+  its two held levels (``docs/coupled-certificate.md``, "With estimates"), on the
+  two-area preset and on Kundur as fitted to ANDES, under the battery's five
+  attacks with anti-windup: at the widened level, load paths of total variation
+  exactly ``load_bound - recheck_bound`` = 0.05 pu beyond those the tests run —
+  ±0.025 pu pulses of 0.01, 0.1, 0.3 and 1 s, ramps of 0.05 pu over 0.1 and 1 s,
+  0.025 pu steps in both areas 0–1 s apart, and ±0.05 pu steps under ten more
+  noise seeds (theorem C' says: no ``outside``, no trip); then steps beyond the
+  bound (0.1 and 0.2 pu on two areas; 0.06, 0.1 and 0.2 pu on Kundur) at both
+  levels: runs with a trip, runs flagged ``outside``, trips never flagged;
 * with ``--andes``: each fitted model's command range (the ladder of
   ``lfc.testbed.grid_fit.validated_range``), then the red team's coordinated
   search (every family of ``MULTI_FAMILIES``, both areas at once) against the
@@ -32,7 +42,7 @@ Prints, from one run:
 
 ``docs/coupled-certificate.md`` quotes its numbers.
 
-Run: python bench/survey_grid_certificates.py [--andes] [--chain10]
+Run: python bench/survey_grid_certificates.py [--andes] [--chain10] [--held-levels]
 """
 
 from __future__ import annotations
@@ -44,6 +54,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
 import lfc
 from lfc.experiments.redteam import MULTI_FAMILIES, coordinated_attacks, coordinated_search
@@ -51,6 +62,8 @@ from lfc.experiments.redteam import MULTI_FAMILIES, coordinated_attacks, coordin
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from test_contract import RELAYS, worst_commands  # noqa: E402  (the tests', not copies)
 from test_coupled import LIGHT, THREE, battery, kundur, ring  # noqa: E402
+from test_coupled_baseline import runs_of  # noqa: E402
+from test_coupled_estimate import NOISE, on_the_estimate  # noqa: E402
 
 
 def grids() -> None:
@@ -167,17 +180,62 @@ def andes() -> None:
                       f"{r.tripped} | {outside} | {peak} |", flush=True)
 
 
+def held_levels() -> None:
+    from lfc.filters.coupled import CoupledFilter
+    instants = np.round(np.arange(1.0, 6.0, 0.5) + 0.001, 6)[::3]   # s, 1 ms after a sample
+    print("| grid | level | load paths | runs | with a trip | flagged outside | trips never "
+          "flagged | time |")
+    print("|---|---|---|---|---|---|---|---|")
+    for name, grid, horizon in (("two-area", lfc.MultiAreaParams.two_area(), 8.0),
+                                ("Kundur", kundur(), 12.0)):
+        level = {held: CoupledFilter(grid, RELAYS, noise_std=NOISE, horizon=horizon,
+                                     held_level=held) for held in ("sharp", "widened")}
+        areas, signs = range(grid.n_areas), (1, -1)
+        within = {
+            "±0.025 pu pulses of 0.01–1 s": [
+                {a: lfc.Step(s * 0.025, start=t, stop=t + w)} for a in areas
+                for t in instants for s in signs for w in (0.01, 0.1, 0.3, 1.0)],
+            "0.05 pu ramps over 0.1 and 1 s": [
+                {a: lfc.Ramp(s * 0.05 / w, start=t, stop=t + w)} for a in areas
+                for t in instants for s in signs for w in (0.1, 1.0)],
+            "0.025 pu steps in both areas, 0–1 s apart": [
+                {0: lfc.Step(s * 0.025, start=t), 1: lfc.Step(s2 * 0.025, start=t + gap)}
+                for t in instants for s in signs for s2 in signs for gap in (0.0, 0.1, 1.0)],
+        }
+        cases = [("widened", paths, loads, (0,)) for paths, loads in within.items()]
+        cases.append(("widened", "±0.05 pu steps under noise seeds 1–10",
+                      [{a: lfc.Step(s * 0.05, start=t)} for a in areas for t in instants[:2]
+                       for s in signs], range(1, 11)))
+        beyond = (0.1, 0.2) if name == "two-area" else (0.06, 0.1, 0.2)
+        cases += [(held, f"±{size:g} pu steps (beyond the bound)",
+                   [{a: lfc.Step(s * size, start=t)} for a in areas for t in instants
+                    for s in signs], (0,)) for size in beyond for held in ("sharp", "widened")]
+        for held, paths, loads, seeds in cases:
+            t0 = time.perf_counter()
+            runs = pd.concat([runs_of(grid, on_the_estimate(grid, level[held], loads, seed))
+                              for seed in seeds])
+            flagged = runs.outside > 0
+            print(f"| {name} | {held} | {paths} | {len(runs)} | {int(runs.tripped.sum())} | "
+                  f"{int(flagged.sum())} | {int((runs.tripped & ~flagged).sum())} | "
+                  f"{time.perf_counter() - t0:.0f} s |", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--andes", action="store_true",
                         help="also the red team's winners replayed on ANDES (about 20 min)")
     parser.add_argument("--chain10", action="store_true",
                         help="also both certificates on a chain of 10 areas (about 25 min)")
+    parser.add_argument("--held-levels", action="store_true",
+                        help="also the coupled certificate's held levels on the estimate "
+                             "(about 10 min)")
     args = parser.parse_args()
     grids()
     if args.chain10:
         chain10()
     tightness()
+    if args.held_levels:
+        held_levels()
     if args.andes:
         mismatch()
         andes()

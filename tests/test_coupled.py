@@ -17,8 +17,8 @@ import lfc
 from lfc import MultiAreaParams
 from lfc.filters.base import INVALID, OUTSIDE
 from lfc.filters.coupled import CoupledFilter, CoupledOptions, reduced_model
-from lfc.simulate_multiarea import simulate_grid_linear, simulate_grid_table
-from test_coupled_baseline import INSTANTS, STEP, attacks
+from lfc.simulate_multiarea import simulate_grid_linear
+from test_coupled_baseline import INSTANTS, STEP, attacks, tally
 
 RELAYS = lfc.RelaySettings()
 THREE = MultiAreaParams.three_area()
@@ -48,14 +48,11 @@ def battery(grid: MultiAreaParams, filt, *, instants=INSTANTS, signs=(1, -1),
     battery x every area x ``instants`` x ``signs`` of a ``step`` pu load step
     (``extra``: more keys of every scenario, e.g. ``estimator``)."""
     every = {a: filt for a in range(grid.n_areas)}
-    scenarios = [{"attacks": attack, "loads": {area: lfc.Step(sign * step, start=t)},
-                  "filters": every, "anti_windup": aw, **extra}
-                 for attack, area, t, sign, aw in itertools.product(
-                     attacks(grid.n_areas).values(), range(grid.n_areas), instants, signs,
-                     anti_windup)]
-    table = simulate_grid_table(grid, scenarios, duration=20.0)
-    runs = table.groupby("scenario").agg(tripped=("tripped", "any"), outside=("outside", "sum"))
-    return len(runs), int(runs.tripped.sum()), int((runs.outside > 0).sum())
+    return tally(grid, [{"attacks": attack, "loads": {area: lfc.Step(sign * step, start=t)},
+                         "filters": every, "anti_windup": aw, **extra}
+                        for attack, area, t, sign, aw in itertools.product(
+                            attacks(grid.n_areas).values(), range(grid.n_areas), instants,
+                            signs, anti_windup)])
 
 
 @pytest.mark.parametrize("kind", ["coupled", "contract"])

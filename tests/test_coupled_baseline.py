@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import itertools
 
+import pandas as pd
 import pytest
 
 import lfc
@@ -31,16 +32,26 @@ def attacks(n: int) -> dict:
                                    for a in every}}
 
 
+def runs_of(grid: MultiAreaParams, scenarios: list[dict]) -> pd.DataFrame:
+    """One row per scenario of ``scenarios`` (20 s each): ``tripped`` (any area)
+    and ``outside`` (samples flagged, every area)."""
+    table = simulate_grid_table(grid, scenarios, duration=20.0)
+    return table.groupby("scenario").agg(tripped=("tripped", "any"), outside=("outside", "sum"))
+
+
+def tally(grid: MultiAreaParams, scenarios: list[dict]) -> tuple[int, int, int]:
+    """``(runs, runs with a trip, runs with an outside flag)`` of ``scenarios``."""
+    runs = runs_of(grid, scenarios)
+    return len(runs), int(runs.tripped.sum()), int((runs.outside > 0).sum())
+
+
 def battery(grid: MultiAreaParams, filters: dict) -> tuple[int, int, int]:
     """``(runs, runs with a trip, runs with an outside flag)`` over the battery."""
-    scenarios = [{"attacks": attack, "loads": {area: lfc.Step(sign * STEP, start=t)},
-                  "filters": filters, "anti_windup": aw}
-                 for attack, area, t, sign, aw in itertools.product(
-                     attacks(grid.n_areas).values(), range(grid.n_areas), INSTANTS, (1, -1),
-                     (False, True))]
-    table = simulate_grid_table(grid, scenarios, duration=20.0)
-    runs = table.groupby("scenario").agg(tripped=("tripped", "any"), outside=("outside", "sum"))
-    return len(runs), int(runs.tripped.sum()), int((runs.outside > 0).sum())
+    return tally(grid, [{"attacks": attack, "loads": {area: lfc.Step(sign * STEP, start=t)},
+                         "filters": filters, "anti_windup": aw}
+                        for attack, area, t, sign, aw in itertools.product(
+                            attacks(grid.n_areas).values(), range(grid.n_areas), INSTANTS,
+                            (1, -1), (False, True))])
 
 
 def steps_filters(grid: MultiAreaParams, bound: float, recheck: bool = False,

@@ -304,8 +304,7 @@ def built_once(make: Callable[[], T], *key: object, store: bool = False) -> T:
     """``make()``, built once per process for the same ``key`` and shared (the last
     ``BUILT_KEPT`` kept; the same object each time): a certificate's rows take
     seconds to build (a robust set, a coupled grid's), and notebooks and tests ask
-    for the same one again (measured: 65 of 148 s of certified-set construction
-    and 25 of 67 s of coupled-set construction repeated in the tests).  The key is
+    for the same one again.  The key is
     ``key``'s ``repr`` (every value exactly: a float's ``repr`` round-trips, an
     array's is printed whole with every digit), so pass every argument ``make``
     reads; what ``make`` returns must never be changed after.
