@@ -16,7 +16,12 @@ the numpy engine of commit ``REFERENCE`` (checked out with ``git worktree``,
 timed in a subprocess on ``REFERENCE_N`` scenarios), the machine's measured
 multiply-add throughput and the fraction of it each run reaches (``limit``).
 
-Run: python bench/bench_batch.py
+With ``--fill``, instead: how full a block must be for lanes to pay (one core,
+960 scenarios of 8 s, k scenarios per plant, k = 1 ... 16; a block pays for all
+its lanes): lanes (every block, ``LANE_MIN_FILL`` 1) against one at a time, the
+best of two, per filter: the measurement behind ``lfc.engine.LANE_MIN_FILL``.
+
+Run: python bench/bench_batch.py [--fill]
 """
 
 from __future__ import annotations
@@ -161,7 +166,31 @@ def _cpu_ghz() -> float:
     return 3.0
 
 
+def fill() -> None:
+    """Lanes against one at a time (one core) as the scenarios per plant grow."""
+    from lfc import engine
+    from lfc.batch import run_chunk
+    from lfc.relays import RelaySettings
+    n, rng = 960, np.random.default_rng(0)
+    print(f"{'filter':<12}{'per plant':>10}{'one (s)':>9}{'lanes (s)':>10}{'one/lanes':>10}")
+    for method in ("none", "paper", "certified"):
+        for k in (1, 2, 4, 6, 8, 12, 16):
+            table = scenarios(n, method).assign(M=np.repeat(rng.uniform(3.2, 4.8, n // k), k))
+            best = {}
+            for lanes in (False, True) * 2:
+                engine.LANE_MIN_FILL = 1
+                run_chunk(LFCParams(), table.iloc[:4], 8.0, RelaySettings(), DT, 0.01, lanes)
+                t0 = time.perf_counter()
+                run_chunk(LFCParams(), table, 8.0, RelaySettings(), DT, 0.01, lanes)
+                best[lanes] = min(best.get(lanes, np.inf), time.perf_counter() - t0)
+            print(f"{method:<12}{k:>10}{best[False]:>9.3f}{best[True]:>10.3f}"
+                  f"{best[False] / best[True]:>10.2f}", flush=True)
+
+
 def main() -> None:
+    if "--fill" in sys.argv[1:]:
+        fill()
+        return
     runs = {}
     print(f"{'run':<62}{'wall (s)':>10}{'steps/s':>12}{'lanes/one':>10}")
     for method, n, goal in (("none", 10_000, None), ("paper", 10_000, 4e8),

@@ -404,6 +404,8 @@ def _lowest_bit(bits: int) -> int:
 
 # -- lanes: one area's scenarios, LANES at a time, the inner loop over scenarios --------
 LANES = 16      # scenarios advanced together: the inner loop's trip count, known to LLVM
+LANE_MIN_FILL = 10  # scenarios of one plant a block needs to run in lanes (the break-even,
+#                     measured by bench/bench_batch.py --fill); fewer run one at a time
 # the rows of a block's lane array z (row r of lane l at z[r * LANES + l])
 (Z_X, Z_START, Z_DUE, Z_PEAK_DW, Z_PEAK_RC, Z_FIRST_T, Z_FIRST_R, Z_ALIVE, Z_U, Z_LOAD,
  Z_ON, Z_OFF, Z_END) = (0, 5, 8, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20)
@@ -823,9 +825,11 @@ class Scenarios:
 
         With ``lanes`` (untraced single-area runs), the scenarios that allow it
         (no relay noise, a step load or none, not the coupled filter) run
-        ``LANES`` at a time in SIMD registers (:func:`_run_lanes`), the others
-        one at a time (:func:`_run`, the reference); the metrics are the same
-        bit for bit either way.
+        ``LANES`` at a time in SIMD registers (:func:`_run_lanes`), a block per
+        plant, the others one at a time (:func:`_run`, the reference), as do a
+        plant's last few (fewer than ``LANE_MIN_FILL`` in its last block: a
+        block pays for all its lanes); the metrics are the same bit for bit
+        either way.
 
         Raises ``ValueError`` naming the scenarios whose state became non-finite
         (a signal that is finite as specified but not where it is evaluated);
@@ -856,7 +860,7 @@ class Scenarios:
             fit = ((relay_noise[:, 0, 0] == 0.0) & (relay_noise[:, 0, 1] == 0.0)
                    & np.isin(kinds[:, 0, LOAD], (STEP, NONE))
                    & ((f_i < 0) | (methods[np.maximum(f_i, 0)] != COUPLED)))
-            blocks = lane_blocks(plant_of, np.flatnonzero(fit))
+            blocks, left = lane_blocks(plant_of, np.flatnonzero(fit), LANE_MIN_FILL)
             _run_lanes(self.n_steps, self.ratio, self.dt, ad, bu, bl,
                        k_freq[0] * self.period, k_tie[0] * self.period, plant_of, blocks,
                        index, kinds, params, offsets, st, sv, noise, ka, kb, kc, kg, kdim,
@@ -865,7 +869,7 @@ class Scenarios:
                        np.zeros(N_AREA_STATES), np.zeros((LANES, MEMORY)),
                        np.zeros((LANES, 1)), np.zeros((LANES, 2, ka.shape[1])),
                        np.zeros(3), np.zeros(3), np.zeros((0, N_CTRL)), np.zeros(1))
-            rest = np.flatnonzero(~fit)
+            rest = np.sort(np.concatenate([np.flatnonzero(~fit), left]))
         if len(rest):
             rest = slice(None) if len(rest) == n else rest   # all of them: views, no copies
             m_rest, e_rest = metrics[rest], ends[rest]
@@ -891,15 +895,23 @@ class Scenarios:
         return Run(metrics, ends, tx, tc, tt)
 
 
-def lane_blocks(plant_of: np.ndarray, rows: np.ndarray) -> np.ndarray:
+def lane_blocks(plant_of: np.ndarray, rows: np.ndarray,
+                min_fill: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """``rows`` (scenario numbers) grouped by plant into blocks of ``LANES``
-    (n_blocks, LANES), the last block of each plant padded with -1."""
-    blocks = []
+    (n_blocks, LANES), the last block of each plant padded with -1 if it holds at
+    least ``min_fill`` rows; and the rows of the last blocks that hold fewer (a
+    block costs the plant's arithmetic of all ``LANES`` lanes, whatever it holds)."""
+    blocks, left = [], []
     for p in np.unique(plant_of[rows]):
         mine = rows[plant_of[rows] == p]
+        full = len(mine) - len(mine) % LANES
+        if len(mine) - full < min_fill:
+            mine, rest = mine[:full], mine[full:]
+            left.append(rest)
         pad = -len(mine) % LANES
         blocks.append(np.concatenate([mine, np.full(pad, -1)]).reshape(-1, LANES))
-    return (np.concatenate(blocks) if blocks else np.zeros((0, LANES))).astype(np.int64)
+    return ((np.concatenate(blocks) if blocks else np.zeros((0, LANES))).astype(np.int64),
+            (np.concatenate(left) if left else np.zeros(0)).astype(np.int64))
 
 
 def check_coupled(filters: dict, grid: MultiAreaParams, estimator,

@@ -7,6 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import lfc
+from lfc import engine
 from lfc.engine import LANES, Scenarios, lane_blocks
 from lfc.relays import RelaySettings
 from lfc.signals import Sinusoid, Square, Step
@@ -15,10 +16,15 @@ from test_batch import random_scenarios
 P = lfc.LFCParams()
 
 
-def both(table: pd.DataFrame, duration: float = 6.0) -> tuple[pd.DataFrame, pd.DataFrame]:
+def both(table: pd.DataFrame, duration: float = 6.0,
+         min_fill: int = 1) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The table in lanes (every block, however few it holds: ``min_fill`` 1) and one
+    at a time."""
     kw = dict(duration=duration, progress=False, executor=None, chunk_size=len(table) + 1)
-    return (lfc.simulate_many(P, table, lanes=True, **kw),
-            lfc.simulate_many(P, table, lanes=False, **kw))
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(engine, "LANE_MIN_FILL", min_fill)
+        lanes = lfc.simulate_many(P, table, lanes=True, **kw)
+    return lanes, lfc.simulate_many(P, table, lanes=False, **kw)
 
 
 def mixed(n: int, seed: int) -> pd.DataFrame:
@@ -80,11 +86,33 @@ def test_lanes_stop_at_a_trip_where_one_at_a_time_stops(stop):
 
 def test_lane_blocks_group_by_plant_and_pad():
     plant_of = np.array([0, 1, 0, 0, 1])
-    blocks = lane_blocks(plant_of, np.array([0, 1, 2, 4]))
-    assert blocks.shape == (2, LANES)
+    blocks, left = lane_blocks(plant_of, np.array([0, 1, 2, 4]))
+    assert blocks.shape == (2, LANES) and len(left) == 0
     assert blocks[0, :3].tolist() == [0, 2, -1] and blocks[1, :3].tolist() == [1, 4, -1]
     assert sorted(blocks[blocks >= 0].tolist()) == [0, 1, 2, 4]
     for row in blocks:
         used = row[row >= 0]
         assert len(set(plant_of[used])) == 1 and (row[len(used):] == -1).all()
-    assert lane_blocks(plant_of, np.array([], np.int64)).shape == (0, LANES)
+    blocks, left = lane_blocks(plant_of, np.array([], np.int64))
+    assert blocks.shape == (0, LANES) and len(left) == 0
+
+
+def test_a_plants_last_few_scenarios_run_one_at_a_time():
+    """A block pays for all its lanes: a plant's last block runs in lanes only with
+    at least ``min_fill`` scenarios, the rest one at a time (the same numbers)."""
+    plant_of = np.repeat([0, 1, 2], [LANES + 3, 9, 1])
+    blocks, left = lane_blocks(plant_of, np.arange(len(plant_of)), min_fill=8)
+    assert sorted(left.tolist()) == [LANES, LANES + 1, LANES + 2, LANES + 12]
+    assert blocks.shape == (2, LANES) and (blocks[1] >= 0).sum() == 9
+    assert sorted(np.concatenate([blocks[blocks >= 0], left]).tolist()) == list(
+        range(len(plant_of)))
+
+
+def test_one_plant_per_row_runs_one_at_a_time_with_the_same_numbers():
+    """A search over a plant box gives every row its own plant: at the default
+    ``LANE_MIN_FILL`` such rows run one at a time (in lanes they took twice as
+    long: ``bench/bench_batch.py --fill``), a plant with a full block in lanes."""
+    table = mixed(40, seed=5)
+    table["M"] = np.where(np.arange(40) < 20, P.M, np.linspace(3.0, 5.0, 40))
+    lanes, scalar = both(table, duration=3.0, min_fill=engine.LANE_MIN_FILL)
+    pd.testing.assert_frame_equal(lanes, scalar, check_exact=True)
