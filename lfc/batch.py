@@ -315,11 +315,13 @@ def run_chunk(params: LFCParams, scenarios: pd.DataFrame, duration: float,
     check_timing(duration, dt, control_period)
     sc = Scenarios(params, duration=duration, dt=dt, control_period=control_period,
                    relays=relays)
+    built: dict = {}     # this chunk's filters by their options (built_once keys by repr: slower)
     for row in scenarios.to_dict("records"):
         signal = scenario_signal(row, duration)
         channel = row["channel"]
         noise = tuple(float(row.get(c, 0.0)) for c in NOISE)
-        sc.add(plant=_plant(params, row), filters={0: _filter(params, relays, row, control_period)},
+        sc.add(plant=_plant(params, row),
+               filters={0: _filter(params, relays, row, control_period, built)},
                estimator="kalman" if any(noise) else None, noise_std=noise,
                seed=int(row.get("seed", 0)), relay_noise=bool(row.get("relay_noise", False)),
                anti_windup=bool(row.get("anti_windup", False)),
@@ -354,18 +356,25 @@ def _plant(params: LFCParams, row: dict) -> LFCParams:
     return replace(params, **own) if own else params
 
 
-def _filter(params: LFCParams, relays: RelaySettings, row: dict,
-            control_period: float) -> SafetyFilter | None:
+def _filter(params: LFCParams, relays: RelaySettings, row: dict, control_period: float,
+            built: dict | None = None) -> SafetyFilter | None:
     """The row's filter (None without SCC): one object per distinct setting and
     process (:func:`~lfc.filters.base.built_once`), kept for later chunks
-    (:func:`_execute` builds them before the workers fork, so they inherit them)."""
+    (:func:`_execute` builds them before the workers fork, so they inherit them);
+    ``built`` holds those of one chunk (same ``params`` and ``relays``) by their options."""
     if pd.isna(row["alpha"]):
         return None
     method = row.get("method", "paper")
     Options = options_of(method)
     options = {**Options.from_columns(row), **Options.for_period(control_period)}
-    return built_once(lambda: SafetyFilter(params, relays, method=method, **options),
-                      "SafetyFilter", params, relays, method, sorted(options.items()))
+    key = (method, tuple(sorted(options.items())))
+    if built is not None and key in built:
+        return built[key]
+    filt = built_once(lambda: SafetyFilter(params, relays, method=method, **options),
+                      "SafetyFilter", params, relays, *key)
+    if built is not None:
+        built[key] = filt
+    return filt
 
 
 def simulate_table(params: LFCParams, scenarios: pd.DataFrame, *, duration: float,

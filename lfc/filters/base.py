@@ -317,8 +317,10 @@ def built_once(make: Callable[[], T], *key: object, store: bool = False) -> T:
     that another process reads it instead of building it: a test worker, a
     notebook's kernel, a papermill sweep's next run.
     """
-    with np.printoptions(threshold=sys.maxsize, floatmode="unique"):
-        text = repr(key)          # every element of an array, every digit
+    text = repr(key)
+    if "array(" in text:          # every element of an array, every digit
+        with np.printoptions(threshold=sys.maxsize, floatmode="unique"):
+            text = repr(key)
     if text in _BUILT:
         _BUILT.move_to_end(text)
         return _BUILT[text]
