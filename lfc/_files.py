@@ -14,6 +14,7 @@ import sys
 import uuid
 import warnings
 from collections.abc import Callable, Iterator
+from importlib import metadata
 from pathlib import Path
 from typing import Any
 
@@ -76,8 +77,10 @@ def code_digest(*packages: str) -> str:
 def content_key(*parts: object) -> str:
     """SHA-256 of ``parts`` (bytes as they are, anything else as sorted JSON) and
     of what every result here depends on besides its inputs: every source file of
-    the package (:func:`code_digest`), the pinned environment (``environment.txt``),
-    the Python version and the BLAS kernel asked for (``OPENBLAS_CORETYPE``)."""
+    the package (:func:`code_digest`), the pinned environment (``environment.txt``)
+    and the numerical packages installed (:func:`installed`; a machine may hold
+    others than the pins), the Python version and the BLAS kernel asked for
+    (``OPENBLAS_CORETYPE``)."""
     digest = hashlib.sha256()
     for part in parts:
         digest.update(part if isinstance(part, bytes)
@@ -85,8 +88,21 @@ def content_key(*parts: object) -> str:
     digest.update(code_digest("*").encode())
     env = Path(__file__).resolve().parents[1] / "environment.txt"
     digest.update(env.read_bytes() if env.exists() else b"")
-    digest.update(f"{sys.version}|{os.environ.get('OPENBLAS_CORETYPE', '')}".encode())
+    digest.update(f"{sys.version}|{os.environ.get('OPENBLAS_CORETYPE', '')}|"
+                  f"{installed()}".encode())
     return digest.hexdigest()
+
+
+@functools.lru_cache(maxsize=None)
+def installed() -> str:
+    """The installed versions of the packages stored results are computed with."""
+    versions = []
+    for name in ("numpy", "scipy", "numba", "andes"):
+        try:
+            versions.append(f"{name} {metadata.version(name)}")
+        except metadata.PackageNotFoundError:
+            versions.append(f"{name} absent")
+    return ", ".join(versions)
 
 
 def cache_folder() -> Path:

@@ -83,3 +83,14 @@ def test_the_stored_folder_keeps_the_newest_within_its_limit(cache, monkeypatch)
     lfc.SafetyFilter(lfc.LFCParams(), **{**ROBUST, "margin": 0.1})
     (newest,) = cache.glob("*.json")
     assert newest != older
+
+
+def test_a_value_that_cannot_be_stored_warns_and_is_still_returned(cache):
+    with pytest.warns(RuntimeWarning, match="cannot store"):
+        made = base.built_once(lambda: (lambda: 1.0), "unpicklable", store=True)
+    assert made() == 1.0 and not list(cache.glob("*.json"))
+
+
+def test_the_key_names_the_installed_numerical_packages():
+    from lfc._files import installed
+    assert all(name in installed() for name in ("numpy", "scipy", "numba"))

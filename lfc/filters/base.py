@@ -19,6 +19,7 @@ import math
 import pickle
 import sys
 import time
+import warnings
 from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import MISSING, dataclass, field, fields
@@ -339,7 +340,11 @@ def stored(make: Callable[[], T], text: str) -> T:
         start = time.perf_counter()
         made = make()
         if time.perf_counter() - start >= STORE_AFTER:
-            write_stored(path, made, _pickle)
+            try:
+                write_stored(path, made, _pickle)
+            except (pickle.PicklingError, TypeError, AttributeError) as err:
+                warnings.warn(f"cannot store {type(made).__name__} ({err}); it will be built "
+                              f"again in the next process", RuntimeWarning, stacklevel=3)
             _prune(path.parent)
     return made
 
