@@ -796,11 +796,15 @@ class Scenarios:
                                  f"would go unflagged; build it with the same thresholds")
             if scc is not None:
                 scc.check_period(self.period)
-            kf = (scc.kalman if isinstance(scc, CoupledFilter)
-                  else make_estimator(estimator, area, self.period, noise_std))
-            e_i = -1 if kf is None else self._kf.index(
-                id(kf) if not isinstance(estimator, str) or isinstance(scc, CoupledFilter)
-                else (a, tuple(noise_std)), lambda: kf)
+            if isinstance(scc, CoupledFilter):
+                kf = scc.kalman
+                e_i = -1 if kf is None else self._kf.index(id(kf), lambda: kf)
+            elif isinstance(estimator, str) and estimator == "kalman":   # one per area and noise
+                e_i = self._kf.index((a, tuple(noise_std)), lambda: make_estimator(
+                    estimator, area, self.period, noise_std))   # its gain takes milliseconds
+            else:
+                kf = make_estimator(estimator, area, self.period, noise_std)
+                e_i = -1 if kf is None else self._kf.index(id(kf), lambda: kf)
             if noisy:
                 self._noise.append(make_noise(noise_std, self.n_ctrl, seed if a == 0
                                               else (seed, a)))
