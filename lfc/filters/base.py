@@ -308,7 +308,9 @@ def built_once(make: Callable[[], T], *key: object, store: bool = False) -> T:
     for the same one again.  The key is
     ``key``'s ``repr`` (every value exactly: a float's ``repr`` round-trips, an
     array's is printed whole with every digit), so pass every argument ``make``
-    reads; what ``make`` returns must never be changed after.
+    reads (a module constant changed at run time is not in it: build such a value
+    directly, as ``tests/test_proven_recovery.py`` does); what ``make`` returns
+    must never be changed after.
 
     With ``store``, a value that took at least ``STORE_AFTER`` seconds to build is
     also kept on disk (pickled, in ``$LFC_CACHE_DIR/built/``, under a key of
