@@ -4,13 +4,16 @@ written by other code never matches)."""
 
 from __future__ import annotations
 
+import base64
 import contextlib
 import fcntl
 import functools
 import hashlib
 import json
 import os
+import pickle
 import sys
+import time
 import uuid
 import warnings
 from collections.abc import Callable, Iterator
@@ -160,6 +163,52 @@ def cached(path: Path, compute: Callable[[], Any], encode: Callable[[Any], dict]
             value = compute()
             write_stored(path, value, encode)
     return value
+
+
+def kept(path: Path, make: Callable[[], Any], after: float, limit: float) -> Any:
+    """``make()`` read from ``path`` (pickled, :func:`read_stored`), or built and
+    written there if building took at least ``after`` seconds (a value that cannot
+    be pickled warns and is not written); then the oldest files of the folder are
+    removed until it holds at most ``limit`` bytes.  Pickles: ``path``'s folder
+    must be writable by its owner alone."""
+    made = read_stored(path, _unpickle)
+    if made is None:
+        start = time.perf_counter()
+        made = make()
+        if time.perf_counter() - start >= after:
+            try:
+                write_stored(path, made, _pickle)
+            except (pickle.PicklingError, TypeError, AttributeError) as err:
+                warnings.warn(f"cannot store {type(made).__name__} ({err}); it will be built "
+                              f"again in the next process", RuntimeWarning, stacklevel=4)
+            _prune(path.parent, limit)
+    return made
+
+
+def _prune(folder: Path, limit: float) -> None:
+    """Remove the least recently written files of ``folder`` until it holds at most
+    ``limit`` bytes (files of earlier code are never read again)."""
+    files = []
+    for f in folder.glob("*.json"):
+        with contextlib.suppress(OSError):        # another process removed it meanwhile
+            stat = f.stat()
+            files.append((stat.st_mtime, stat.st_size, f))
+    total = 0
+    for _, size, f in sorted(files, reverse=True):
+        total += size
+        if total > limit:
+            f.unlink(missing_ok=True)
+
+
+def _pickle(value: object) -> dict:
+    return {"pickle": base64.b64encode(pickle.dumps(value, protocol=5)).decode("ascii")}
+
+
+def _unpickle(payload: dict) -> object:
+    try:
+        return pickle.loads(base64.b64decode(payload["pickle"]))
+    except (pickle.UnpicklingError, EOFError, AttributeError, ImportError) as err:
+        raise ValueError(f"cannot unpickle: {err}") from err
 
 
 @contextlib.contextmanager

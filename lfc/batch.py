@@ -357,7 +357,7 @@ def _plant(params: LFCParams, row: dict) -> LFCParams:
 
 
 def _filter(params: LFCParams, relays: RelaySettings, row: dict, control_period: float,
-            built: dict | None = None) -> SafetyFilter | None:
+            built: dict) -> SafetyFilter | None:
     """The row's filter (None without SCC): one object per distinct setting and
     process (:func:`~lfc.filters.base.built_once`), kept for later chunks
     (:func:`_execute` builds them before the workers fork, so they inherit them);
@@ -368,13 +368,10 @@ def _filter(params: LFCParams, relays: RelaySettings, row: dict, control_period:
     Options = options_of(method)
     options = {**Options.from_columns(row), **Options.for_period(control_period)}
     key = (method, tuple(sorted(options.items())))
-    if built is not None and key in built:
-        return built[key]
-    filt = built_once(lambda: SafetyFilter(params, relays, method=method, **options),
-                      "SafetyFilter", params, relays, *key)
-    if built is not None:
-        built[key] = filt
-    return filt
+    if key not in built:
+        built[key] = built_once(lambda: SafetyFilter(params, relays, method=method, **options),
+                                "SafetyFilter", params, relays, *key)
+    return built[key]
 
 
 def simulate_table(params: LFCParams, scenarios: pd.DataFrame, *, duration: float,
@@ -508,7 +505,7 @@ def _execute(todo: list, args: tuple, executor: Executor | None):
         for _, chunk, _ in todo:
             for row in chunk.drop_duplicates(
                     subset=[c for c in FILTER_COLUMNS if c in chunk]).to_dict("records"):
-                _filter(params, relays, row, cp)
+                _filter(params, relays, row, cp, {})
     pool = executor or ProcessPoolExecutor(max_workers=os.cpu_count() or 1)
     wait, futures = True, {}
     try:

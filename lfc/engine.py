@@ -910,8 +910,8 @@ def lane_blocks(plant_of: np.ndarray, rows: np.ndarray,
         mine = rows[plant_of[rows] == p]
         full = len(mine) - len(mine) % LANES
         if len(mine) - full < min_fill:
-            mine, rest = mine[:full], mine[full:]
-            left.append(rest)
+            left.append(mine[full:])
+            mine = mine[:full]
         pad = -len(mine) % LANES
         blocks.append(np.concatenate([mine, np.full(pad, -1)]).reshape(-1, LANES))
     return ((np.concatenate(blocks) if blocks else np.zeros((0, LANES))).astype(np.int64),

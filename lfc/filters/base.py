@@ -12,23 +12,17 @@ compiled code the engine runs; one state is a batch of one.
 
 from __future__ import annotations
 
-import base64
-import contextlib
 import difflib
 import math
-import pickle
 import sys
-import time
-import warnings
 from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import MISSING, dataclass, field, fields
-from pathlib import Path
 from typing import Any, ClassVar, NamedTuple, TypeVar, get_type_hints
 
 import numpy as np
 
-from lfc._files import cache_folder, content_key, read_stored, write_stored
+from lfc._files import cache_folder, content_key, kept
 from lfc._jit import inline
 from lfc._validate import ParameterTypeError, check_number, conforms, kind
 from lfc.model import LFCParams
@@ -336,44 +330,8 @@ def built_once(make: Callable[[], T], *key: object, store: bool = False) -> T:
 def stored(make: Callable[[], T], text: str) -> T:
     """``make()`` read from the disk (:func:`built_once`'s ``store``), or built
     and written there if it took at least ``STORE_AFTER`` seconds."""
-    path = cache_folder() / "built" / f"{content_key('built_once', text)}.json"
-    made = read_stored(path, _unpickle)
-    if made is None:
-        start = time.perf_counter()
-        made = make()
-        if time.perf_counter() - start >= STORE_AFTER:
-            try:
-                write_stored(path, made, _pickle)
-            except (pickle.PicklingError, TypeError, AttributeError) as err:
-                warnings.warn(f"cannot store {type(made).__name__} ({err}); it will be built "
-                              f"again in the next process", RuntimeWarning, stacklevel=3)
-            _prune(path.parent)
-    return made
-
-
-def _prune(folder: Path) -> None:
-    """Remove the least recently written files of ``folder`` until it holds at most
-    ``STORE_LIMIT`` bytes (files of earlier code are never read again)."""
-    files = []
-    for f in folder.glob("*.json"):
-        with contextlib.suppress(OSError):        # another process removed it meanwhile
-            files.append((f.stat().st_mtime, f.stat().st_size, f))
-    total = 0
-    for _, size, f in sorted(files, reverse=True):
-        total += size
-        if total > STORE_LIMIT:
-            f.unlink(missing_ok=True)
-
-
-def _pickle(value: object) -> dict:
-    return {"pickle": base64.b64encode(pickle.dumps(value, protocol=5)).decode("ascii")}
-
-
-def _unpickle(payload: dict) -> object:
-    try:
-        return pickle.loads(base64.b64decode(payload["pickle"]))
-    except (pickle.UnpicklingError, EOFError, AttributeError, ImportError) as err:
-        raise ValueError(f"cannot unpickle: {err}") from err
+    return kept(cache_folder() / "built" / f"{content_key('built_once', text)}.json", make,
+                STORE_AFTER, STORE_LIMIT)
 
 
 def clear_built() -> None:
