@@ -100,10 +100,11 @@ def test_lane_blocks_group_by_plant_and_pad():
 def test_a_plants_last_few_scenarios_run_one_at_a_time():
     """A block pays for all its lanes: a plant's last block runs in lanes only with
     at least ``min_fill`` scenarios, the rest one at a time (the same numbers)."""
-    plant_of = np.repeat([0, 1, 2], [LANES + 3, 9, 1])
+    plant_of = np.repeat([0, 1, 2, 3, 4], [LANES + 3, 9, 1, 8, 7])   # 8 and 7: the corner
     blocks, left = lane_blocks(plant_of, np.arange(len(plant_of)), min_fill=8)
-    assert sorted(left.tolist()) == [LANES, LANES + 1, LANES + 2, LANES + 12]
-    assert blocks.shape == (2, LANES) and (blocks[1] >= 0).sum() == 9
+    assert sorted(left.tolist()) == [LANES, LANES + 1, LANES + 2, LANES + 12] + list(
+        range(LANES + 21, LANES + 28))
+    assert blocks.shape == (3, LANES) and [(b >= 0).sum() for b in blocks] == [LANES, 9, 8]
     assert sorted(np.concatenate([blocks[blocks >= 0], left]).tolist()) == list(
         range(len(plant_of)))
 
