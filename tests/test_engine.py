@@ -102,7 +102,7 @@ def test_bad_plant_and_noise_columns_name_the_column(column, value, message):
 
 def test_import_lfc_loads_no_heavy_or_optional_package():
     code = ("import sys, lfc; print(sorted(m for m in ('cvxpy', 'matplotlib', 'andes', "
-            "'papermill', 'dask', 'distributed') if m in sys.modules))")
+            "'papermill', 'dask', 'distributed', 'scipy.stats', 'scipy.optimize') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)
     assert out.stdout.strip() == "[]"

@@ -108,8 +108,6 @@ from typing import ClassVar
 
 import numpy as np
 from scipy.linalg import expm, solve_continuous_lyapunov
-from scipy.optimize import linprog
-from scipy.stats import chi2, norm
 
 from lfc._jit import inline, maxnum, minnum
 from lfc._validate import (check_nonnegative, check_pair, check_positive, check_range,
@@ -344,6 +342,8 @@ class CertifiedSet:
         _check_stable(self.plants)
         cov = (_estimate_covariance(params, o.noise_std, o.control_period)
                if o.noise_std is not None else None)
+        from scipy.stats import chi2, norm   # here: scipy.stats takes 0.3 s to import
+
         self.kappa = math.sqrt(chi2.ppf(o.confidence, len(cov))) if cov is not None else 0.0
         limits = np.array([relays.F, relays.rocof_limit]) * (1 - o.margin) * (1 - NUMERIC_MARGIN)
         if o.trips_per_hour is not None:
@@ -572,6 +572,8 @@ def rate_bound(M: np.ndarray, a_ub: np.ndarray, b_ub: np.ndarray,
     """``V_i = max |M_i v|`` over ``a_ub v <= b_ub`` within ``bounds`` (two linear
     programs per row of ``M``): the rate of change ``x' = M v`` of a state and
     input ``v`` over a polytope."""
+    from scipy.optimize import linprog    # here: 0.14 s to import, only a build needs it
+
     V = np.zeros(len(M))
     for i in range(len(M)):
         for sign in (1.0, -1.0):
@@ -656,9 +658,16 @@ def largest_load_bound(params: LFCParams, relays: RelaySettings, *, tol: float =
     filter with ``options`` can be built: bisection on construction, from 0 (a
     ``ValueError`` if even that cannot be built) up to where the load alone takes a
     whole limit at some plant.  ``tol`` must lie in [1e-9, 1] pu (finer is below
-    what the construction resolves, and the bisection would not end)."""
+    what the construction resolves, and the bisection would not end).  Ten or so
+    constructions: the answer is kept (:func:`built_once`, on disk too)."""
     check_range("tol", tol, 1e-9, 1.0, closed=True)
+    return built_once(lambda: _bisect_load_bound(params, relays, tol, options),
+                      "largest_load_bound", params, relays, tol, sorted(options.items()),
+                      store=True)
 
+
+def _bisect_load_bound(params: LFCParams, relays: RelaySettings, tol: float,
+                       options: dict) -> float:
     def builds(bound: float) -> bool:
         try:
             CertifiedSet(params, relays, **{**options, "load_bound": bound})

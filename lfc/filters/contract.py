@@ -72,7 +72,6 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
-from scipy.optimize import linprog
 
 from lfc._jit import inline
 from lfc._validate import check_nonnegative, check_positive
@@ -170,6 +169,8 @@ def _largest(gains: np.ndarray, room: np.ndarray, upper: float) -> np.ndarray:
     """The largest ``x`` in ``[0, upper]`` with ``gains @ x <= room``: the
     smallest entry as large as possible, then the sum at that smallest (two
     linear programs)."""
+    from scipy.optimize import linprog    # here: 0.14 s to import, only a design needs it
+
     n = gains.shape[1]
     first = linprog(np.r_[np.zeros(n), -1.0],
                     A_ub=np.block([[gains, np.zeros((len(gains), 1))],

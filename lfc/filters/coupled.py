@@ -92,7 +92,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import expm, solve_continuous_lyapunov
-from scipy.stats import chi2
 
 from lfc._jit import inline, jit, maxnum, minnum
 from lfc._validate import check_nonnegative, check_positive, check_range
@@ -411,6 +410,8 @@ class CoupledSet:
         self.kalman = (GridKalman(params, o.control_period, o.noise_std)
                        if o.noise_std is not None else None)
         cov = self.kalman.posterior_covariance if self.kalman is not None else None
+        from scipy.stats import chi2         # here: scipy.stats takes 0.3 s to import
+
         kappa_e = math.sqrt(chi2.ppf(o.confidence, len(cov))) if cov is not None else 0.0
         est, est0 = np.zeros(tau.shape), np.zeros(len(limits))
         load_rows, load_0 = np.broadcast_to(load, tau.shape), load
