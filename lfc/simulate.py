@@ -269,13 +269,16 @@ def result(trace: pd.DataFrame, tc: np.ndarray, ctrl: np.ndarray, trips: pd.Data
     a = c[alarm]
     fa = flags[alarm]
     explain = scc.reason if scc is not None else (lambda f: "")
+    distinct, which = np.unique(fa, return_inverse=True)     # a few flag values, many rows
+    binding = np.array([";".join(binding_names(f)) if f & ACTIVE else "" for f in distinct],
+                       dtype=object)
+    reason = np.array([explain(int(f)) for f in distinct], dtype=object)
     alarms = pd.DataFrame({
-        "t": tc[:n][alarm], "u_ref": a["u_ref"], "u": a["u"],
-        "binding": [";".join(binding_names(f)) if f & ACTIVE else "" for f in fa],
+        "t": tc[:n][alarm], "u_ref": a["u_ref"], "u": a["u"], "binding": binding[which],
         "h_freq": a["h_freq"], "h_rocof": a["h_rocof"], "margin_freq": a["margin_freq"],
         "margin_rocof": a["margin_rocof"], "infeasible": (fa & INFEASIBLE) != 0,
         "outside": (fa & OUTSIDE) != 0, "invalid_input": (fa & INVALID) != 0,
-        "solver_error": (fa & SOLVER_ERROR) != 0, "reason": [explain(int(f)) for f in fa]},
+        "solver_error": (fa & SOLVER_ERROR) != 0, "reason": reason[which]},
         columns=list(ALARM_COLUMNS)).reset_index(drop=True)
     return SimResult(trace, controls, trips, alarms, settings,
                      line_trips if line_trips is not None else
