@@ -36,14 +36,16 @@ from lfc._pool import completed
 from lfc.experiments.scenarios import ALL_PLANTS
 from lfc.repro.manifest import CHAPTERS
 from lfc.repro.notebook import check_plant, check_type, figure_name, markdown_table
-from lfc.testbed.loop import CLOCK_ENV
 from lfc.warmup import compile_kernels
 
 ROOT = Path(__file__).resolve().parents[2]
 NOTEBOOKS_DIR = ROOT / "notebooks"
 FIGURES = {c.name: c.notebook for c in CHAPTERS}          # name -> notebook
 FIGURE_PLANTS = {c.name: c.plants for c in CHAPTERS}      # name -> plants it runs on
-LONGEST_FIRST = ("redteam", "surface")   # submitted first, so the pool is never idle at the end
+# submitted first, longest first, so the pool is never idle at the end (the order of
+# their measured times: a full run, and --quick's short runs on 2 jobs, 2026-11-27)
+LONGEST_FIRST = ("redteam", "surface")
+QUICK_LONGEST_FIRST = ("redteam", "wire", "coupled", "surface", "multiarea", "fig4")
 POSITIVE = {"duration", "Ts", "control_period", "alpha", "alphas", "dt"}
 
 
@@ -240,6 +242,8 @@ def _run_one(name: str, notebook: Path, results: Path, parameters: dict,
         (results / CACHE_FILE).unlink(missing_ok=True)
         for stale in RESULT_FILES:  # never report a claim an earlier run computed
             (results / stale).unlink(missing_ok=True)
+        from lfc.testbed.loop import CLOCK_ENV   # here: lfc.testbed imports control, 1 s
+
         error = ""
         start = time.time_ns()
         clock = results / ANDES_CLOCK     # every ANDES run of the notebook adds a line
@@ -342,7 +346,9 @@ def reproduce(only: list[str] | None = None, plant: str = "all", jobs: int = 2,
     futures = {}
     labels = [figure_name(n, p) for n, p in runs]
     short = {c.name: c.short for c in CHAPTERS}
-    order = sorted(range(len(runs)), key=lambda i: runs[i][0] not in LONGEST_FIRST)
+    first = QUICK_LONGEST_FIRST if quick else LONGEST_FIRST
+    order = sorted(range(len(runs)), key=lambda i: first.index(runs[i][0])
+                   if runs[i][0] in first else len(first))
     for (name, run_plant), label in ((runs[i], labels[i]) for i in order):
         results = Path(build_dir).resolve() / "reproduce" / label
         params = {**(short[name] if quick else {}),
