@@ -114,9 +114,10 @@ def test_the_readmes_quick_start_runs_and_stops_the_attack(tmp_path, monkeypatch
 
 
 def test_a_reader_goes_from_the_readme_to_a_modified_attack_without_touching_figures(tmp_path):
-    """The path a newcomer takes (walked once by an agent session that had never seen
-    the project, acting as a reader: 5.5 minutes from the README to a modified attack;
-    a person's time is not measured): the README sends them to chapter
+    """The path a newcomer takes (walked twice by an agent session that had never seen
+    the project, acting as a reader: 5.5 and 2.1 minutes from the README to a modified
+    attack, the second finding the README's papermill example overwrote the default
+    run's results; a person's time is not measured): the README sends them to chapter
     01, whose "What to try next" gives a papermill command that changes the attack
     (a square wave, α = 3) after ``mkdir -p build``.  Run as written from a folder
     that holds the notebooks and no ``build/`` (as a fresh clone: papermill does not
