@@ -94,3 +94,15 @@ def test_a_value_that_cannot_be_stored_warns_and_is_still_returned(cache):
 def test_the_key_names_the_installed_numerical_packages():
     from lfc._files import installed
     assert all(name in installed() for name in ("numpy", "scipy", "numba"))
+
+
+def test_the_largest_load_bound_is_kept_and_its_options_are_in_the_key(cache, monkeypatch):
+    """``largest_load_bound`` (a bisection of constructions) is read back in a new
+    process without constructing anything; other options are another answer."""
+    p, r = lfc.LFCParams(), lfc.RelaySettings()
+    first = certified.largest_load_bound(p, r, tol=0.01, load_kind="steps")
+    base.clear_built()
+    monkeypatch.setattr(certified.CertifiedSet, "__init__", _no_build)
+    assert certified.largest_load_bound(p, r, tol=0.01, load_kind="steps") == first
+    with pytest.raises(AssertionError, match="built again"):
+        certified.largest_load_bound(p, r, tol=0.01)              # the default load_kind
