@@ -604,3 +604,24 @@ def test_a_notebook_runs_kernel_gets_the_environment_it_is_given(tmp_path):
     assert runner.andes_seconds(clock) == 3.7
     clock.write_text("1.5\n2.\n")                      # cut inside a number: left out
     assert runner.andes_seconds(clock) == 1.5
+
+
+@pytest.mark.parametrize("c", CHAPTERS, ids=lambda c: c.name)
+def test_what_to_try_next_names_the_chapters_own_parameters(c):
+    """Each bullet of "What to try next" opens with the knobs it turns
+    (backticked, before its colon); each is a parameter of the chapter's
+    parameters cell (a reader reviewing chapter 10 found it naming filter options
+    instead), except a bullet that starts "In a new cell"."""
+    import re
+    cells = json.loads((runner.NOTEBOOKS_DIR / c.notebook).read_text())["cells"]
+    cell = next(x for x in cells if "parameters" in x["metadata"].get("tags", []))
+    params = {t.id for node in ast.parse("".join(cell["source"])).body
+              for t in getattr(node, "targets", [])}
+    text = next("".join(x["source"]) for x in cells[-3:] if x["cell_type"] == "markdown"
+                and "What to try next" in "".join(x["source"]))
+    named = set()
+    for bullet in re.findall(r"^\* (.*)$", text, re.M):
+        if not bullet.lower().startswith("in a new cell"):
+            named |= set(re.findall(r"`([A-Za-z_]\w*)", bullet.split(":")[0]))
+    assert named, "no bullet names a parameter"
+    assert named <= params, sorted(named - params)
