@@ -98,7 +98,8 @@ CHAPTERS = (
              "scaling_ties": [2.0, 30.0]}),
     Chapter("wire", "11_wire.ipynb",
             "Beyond the paper: the attack on a real industrial protocol (Modbus/TCP)",
-            ("linear",), ("wire",), {"duration": 4.0, "realtime_duration": 2.0, "forensic_draws": 1}),
+            ("linear",), ("wire",),
+            {"duration": 4.0, "realtime_duration": 2.0, "forensic_draws": 1}),
 )
 
 
