@@ -625,3 +625,18 @@ def test_what_to_try_next_names_the_chapters_own_parameters(c):
             named |= set(re.findall(r"`([A-Za-z_]\w*)", bullet.split(":")[0]))
     assert named, "no bullet names a parameter"
     assert named <= params, sorted(named - params)
+
+
+def test_reproduce_submits_the_longest_runs_first_by_their_last_recorded_times(tmp_path):
+    """Recorded wall times order the runs (longest first, so the pool is not idle
+    at the end); runs without a record follow, ``LONGEST_FIRST``'s chapters first,
+    then the manifest's order; a missing or damaged record counts as none."""
+    runs = [("tutorial", "linear"), ("fig4", "linear"), ("redteam", "linear"),
+            ("multiarea", "ieee39"), ("wire", "linear")]
+    assert runner.submission_order(runs, [0.0] * 5) == [3, 2, 4, 0, 1]
+    assert runner.submission_order(runs, [5.0, 30.0, 0.0, 0.0, 20.0]) == [1, 4, 0, 3, 2]
+    (tmp_path / runner.CACHE_FILE).write_text(json.dumps({"key": "k", "seconds": 12.5}))
+    assert runner.last_seconds(tmp_path) == 12.5
+    (tmp_path / runner.CACHE_FILE).write_text('{"key": "k", "seco')
+    assert runner.last_seconds(tmp_path) == 0.0
+    assert runner.last_seconds(tmp_path / "never") == 0.0

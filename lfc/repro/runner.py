@@ -42,10 +42,10 @@ ROOT = Path(__file__).resolve().parents[2]
 NOTEBOOKS_DIR = ROOT / "notebooks"
 FIGURES = {c.name: c.notebook for c in CHAPTERS}          # name -> notebook
 FIGURE_PLANTS = {c.name: c.plants for c in CHAPTERS}      # name -> plants it runs on
-# submitted first, longest first, so the pool is never idle at the end (the order of
-# their measured times: a full run, and --quick's short runs on 2 jobs, 2026-11-27)
-LONGEST_FIRST = ("redteam", "surface")
-QUICK_LONGEST_FIRST = ("redteam", "wire", "coupled", "surface", "multiarea", "fig4")
+# Where no run has recorded its time yet: these first, in this order (their measured
+# order on 2 cores, 2026-11-27: a full run, chapter 09's ANDES runs 277-494 s, the red team
+# 172 s, chapters 10 and 11 77 and 54 s; --quick, the red team 25 s, 11 21 s, 10 16 s)
+LONGEST_FIRST = ("multiarea", "redteam", "wire", "coupled", "surface")
 POSITIVE = {"duration", "Ts", "control_period", "alpha", "alphas", "dt"}
 
 
@@ -221,6 +221,24 @@ def _from_cache(results: Path, key: str, figures: Path) -> bool:
         return False
 
 
+def last_seconds(results: Path) -> float:
+    """The wall time (s) the last successful run into ``results`` took; 0 without one."""
+    try:
+        return float(json.loads((results / CACHE_FILE).read_text())["seconds"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return 0.0
+
+
+def submission_order(runs: list[tuple[str, str]], seconds: list[float]) -> list[int]:
+    """The order in which to submit ``runs`` ((chapter, plant) pairs), so that the
+    pool is never idle at the end: longest first by their last recorded wall times
+    ``seconds`` (0: none), then the chapters of ``LONGEST_FIRST``, then the rest in
+    the manifest's order."""
+    rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
+    return sorted(range(len(runs)),
+                  key=lambda i: (-seconds[i], rank.get(runs[i][0], len(rank))))
+
+
 def _run_one(name: str, notebook: Path, results: Path, parameters: dict,
              cache: bool = True) -> RunOutcome:
     """Execute one notebook; its claims are read only from files this run wrote
@@ -262,7 +280,8 @@ def _run_one(name: str, notebook: Path, results: Path, parameters: dict,
         if ok and held:
             files = [results / f for f in (*RESULT_FILES, notebook.name)]
             record = {"key": key, "figures": _written(figures, start) if figures.is_dir()
-                      else {}, "results": {p.name: _hash(p) for p in files if p.is_file()}}
+                      else {}, "results": {p.name: _hash(p) for p in files if p.is_file()},
+                      "seconds": round(time.perf_counter() - t0, 1)}   # submission_order
             write_atomic(results / CACHE_FILE, json.dumps(record, indent=1))
     return RunOutcome(name, ok and held, time.perf_counter() - t0, claims, error, deviations,
                       andes_seconds=andes)
@@ -346,11 +365,9 @@ def reproduce(only: list[str] | None = None, plant: str = "all", jobs: int = 2,
     futures = {}
     labels = [figure_name(n, p) for n, p in runs]
     short = {c.name: c.short for c in CHAPTERS}
-    first = QUICK_LONGEST_FIRST if quick else LONGEST_FIRST
-    order = sorted(range(len(runs)), key=lambda i: first.index(runs[i][0])
-                   if runs[i][0] in first else len(first))
-    for (name, run_plant), label in ((runs[i], labels[i]) for i in order):
-        results = Path(build_dir).resolve() / "reproduce" / label
+    folders = [Path(build_dir).resolve() / "reproduce" / label for label in labels]
+    order = submission_order(runs, [last_seconds(f) for f in folders])
+    for (name, run_plant), label, results in ((runs[i], labels[i], folders[i]) for i in order):
         params = {**(short[name] if quick else {}),
                   "figures_dir": str(Path(figures_dir).resolve()), "results_dir": str(results),
                   "plant": run_plant, "check_claims": not quick}
