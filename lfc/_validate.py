@@ -22,6 +22,8 @@ class ParameterTypeError(TypeError, ValueError):
 
 
 def _is_number(value: object) -> bool:
+    if type(value) is float or type(value) is int:   # the common case, without the ABC check
+        return True
     return isinstance(value, Real) and not isinstance(value, bool)
 
 
@@ -63,7 +65,7 @@ def check_finite(name: str, value: float) -> None:
 def check_index(name: str, value: object, n: int) -> int:
     """Raise unless ``value`` is an integer (not a bool, not 0.7) in ``[0, n)``;
     return it as an int."""
-    if not isinstance(value, Integral) or isinstance(value, bool):
+    if type(value) is not int and (not isinstance(value, Integral) or isinstance(value, bool)):
         raise ParameterTypeError(f"{name} must be an integer index in [0, {n - 1}], got "
                                  f"{value!r} ({type(value).__name__})")
     if not 0 <= value < n:
@@ -116,7 +118,7 @@ def check_pair(name: str, value: object, *, positive: bool = False) -> tuple[flo
 
 def check_seed(name: str, value: object) -> int:
     """Raise unless ``value`` is an integer >= 0 (a random seed); return it."""
-    if not isinstance(value, Integral) or isinstance(value, bool):
+    if type(value) is not int and (not isinstance(value, Integral) or isinstance(value, bool)):
         raise ParameterTypeError(f"{name} must be an integer >= 0, got {value!r} "
                                  f"({type(value).__name__})")
     if value < 0:

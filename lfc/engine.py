@@ -626,6 +626,9 @@ def sample_signal(signal, t: np.ndarray, name: str) -> np.ndarray:
     return values
 
 
+_NO_SAMPLES = np.zeros(0)   # a scenario without sampled signals (empty: nothing to write)
+
+
 def scenario_signals(pc_attack, wref_attack, load, tc: np.ndarray, t: np.ndarray,
                      ace_attack=None) -> tuple:
     """One scenario's (or area's) signals as the engine reads them: ``(kinds (4,),
@@ -634,23 +637,28 @@ def scenario_signals(pc_attack, wref_attack, load, tc: np.ndarray, t: np.ndarray
     spec; any other callable is sampled on its grid (control samples ``tc`` for
     the attacks, plant samples ``t`` for the load)."""
     kinds, params = np.zeros(N_CHANNELS, np.int64), np.zeros((N_CHANNELS, N_PARAMS))
-    offsets, st, sv = np.zeros((N_CHANNELS, 2), np.int64), [], []
+    offsets, st, sv, n = np.zeros((N_CHANNELS, 2), np.int64), [], [], 0
     for c, (signal, name, grid) in enumerate(((pc_attack, "pc_attack", tc),
                                              (wref_attack, "wref_attack", tc),
                                              (load, "load", t),
                                              (ace_attack, "ace_attack", tc))):
-        if signal is None:
-            times, values = np.zeros(0), np.zeros(0)          # kind NONE: zero
-        elif isinstance(signal, Signal):
+        if signal is None:                                    # kind NONE: zero, no samples
+            offsets[c, 0] = n
+            continue
+        if isinstance(signal, Signal):
             kinds[c], params[c], times, values = signal.spec()
-            if kinds[c] != SAMPLES:
-                times, values = times[:0], values[:0]
+            if kinds[c] != SAMPLES:                           # a closed form: no samples
+                offsets[c, 0] = n
+                continue
         else:
             values = sample_signal(signal, grid, name)
             kinds[c], times = GRID, np.zeros(len(values))
-        offsets[c] = (sum(map(len, st)), len(times))
+        offsets[c] = (n, len(times))
         st.append(np.asarray(times, float))
         sv.append(np.asarray(values, float))
+        n += len(times)
+    if not st:
+        return kinds, params, offsets, _NO_SAMPLES, _NO_SAMPLES
     return kinds, params, offsets, np.concatenate(st), np.concatenate(sv)
 
 
@@ -662,9 +670,12 @@ class _Table:
         self._keys: dict = {}
 
     def index(self, key, make) -> int:
+        """The number of the item ``key`` names, made by ``make()`` the first time
+        (if ``make`` raises, nothing is kept)."""
         if key not in self._keys:
+            item = make()
             self._keys[key] = len(self.items)
-            self.items.append(make())
+            self.items.append(item)
         return self._keys[key]
 
 
@@ -782,20 +793,12 @@ class Scenarios:
             raise ValueError("relay_noise=True needs noise_std > 0 (the relays' measurement "
                              "noise)")
         check_coupled(filters, grid, estimator, noise_std)
+        f_is = [-1 if filters.get(a) is None else self._filters.index(
+            id(filters[a]), lambda: self._checked(a, filters[a])) for a in range(n)]
         row = []
         for a, area in enumerate(grid.areas):
             channels = attacks.get(a, {})
             scc = filters.get(a)
-            if scc is not None and not isinstance(scc, (SafetyFilter, CoupledFilter)):
-                raise ValueError(f"filters[{a}] must be a SafetyFilter, a CoupledFilter or "
-                                 f"None, got {scc!r}")
-            if scc is not None and not np.array_equal(scc.relays.arrays()[0],
-                                                      self.relays.arrays()[0]):
-                raise ValueError(f"the filter of area {a} keeps the safe set of {scc.relays} "
-                                 f"but the simulation's relays are {self.relays}: a trip "
-                                 f"would go unflagged; build it with the same thresholds")
-            if scc is not None:
-                scc.check_period(self.period)
             if isinstance(scc, CoupledFilter):
                 kf = scc.kalman
                 e_i = -1 if kf is None else self._kf.index(id(kf), lambda: kf)
@@ -808,11 +811,12 @@ class Scenarios:
             if noisy:
                 self._noise.append(make_noise(noise_std, self.n_ctrl, seed if a == 0
                                               else (seed, a)))
-            f_i = -1 if scc is None else self._filters.index(id(scc), lambda: scc)
+            f_i = f_is[a]
             kinds, params, offsets, st, sv = scenario_signals(
                 channels.get("pc"), channels.get("wref"), loads.get(a), self.tc, self.t,
                 channels.get("ace"))
-            self._sig.append((kinds, params, offsets + np.array([self._n_samples, 0])))
+            offsets[:, 0] += self._n_samples          # into this run's sample arrays
+            self._sig.append((kinds, params, offsets))
             self._st.append(st)
             self._sv.append(sv)
             self._n_samples += len(st)
@@ -822,6 +826,19 @@ class Scenarios:
         self._plant_of.append(p_i)
         self._relay_noise.append([(*(noise_std if relay_noise else (0.0, 0.0)), seed)] * n)
         return len(self._rows) - 1
+
+    def _checked(self, a: int, scc) -> SafetyFilter | CoupledFilter:
+        """``scc``, the filter of area ``a``, once checked: its type, its relays
+        (the simulation's) and its control period (once per distinct filter)."""
+        if not isinstance(scc, (SafetyFilter, CoupledFilter)):
+            raise ValueError(f"filters[{a}] must be a SafetyFilter, a CoupledFilter or "
+                             f"None, got {scc!r}")
+        if not np.array_equal(scc.relays.arrays()[0], self.relays.arrays()[0]):
+            raise ValueError(f"the filter of area {a} keeps the safe set of {scc.relays} "
+                             f"but the simulation's relays are {self.relays}: a trip "
+                             f"would go unflagged; build it with the same thresholds")
+        scc.check_period(self.period)
+        return scc
 
     def run(self, *, trace: bool = False, stop_on_trip: bool = False,
             lanes: bool = True) -> Run:

@@ -570,3 +570,24 @@ def test_the_sweep_helps_examples_parse_into_their_grids():
         source = "".join(next(c for c in nb["cells"] if "parameters" in c["metadata"].get(
             "tags", []))["source"])
         assert all(f"\n{name} = " in "\n" + source for name in grid)
+
+
+def test_a_refused_filter_leaves_the_scenarios_as_they_were():
+    """The relays and period of a filter are checked once, when a scenario first
+    names it, for every area before anything is kept: a refused scenario (its
+    second area's filter keeps other relays) adds no row, and the next one runs
+    as if it had never been tried."""
+    from lfc.engine import Scenarios
+    other = lfc.SafetyFilter(TWO.areas[1], lfc.RelaySettings(rocof_limit=0.02))
+    good = lfc.SafetyFilter(TWO.areas[0])
+    sc = Scenarios(TWO, duration=1.0, dt=1e-3, control_period=0.01,
+                   relays=lfc.RelaySettings())
+    with pytest.raises(ValueError, match="the filter of area 1 .* a trip would go unflagged"):
+        sc.add(filters={0: good, 1: other}, attacks={0: {"pc": lfc.Step(0.3, start=0.1)}})
+    assert sc._filters.items == [good] and sc._rows == [] and sc._sig == []
+    row = sc.add(filters={0: good}, attacks={0: {"pc": lfc.Step(0.3, start=0.1)}})
+    alone = lfc.simulate(TWO, duration=1.0, filters={0: good},
+                         attacks={0: {"pc": lfc.Step(0.3, start=0.1)}})
+    run = sc.run()
+    assert row == 0 and run.metrics.shape[0] == 1
+    assert alone.metrics()[0]["alarms"] == run.metrics[0, 0, 5] == 7   # the filter acted

@@ -13,6 +13,7 @@ compiled code the engine runs; one state is a batch of one.
 from __future__ import annotations
 
 import difflib
+import functools
 import math
 import sys
 from collections import OrderedDict
@@ -159,6 +160,12 @@ def option(default: Any, unit: str, valid: str, doc: str) -> Any:
     return field(default=default, metadata={"unit": unit, "valid": valid, "doc": doc})
 
 
+@functools.cache
+def _names(cls: type) -> frozenset[str]:
+    """The field names of the dataclass ``cls`` (read once per class)."""
+    return frozenset(f.name for f in fields(cls))
+
+
 @dataclass(frozen=True)
 class Options:
     """A filter method's options: subclasses declare each one with :func:`option`
@@ -202,8 +209,7 @@ class Options:
         """``{"control_period": control_period}`` for a method whose options depend
         on the period of its calls (s), else ``{}``: what a simulation adds to the
         options of a filter it builds."""
-        return ({"control_period": control_period}
-                if "control_period" in {f.name for f in fields(cls)} else {})
+        return {"control_period": control_period} if "control_period" in _names(cls) else {}
 
     def as_dict(self) -> dict:
         """Every option and its value (``SafetyFilter(..., **as_dict())`` rebuilds it)."""
