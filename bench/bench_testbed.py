@@ -1,31 +1,51 @@
-"""Benchmark: the ANDES testbed, with and without the SCC in the loop.
+"""Benchmark: the ANDES testbeds, with and without the filters in the loop.
 
-Prints, from one run (median of ``REPEAT``), the wall time of a 20 s Fig. 4
-scenario (0.5 pu, 1 Hz attack on P_c; 5 ms ANDES step, 10 ms control period):
+Prints, from one run (median of ``REPEAT``), the wall time of 20 s scenarios
+(5 ms ANDES step, 10 ms control period), each against ANDES alone (the same
+system, undisturbed, run by ANDES with no callback, built and initialized outside
+the timing), and for each loop the share ANDES itself took (its CPU seconds as
+the loop records them, :data:`lfc.testbed.loop.CLOCK_ENV`: building, initializing
+and integrating the case) and the rest of the wall time (the loop's own: meters,
+relays, AGC, filters, logging, the result; the difference of a wall time and a
+CPU time, so only to about 0.1 s).  A disturbed system costs ANDES more Newton
+iterations per step than an undisturbed one, so "vs alone" overstates the loop's
+cost; the last column measures it.
 
-* ANDES alone: the same system run by ANDES with no callback (the reference);
-* the testbed loop without SCC (callback, logging, relays, local controller);
-* the testbed loop with the SCC (alpha = 20, exact solver);
+* ``microgrid``: the paper's Fig. 4 scenario (a 0.5 pu, 1 Hz attack on P_c) on
+  the microgrid, the loop without SCC (callback, logging, relays, local
+  controller) and with the SCC (alpha = 20, exact solver), and the SCC's
+  overhead relative to the ANDES run (target <= 25 %);
+* ``grids``: a 0.1 pu load step in area 0 at 1 s on Kundur's two-area system
+  and the IEEE 39-bus system (:class:`lfc.testbed.GridCase`), the loop with every
+  area's AGC and no filter, and with the certified filter at every area (the
+  fitted design models computed, or read from the cache, before timing);
 
-with the real-time factor of each and the SCC's overhead relative to the
-ANDES run.  System build and power flow are timed separately (once per run).
+with the real-time factor of each and the loop's cost relative to ANDES alone.
 
-Run: python bench/bench_testbed.py
+Run: python bench/bench_testbed.py [microgrid | grids]   (both by default)
 """
 
 from __future__ import annotations
 
+import os
 import statistics
+import sys
+import tempfile
 import time
+from pathlib import Path
 
-from lfc import SafetyFilter, Sinusoid, simulate
-from lfc.testbed import MicrogridCase, build_system, prepare_andes
+import lfc
+from lfc.testbed import (GridCase, MicrogridCase, build_grid, build_system, grid_design,
+                         prepare_andes)
+from lfc.testbed.loop import CLOCK_ENV, init_tds
 
 DURATION = 20.0  # s simulated
+STEP = 0.005     # s, ANDES step
 REPEAT = 3
 
 
 def median_time(fn) -> float:
+    """Median wall time (s) of ``REPEAT`` calls of ``fn``."""
     times = []
     for _ in range(REPEAT):
         t0 = time.perf_counter()
@@ -34,39 +54,97 @@ def median_time(fn) -> float:
     return statistics.median(times)
 
 
-def andes_alone(case: MicrogridCase) -> float:
-    """Median seconds of the bare ANDES integration (build excluded)."""
+def loop_time(fn) -> tuple[float, float]:
+    """Median wall time (s) of ``REPEAT`` calls of ``fn`` (an ANDES loop) and the
+    median of ANDES' own CPU seconds in each call."""
+    walls, andes = [], []
+    with tempfile.TemporaryDirectory() as folder:
+        clock = Path(folder) / "andes_seconds.txt"
+        os.environ[CLOCK_ENV] = str(clock)
+        try:
+            for _ in range(REPEAT):
+                clock.write_text("")
+                t0 = time.perf_counter()
+                fn()
+                walls.append(time.perf_counter() - t0)
+                andes.append(sum(map(float, clock.read_text().split())))
+        finally:
+            del os.environ[CLOCK_ENV]
+    return statistics.median(walls), statistics.median(andes)
+
+
+def print_rows(label: str, bare: float, loops: dict[str, tuple[float, float]]) -> None:
+    """One row for ANDES alone and one per loop: wall time, real-time factor, the
+    ratio to ANDES alone, ANDES' own CPU seconds and the rest of the wall time (s)."""
+    print(f"{label:<8}{'ANDES alone, undisturbed':<34}{bare:>9.2f}{DURATION / bare:>10.2f}"
+          f"{1.0:>10.2f}")
+    for name, (wall, andes) in loops.items():
+        print(f"{label:<8}{name:<34}{wall:>9.2f}{DURATION / wall:>10.2f}{wall / bare:>10.2f}"
+              f"{andes:>10.2f}{wall - andes:>10.2f}")
+
+
+HEADER = (f"{'':<8}{'run':<34}{'wall (s)':>9}{'x real':>10}{'vs alone':>10}"
+          f"{'ANDES (s)':>10}{'rest (s)':>10}")
+
+
+def andes_alone(build) -> float:
+    """Median seconds of the bare ANDES integration of ``build()``'s system
+    (build and initialization excluded)."""
     times = []
     for _ in range(REPEAT):
-        ss = build_system(case)
-        cfg = ss.TDS.config
-        cfg.tf, cfg.tstep, cfg.no_tqdm, cfg.criteria = DURATION, 0.005, 1, 0
-        cfg.linesearch, cfg.save_every = 0, 0
-        ss.TDS.init()
+        ss = build()
+        init_tds(ss, DURATION, STEP)
         t0 = time.perf_counter()
         ss.TDS.run(no_summary=True)
         times.append(time.perf_counter() - t0)
     return statistics.median(times)
 
 
-def main() -> None:
-    prepare_andes()
+def microgrid() -> None:
     case = MicrogridCase()
     params = case.design_params()
-    attack = Sinusoid(0.5, 1.0, start=1.0)
+    attack = lfc.Sinusoid(0.5, 1.0, start=1.0)
     build = median_time(lambda: build_system(case))
-    bare = andes_alone(case)
-    loop = median_time(lambda: simulate(case, design=params, duration=DURATION,
-                                        pc_attack=attack))
-    scc = median_time(lambda: simulate(case, design=params, duration=DURATION, pc_attack=attack,
-                                       scc=SafetyFilter(params, alpha=20.0)))
-    print(f"20 s scenario, median of {REPEAT} (build + power flow: {build:.2f} s each)")
-    print(f"{'run':<34}{'wall (s)':>10}{'x real time':>13}")
-    for name, t in (("ANDES alone (reference)", bare), ("testbed loop, no SCC", loop),
-                    ("testbed loop, SCC alpha=20", scc)):
-        print(f"{name:<34}{t:>10.2f}{DURATION / t:>13.1f}")
+    bare = andes_alone(lambda: build_system(case))
+    loops = {
+        "testbed loop, no SCC": loop_time(lambda: lfc.simulate(
+            case, design=params, duration=DURATION, pc_attack=attack)),
+        "testbed loop, SCC alpha=20": loop_time(lambda: lfc.simulate(
+            case, design=params, duration=DURATION, pc_attack=attack,
+            scc=lfc.SafetyFilter(params, alpha=20.0)))}
+    print(f"microgrid: {DURATION:g} s Fig. 4 scenario, median of {REPEAT} "
+          f"(build + power flow: {build:.2f} s each)")
+    print(HEADER)
+    print_rows("micro", bare, loops)
+    (loop, _), (scc, _) = loops.values()
     print(f"SCC overhead: {(scc - loop):.2f} s = {100 * (scc - loop) / bare:.1f} % of the "
-          f"ANDES run (target <= 25 %); whole loop vs ANDES alone: {scc / bare:.2f}x")
+          f"ANDES run (target <= 25 %)")
+
+
+def grids() -> None:
+    load = {0: lfc.Step(0.1, 1.0)}
+    print(f"grids: {DURATION:g} s load step, median of {REPEAT}")
+    print(HEADER)
+    for case in (GridCase.kundur(), GridCase.ieee39()):
+        params = grid_design(case)
+        bare = andes_alone(lambda: build_grid(case))
+        certified = {a: "certified" for a in range(case.n_areas)}
+        print_rows(case.name, bare, {
+            "loop, AGC, no filter": loop_time(lambda: lfc.simulate(
+                case, design=params, duration=DURATION, loads=load)),
+            "loop, AGC, certified filters": loop_time(lambda: lfc.simulate(
+                case, design=params, duration=DURATION, loads=load, filters=certified))})
+
+
+def main() -> None:
+    parts = {"microgrid": microgrid, "grids": grids}
+    chosen = sys.argv[1:] or list(parts)
+    unknown = [p for p in chosen if p not in parts]
+    if unknown:
+        raise SystemExit(f"unknown part(s) {unknown}; choose among {list(parts)}")
+    prepare_andes()
+    for name in chosen:
+        parts[name]()
 
 
 if __name__ == "__main__":
