@@ -795,7 +795,7 @@ class Scenarios:
         check_coupled(filters, grid, estimator, noise_std)
         f_is = [-1 if filters.get(a) is None else self._filters.index(
             id(filters[a]), lambda: self._checked(a, filters[a])) for a in range(n)]
-        row = []
+        row, noise, sig, n_samples = [], [], [], self._n_samples   # kept once all areas pass
         for a, area in enumerate(grid.areas):
             channels = attacks.get(a, {})
             scc = filters.get(a)
@@ -809,19 +809,21 @@ class Scenarios:
                 kf = make_estimator(estimator, area, self.period, noise_std)
                 e_i = -1 if kf is None else self._kf.index(id(kf), lambda: kf)
             if noisy:
-                self._noise.append(make_noise(noise_std, self.n_ctrl, seed if a == 0
-                                              else (seed, a)))
-            f_i = f_is[a]
+                noise.append(make_noise(noise_std, self.n_ctrl, seed if a == 0 else (seed, a)))
             kinds, params, offsets, st, sv = scenario_signals(
                 channels.get("pc"), channels.get("wref"), loads.get(a), self.tc, self.t,
                 channels.get("ace"))
-            offsets[:, 0] += self._n_samples          # into this run's sample arrays
-            self._sig.append((kinds, params, offsets))
+            offsets[:, 0] += n_samples                # into this run's sample arrays
+            sig.append(((kinds, params, offsets), st, sv))
+            n_samples += len(st)
+            row.append((e_i, len(self._noise) + len(noise) - 1 if noisy else -1, f_is[a],
+                        int(feedforward), int(anti_windup)))
+        self._noise += noise
+        for area_sig, st, sv in sig:
+            self._sig.append(area_sig)
             self._st.append(st)
             self._sv.append(sv)
-            self._n_samples += len(st)
-            row.append((e_i, len(self._noise) - 1 if noisy else -1, f_i, int(feedforward),
-                        int(anti_windup)))
+        self._n_samples = n_samples
         self._rows.append(row)
         self._plant_of.append(p_i)
         self._relay_noise.append([(*(noise_std if relay_noise else (0.0, 0.0)), seed)] * n)

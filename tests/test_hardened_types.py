@@ -574,9 +574,10 @@ def test_the_sweep_helps_examples_parse_into_their_grids():
 
 def test_a_refused_filter_leaves_the_scenarios_as_they_were():
     """The relays and period of a filter are checked once, when a scenario first
-    names it, for every area before anything is kept: a refused scenario (its
-    second area's filter keeps other relays) adds no row, and the next one runs
-    as if it had never been tried."""
+    names it, and a scenario's areas are kept only once all of them pass: a
+    refused scenario (its second area's filter keeps other relays, or its second
+    area's attack is not a signal) adds no row, noise or samples, and the next
+    one runs as if it had never been tried."""
     from lfc.engine import Scenarios
     other = lfc.SafetyFilter(TWO.areas[1], lfc.RelaySettings(rocof_limit=0.02))
     good = lfc.SafetyFilter(TWO.areas[0])
@@ -584,7 +585,11 @@ def test_a_refused_filter_leaves_the_scenarios_as_they_were():
                    relays=lfc.RelaySettings())
     with pytest.raises(ValueError, match="the filter of area 1 .* a trip would go unflagged"):
         sc.add(filters={0: good, 1: other}, attacks={0: {"pc": lfc.Step(0.3, start=0.1)}})
+    with pytest.raises(ValueError, match="pc_attack must be a callable"):   # area 1's signal
+        sc.add(filters={0: good}, attacks={0: {"pc": lfc.Samples([0.1, 0.2], [0.3, 0.3])},
+                                           1: {"pc": "0.3"}}, noise_std=(1e-4, 1e-3))
     assert sc._filters.items == [good] and sc._rows == [] and sc._sig == []
+    assert sc._noise == [] and sc._st == [] and sc._n_samples == 0
     row = sc.add(filters={0: good}, attacks={0: {"pc": lfc.Step(0.3, start=0.1)}})
     alone = lfc.simulate(TWO, duration=1.0, filters={0: good},
                          attacks={0: {"pc": lfc.Step(0.3, start=0.1)}})
