@@ -27,6 +27,12 @@ def _is_number(value: object) -> bool:
     return isinstance(value, Real) and not isinstance(value, bool)
 
 
+def _is_integer(value: object) -> bool:
+    if type(value) is int:                           # the common case, without the ABC check
+        return True
+    return isinstance(value, Integral) and not isinstance(value, bool)
+
+
 def is_sequence(value: object) -> bool:
     """Whether ``value`` is an ordered sequence of values: a list, a tuple or a 1-D
     array (not a string, a set or a dict, whose order or meaning differs)."""
@@ -65,7 +71,7 @@ def check_finite(name: str, value: float) -> None:
 def check_index(name: str, value: object, n: int) -> int:
     """Raise unless ``value`` is an integer (not a bool, not 0.7) in ``[0, n)``;
     return it as an int."""
-    if type(value) is not int and (not isinstance(value, Integral) or isinstance(value, bool)):
+    if not _is_integer(value):
         raise ParameterTypeError(f"{name} must be an integer index in [0, {n - 1}], got "
                                  f"{value!r} ({type(value).__name__})")
     if not 0 <= value < n:
@@ -118,7 +124,7 @@ def check_pair(name: str, value: object, *, positive: bool = False) -> tuple[flo
 
 def check_seed(name: str, value: object) -> int:
     """Raise unless ``value`` is an integer >= 0 (a random seed); return it."""
-    if type(value) is not int and (not isinstance(value, Integral) or isinstance(value, bool)):
+    if not _is_integer(value):
         raise ParameterTypeError(f"{name} must be an integer >= 0, got {value!r} "
                                  f"({type(value).__name__})")
     if value < 0:
@@ -162,7 +168,7 @@ def check_sizes(name: str, value: object, *, nonnegative: bool = False,
 
 def check_count(name: str, value: object) -> int:
     """Raise unless ``value`` is an integer >= 1 (not a bool, not 2.0); return it."""
-    if not isinstance(value, Integral) or isinstance(value, bool):
+    if not _is_integer(value):
         raise ParameterTypeError(f"{name} must be an integer >= 1, got {value!r} "
                                  f"({type(value).__name__})")
     if value < 1:
