@@ -128,7 +128,7 @@ def read_stored(path: Path, decode: Callable[[dict], Any],
         value = decode(json.loads(payload))
         check(value)
         return value
-    except (OSError, ValueError, KeyError, TypeError) as err:
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
         warnings.warn(f"damaged cache file {path} ({err}); computing it again", RuntimeWarning,
                       stacklevel=2)
         return None

@@ -33,6 +33,23 @@ def _is_integer(value: object) -> bool:
     return isinstance(value, Integral) and not isinstance(value, bool)
 
 
+def _finite(value: float) -> bool:
+    """``math.isfinite``, false for an integer too large for a float (10**400)."""
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
+
+
+def as_float(value: float) -> float:
+    """A checked number as a float: an integer too large for one becomes an
+    infinity of its sign (which a filter then refuses as non-finite input)."""
+    try:
+        return float(value)
+    except OverflowError:
+        return math.inf if value > 0 else -math.inf
+
+
 def is_sequence(value: object) -> bool:
     """Whether ``value`` is an ordered sequence of values: a list, a tuple or a 1-D
     array (not a string, a set or a dict, whose order or meaning differs)."""
@@ -50,21 +67,21 @@ def check_number(name: str, value: object) -> None:
 def check_positive(name: str, value: float) -> None:
     """Raise unless ``value`` is a finite number > 0."""
     check_number(name, value)
-    if not (math.isfinite(value) and value > 0):
+    if not (_finite(value) and value > 0):
         raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
 
 
 def check_nonnegative(name: str, value: float) -> None:
     """Raise unless ``value`` is a finite number >= 0."""
     check_number(name, value)
-    if not (math.isfinite(value) and value >= 0):
+    if not (_finite(value) and value >= 0):
         raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
 
 
 def check_finite(name: str, value: float) -> None:
     """Raise unless ``value`` is a finite number."""
     check_number(name, value)
-    if not math.isfinite(value):
+    if not _finite(value):
         raise ValueError(f"{name} must be a finite number, got {value!r}")
 
 
@@ -122,14 +139,28 @@ def check_pair(name: str, value: object, *, positive: bool = False) -> tuple[flo
     return float(value[0]), float(value[1])
 
 
-def check_seed(name: str, value: object) -> int:
-    """Raise unless ``value`` is an integer >= 0 (a random seed); return it."""
+SEED_LIMIT = 2 ** 32   # the relays' noise generator (numba's legacy seed) keeps 32 bits
+
+
+def check_integer(name: str, value: object, low: int = 0, high: int | None = None,
+                  high_text: str | None = None) -> int:
+    """Raise unless ``value`` is an integer (not a bool, not 2.0) with ``low <= value``
+    (and ``value < high``; ``high_text`` writes ``high`` in the message); return it."""
+    want = (f"an integer >= {low}" if high is None else
+            f"an integer in [{low}, {high_text or high})")
     if not _is_integer(value):
-        raise ParameterTypeError(f"{name} must be an integer >= 0, got {value!r} "
+        raise ParameterTypeError(f"{name} must be {want}, got {value!r} "
                                  f"({type(value).__name__})")
-    if value < 0:
-        raise ValueError(f"{name} must be an integer >= 0, got {value!r}")
+    if value < low or (high is not None and value >= high):
+        raise ValueError(f"{name} must be {want}, got {value!r}")
     return int(value)
+
+
+def check_seed(name: str, value: object) -> int:
+    """Raise unless ``value`` is an integer in ``[0, 2**32)`` (a random seed: the
+    relays' noise generator keeps 32 bits, so two larger seeds could give the
+    same noise); return it."""
+    return check_integer(name, value, 0, SEED_LIMIT, "2**32")
 
 
 def check_array(name: str, value: object, *, ndim: int | None = None,
@@ -168,12 +199,7 @@ def check_sizes(name: str, value: object, *, nonnegative: bool = False,
 
 def check_count(name: str, value: object) -> int:
     """Raise unless ``value`` is an integer >= 1 (not a bool, not 2.0); return it."""
-    if not _is_integer(value):
-        raise ParameterTypeError(f"{name} must be an integer >= 1, got {value!r} "
-                                 f"({type(value).__name__})")
-    if value < 1:
-        raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
-    return int(value)
+    return check_integer(name, value, 1)
 
 
 def conforms(value: Any, hint: Any) -> bool:

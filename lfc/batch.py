@@ -104,6 +104,9 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
     """Raise ``ValueError`` naming the column and row of any invalid entry."""
     if not isinstance(scenarios, pd.DataFrame):
         raise ValueError(f"scenarios must be a pandas DataFrame, got {type(scenarios).__name__}")
+    twice = scenarios.columns[scenarios.columns.duplicated()].unique().tolist()
+    if twice:
+        raise ValueError(f"scenarios has column(s) {twice} more than once; give each once")
     missing = [c for c in REQUIRED if c not in scenarios.columns]
     if missing:
         raise ValueError(f"scenarios is missing column(s) {missing}; required: {list(REQUIRED)}")
@@ -264,8 +267,11 @@ EMPTY_DTYPES = {"tripped": bool, "first_trip_relay": object, "alarms": "int64",
 # the value of a filter column that asks for nothing: its option's default (else False,
 # e.g. declare_noise)
 NEUTRAL = {f.name: f.default for m in reversed(METHODS) for f in fields(options_of(m))}
-NUMERIC = ("amplitude", "freq_hz", "start", "alpha", "Ts", "stop", "sample_period", *PLANT,
-           *NOISE, "uncertainty", "margin", "trips_per_hour", "seed")
+# numeric columns: the signal's, the plant's, the noise's and every filter option that is
+# a number (its annotation names float)
+NUMERIC = ("amplitude", "freq_hz", "start", "stop", "sample_period", *PLANT, *NOISE, "seed",
+           *dict.fromkeys(f.name for m in METHODS for f in fields(options_of(m))
+                          if f.name in options_of(m).COLUMNS and "float" in str(f.type)))
 
 
 def _check_numbers(scenarios: pd.DataFrame) -> None:

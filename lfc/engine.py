@@ -34,7 +34,7 @@ from lfc._validate import ParameterTypeError, check_flag, check_index, check_see
 from lfc.estimation import (KalmanFilter, check_noise_std, kf_correct, kf_predict,
                             measurement_std)
 from lfc.filters import SafetyFilter
-from lfc.filters.base import ACTIVE, ALARM_BITS, MEMORY, OUTSIDE
+from lfc.filters.base import ACTIVE, ALARM_BITS, MAX_ABS_INPUT, MEMORY, OUTSIDE
 from lfc.filters.coupled import METHOD_ID as COUPLED
 from lfc.filters.coupled import CoupledFilter
 from lfc.filters.coupled import N_R as N_R_COUPLED
@@ -156,8 +156,9 @@ def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise0: flo
                 p_hat, wref)
         for c in range(N_CTRL):
             ctrl[j, c] = vals[c]
-    mod = abs(u - u_ref)
-    return u, flags, mod if math.isfinite(mod) else 0.0
+    # the modification of a command the filter could read (a non-finite command or one
+    # beyond MAX_ABS_INPUT is invalid input, held, not modified: it counts 0)
+    return u, flags, abs(u - u_ref) if abs(u_ref) <= MAX_ABS_INPUT else 0.0
 
 
 @inline

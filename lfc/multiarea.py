@@ -79,8 +79,9 @@ class MultiAreaParams:
     def __post_init__(self) -> None:
         areas = tuple(self.areas) if isinstance(self.areas, (list, tuple)) else ()
         if not areas or not all(isinstance(a, LFCParams) for a in areas):
-            raise ValueError(f"areas must be a non-empty sequence of LFCParams, got "
-                             f"{self.areas!r}")
+            error = ParameterTypeError if areas else ValueError
+            raise error(f"areas must be a non-empty sequence of LFCParams, got "
+                        f"{self.areas!r}")
         for name in ("f_nominal", "s_base_mva"):
             values = {getattr(a, name) for a in areas}
             if len(values) > 1:

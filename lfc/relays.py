@@ -87,12 +87,17 @@ class RelaySettings:
         Raises
         ------
         ValueError
-            If ``category`` is not one of them, or ``nominal_hz`` is not in (0, 1000].
+            If ``category`` is not one of them, or ``nominal_hz`` is not in [1, 1000] Hz.
+        TypeError
+            If ``category`` is not a string.
         """
+        if not isinstance(category, str):
+            raise ParameterTypeError(f"category must be a string, one of "
+                                     f"{tuple(IEEE1547_ROCOF_HZ_PER_S)}, got {category!r}")
         if category not in IEEE1547_ROCOF_HZ_PER_S:
             raise ValueError(f"category must be one of {tuple(IEEE1547_ROCOF_HZ_PER_S)} "
                              f"(IEEE 1547-2018), got {category!r}")
-        check_range("nominal_hz", nominal_hz, 0.0, 1000.0)
+        check_range("nominal_hz", nominal_hz, 1.0, 1000.0, closed=True)
         return cls(rocof_limit=IEEE1547_ROCOF_HZ_PER_S[category] / nominal_hz)
 
     @property

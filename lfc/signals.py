@@ -95,7 +95,7 @@ class Signal:
         raise NotImplementedError  # pragma: no cover - abstract
 
     def __call__(self, t: float | np.ndarray) -> float | np.ndarray:
-        arr = np.asarray(t, dtype=float)
+        arr = check_array("t", t)             # times (s): a string or a bool is refused
         kind, p, st, sv = self.spec()
         out = _values(kind, p, arr.reshape(-1), st, sv).reshape(arr.shape)
         return float(out) if arr.ndim == 0 else out

@@ -22,7 +22,8 @@ from lfc._validate import (ParameterTypeError, check_flag, check_folder, check_m
                            check_positive)
 from lfc.engine import CTRL_COLUMNS, Scenarios, sample_signal
 from lfc.filters import SafetyFilter, binding_names
-from lfc.filters.base import ACTIVE, ALARM_BITS, INFEASIBLE, INVALID, OUTSIDE, SOLVER_ERROR
+from lfc.filters.base import (ACTIVE, ALARM_BITS, INFEASIBLE, INVALID, MAX_ABS_INPUT, OUTSIDE,
+                              SOLVER_ERROR)
 from lfc.model import STATES, LFCParams
 from lfc.relays import RELAY_NAMES, RelaySettings, relays_or_default
 from lfc.signals import Signal
@@ -83,11 +84,13 @@ class SimResult:
         trip; ``max_abs_dw_meas`` (pu), ``max_abs_rocof_meas`` (pu/s) over the
         trace, ``final_abs_dw_meas`` (pu) at its end; ``scc_active_fraction``
         and ``max_abs_modification``, ``mean_abs_modification`` (pu,
-        ``|pc - pc_ref|``) over the control samples; ``alarms`` (control
+        ``|pc - pc_ref|``) over the control samples (0 where ``pc_ref`` is
+        non-finite or beyond ``MAX_ABS_INPUT``: invalid input, held); ``alarms`` (control
         samples that alarmed), ``outside`` (of them, flagged ``outside``).
         """
         first = self.first_trip or {"relay": None, "t": None}
-        mod = (self.controls["pc"] - self.controls["pc_ref"]).abs()
+        ref = self.controls["pc_ref"]
+        mod = (self.controls["pc"] - ref).abs().where(ref.abs() <= MAX_ABS_INPUT, 0.0)
         return {
             "tripped": bool(len(self.trips) > 0),
             "first_trip_relay": first["relay"],
@@ -180,7 +183,7 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
         Std of white noise on the controller's ``dw_meas`` (pu) and
         ``rocof_meas`` (pu/s) readings.
     seed : int
-        Seed of the noise generator.
+        Seed of the noise generators, in [0, 2**32) (the relays' noise keeps 32 bits).
     dt : float
         Plant step (s). Default 1 ms.
     control_period : float

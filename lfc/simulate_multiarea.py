@@ -67,8 +67,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lfc._validate import check_count, check_index
+from lfc._validate import check_count, check_folder, check_index
 from lfc.batch import metrics_frame
+from lfc.estimation import check_noise_std
 from lfc.engine import METRICS, Scenarios, check_area_keys, sample_signal
 from lfc.filters import SafetyFilter
 from lfc.filters.base import built_once
@@ -205,7 +206,7 @@ class MultiAreaResult:
     def save(self, directory: str | Path) -> Path:
         """Write ``trace.csv``, ``metrics.json``, ``settings.json`` and each area's
         files (:meth:`SimResult.save`) in ``area_{i}/`` under ``directory``."""
-        out = Path(directory)
+        out = check_folder("directory", directory)
         out.mkdir(parents=True, exist_ok=True)
         self.trace.to_csv(out / "trace.csv", index=False)
         (out / "metrics.json").write_text(json.dumps(self.metrics(), indent=2))
@@ -267,7 +268,7 @@ def simulate_grid_linear(params: MultiAreaParams, *, duration: float,
         raise ValueError(f"params must be a MultiAreaParams, got {type(params).__name__}")
     relays = relays_or_default(relays)
     filters = check_area_keys(filters, params.n_areas, "filters")
-    estimate = tuple(noise_std) if _kalman(estimator) else None
+    estimate = check_noise_std("noise_std", noise_std) if _kalman(estimator) else None
     built = {a: area_filter(params, a, f, relays, control_period, estimate)
              for a, f in filters.items()}
     sc = Scenarios(params, duration=duration, dt=dt, control_period=control_period,

@@ -489,7 +489,7 @@ def test_small_public_helpers_name_their_bad_argument():
         (lambda: redteam.piecewise_attack_table(n=1, amplitude=1.0, duration=0.5, seed=0),
          ValueError, "duration must be > ATTACK_START"),
         (lambda: redteam.piecewise_attack_table(n=1, amplitude=1.0, duration=2.0, seed=-1),
-         ValueError, "seed must be an integer >= 0"),
+         ValueError, "seed must be an integer in \\[0, 2\\*\\*32\\)"),
     ]
     for call, error, words in cases:
         with pytest.raises(error, match=words):
@@ -596,3 +596,123 @@ def test_a_refused_filter_leaves_the_scenarios_as_they_were():
     run = sc.run()
     assert row == 0 and run.metrics.shape[0] == 1
     assert alone.metrics()[0]["alarms"] == run.metrics[0, 0, 5] == 7   # the filter acted
+
+
+# -- a fuzz pass of 2026-11-27: each input below misbehaved (a silent wrong answer, a
+# crash other than ValueError / TypeError, a filter raising or a damaged file read) --
+def test_seeds_the_relay_noise_cannot_tell_apart_are_refused():
+    """The relays' noise generator keeps 32 bits of the seed: seeds 5 and 5 + 2**32
+    gave the same relay noise.  Every seed is now in [0, 2**32)."""
+    run = dict(duration=0.2, noise_std=(1e-3, 0.04), relay_noise=True)
+    lfc.simulate(LFCParams(), seed=2 ** 32 - 1, **run)
+    for seed in (2 ** 32, 5 + 2 ** 32, -1):
+        with pytest.raises(ValueError, match=r"seed must be an integer in \[0, 2\*\*32\)"):
+            lfc.simulate(LFCParams(), seed=seed, **run)
+    from lfc.wire import run_wire
+    with pytest.raises(ValueError, match=r"seed must be an integer in \[0, 2\*\*32\)"):
+        run_wire(LFCParams(), duration=0.1, seed=-1, noise_std=(1e-4, 1e-3))
+
+
+def test_an_integer_too_large_for_a_float_is_refused_by_name_or_flagged():
+    huge = 10 ** 400
+    for make, name in ((lambda: LFCParams(D=huge), "D"), (lambda: lfc.Step(huge), "value"),
+                       (lambda: lfc.simulate(LFCParams(), duration=huge), "duration")):
+        with pytest.raises(ValueError, match=f"{name} must be a finite number"):
+            make()
+    u, info = lfc.SafetyFilter(LFCParams()).filter(np.zeros(5), huge)   # never raises
+    assert u == 0.0 and info.invalid_input
+
+
+def test_the_coupled_filter_checks_its_call_and_refuses_a_grid_without_ties():
+    from lfc.filters.coupled import INVALID, CoupledFilter, CoupledOptions
+    with pytest.raises(ValueError, match="needs a connected grid"):
+        lfc.simulate(MultiAreaParams(TWO.areas), duration=0.2,
+                     filters={0: "coupled", 1: "coupled"})
+    cf = CoupledFilter(TWO, lfc.RelaySettings())
+    x, two = np.zeros(TWO.n_states), np.zeros(2)
+    with pytest.raises(TypeError, match=r"area must be an integer index in \[0, 1\], got True"):
+        cf.filter(x, two, two, True, 0.1, np.zeros(2))
+    with pytest.raises(TypeError, match="u_ref must be a number, got '0.5'"):
+        cf.filter(x, two, two, 0, "0.5", np.zeros(2))
+    with pytest.raises(TypeError, match="x must hold real numbers"):
+        cf.filter(["0"] * TWO.n_states, two, two, 0, 0.1, np.zeros(2))
+    for memory in (np.array([np.nan, 0.0]), np.zeros(0), np.zeros(2, int)):
+        with pytest.raises(ValueError, match="memory must be a writable float64 array"):
+            cf.filter(x, two, two, 0, 0.1, memory)      # it held a NaN command, or wrote past
+    u, flags, reason = cf.filter(x, two, two, 0, 10 ** 400, np.zeros(2))
+    assert u == 0.0 and flags & INVALID and reason.startswith("invalid input")
+    with pytest.raises(TypeError, match="margin must be a number"):
+        CoupledOptions(margin="0.1")
+
+
+def test_a_command_the_filter_cannot_read_counts_no_modification():
+    """A command of 1.7e308 (invalid input: held) gave a mean modification of inf
+    and a maximum of 1.7e308; the row of simulate_many and simulate agree on 0."""
+    P = LFCParams()
+    for attack in (lfc.Step(1.7e308, start=0.5), lfc.Sinusoid(1.0, 1e308)):
+        m = lfc.simulate(P, duration=1.0, pc_attack=attack, scc=lfc.SafetyFilter(P)).metrics()
+        assert m["max_abs_modification"] == m["mean_abs_modification"] == 0.0
+        assert m["alarms"] > 0
+    row = pd.DataFrame([dict(waveform="step", channel="pc", amplitude=1.7e308, freq_hz=0.0,
+                             start=0.5, alpha=20.0, Ts=0.25)])
+    out = lfc.simulate_many(P, row, duration=1.0, progress=False).iloc[0]
+    assert out.max_abs_modification == out.mean_abs_modification == 0.0
+
+
+def test_scenario_tables_refuse_repeated_columns_and_strings_in_contract_columns():
+    P = LFCParams()
+    base = dict(waveform="sinusoid", channel="pc", amplitude=1.0, freq_hz=1.0, start=1.0,
+                alpha=20.0, Ts=0.25)
+    twice = pd.DataFrame([list(base.values()) + [2.0]], columns=[*base, "freq_hz"])
+    with pytest.raises(ValueError, match=r"column\(s\) \['freq_hz'\] more than once"):
+        lfc.simulate_many(P, twice, duration=0.1, progress=False)
+    for name, value in (("half_width", "0.01"), ("rate", True)):
+        row = pd.DataFrame([{**base, "method": "contract", name: value}])
+        with pytest.raises(TypeError, match=f"column '{name}' must hold numbers"):
+            lfc.simulate_many(P, row, duration=0.1, progress=False)
+
+
+def test_a_grids_result_and_estimate_name_what_is_wrong():
+    with pytest.raises(ValueError, match="directory must be a folder path, not empty"):
+        lfc.simulate(TWO, duration=0.1).save("")
+    with pytest.raises(TypeError, match="noise_std must be a pair of numbers"):
+        lfc.simulate(TWO, duration=0.2, estimator="kalman", noise_std=1e-3)
+
+
+def test_a_damaged_store_whose_payload_is_not_text_is_computed_again(tmp_path):
+    import json
+
+    from lfc._files import read_stored
+    path = tmp_path / "stored.json"
+    for payload in (1, None):
+        path.write_text(json.dumps({"payload": payload, "sha256": "x"}))
+        with pytest.warns(RuntimeWarning, match="damaged cache file"):
+            assert read_stored(path, lambda d: d) is None
+
+
+def test_a_malformed_frame_is_not_a_command_and_never_stops_the_generator():
+    """A write cut short, or of fewer registers, raised struct.error or IndexError,
+    in the relay and in the generator's outstation (its loop would stop); now it is
+    not a command (the generator side counts it as one that did not arrive)."""
+    import struct
+
+    from lfc.wire import modbus, registers
+    good = struct.pack(">HHHBBHHB", 1, 0, 7 + 26, 1, 16, 0, 13, 26) + b"\x00" * 26
+    assert modbus.Codec.command(good) == ({"pc": 0.0, "wref": 0.0, "ace": 0.0}, 0)
+    short = struct.pack(">HHHBBHHB", 1, 0, 13, 1, 16, 0, 3, 6) + b"\x00" * 6
+    report = struct.pack(">HHHBBB", 1, 0, 3 + 48, 1, 4, 48) + b"\x00" * 10
+    assert modbus.Codec.command(good[:20]) is modbus.Codec.command(short) is None
+    assert modbus.Codec.report(report) is None
+    for regs in ([0] * 5, [70000] + [0] * 12, [-1] + [0] * 12):
+        assert registers.read_command(regs) is None
+    assert registers.read_report([0] * 5) is None
+    station = modbus.Outstation()
+    station.inbox = ([0, 0, 0, 0], 0.0)
+    assert station.take() is None
+
+
+def test_the_wire_refuses_a_plant_that_overflows_as_simulate_does():
+    from lfc.wire import run_wire
+    bias = [{"op": "bias", "field": "pc", "value": 1e308}] * 2
+    with pytest.raises(ValueError, match="the plant became non-finite"):
+        run_wire(LFCParams(), duration=0.2, attack=bias)

@@ -381,6 +381,12 @@ def test_sweep_table_and_resume(tmp_path, monkeypatch):
         if path != lost:
             assert path.stat().st_mtime_ns == mtime
     assert lost.exists()
+    # a run made by another notebook or other code (its key differs) is run again, not read
+    stale = out / runner.run_id({"alpha": 20.0, "duration": 2.0}) / "done.json"
+    stale.write_text(json.dumps({"point": {"alpha": 20.0, "duration": 2.0}, "key": "other"}))
+    with pytest.warns(UserWarning, match="stale or damaged .made by another notebook"):
+        assert runner.sweep(nb, grid, out).equals(table)
+    assert json.loads(stale.read_text())["key"] != "other"
     assert scans == {p: p.stat().st_mtime_ns                        # the rerun read its scan
                      for p in (tmp_path / "cache").glob("fig4-edges-*.json")}   # back
     # the table plotted: one line per panel, labelled axes with units, the relay dashed
@@ -407,6 +413,7 @@ def test_sweep_table_and_resume(tmp_path, monkeypatch):
     (["-p", "amplitude", "nan"], "'amplitude' must be a finite number"),
     (["-p", "amplitude", "0.5", "-p", "amplitude", "0.5"], "lists 0.5 more than once"),
     (["-p", "amplitude", "0.5", "0.5"], "lists 0.5 more than once"),
+    (["-p", "amplitude", "1", "1.0"], "lists 1, 1.0 more than once"),   # one point
     (["-p", "seed", "1.5"], "'seed' must be an integer"),
     (["-p", "edge_durations", "[]"], "must be a non-empty list"),
     (["-p", "edge_durations", "['a']"], "must be a finite number"),

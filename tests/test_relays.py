@@ -93,7 +93,9 @@ def test_ieee1547_categories_set_the_rocof_ride_through_and_keep_table_1(categor
 
 @pytest.mark.parametrize("kwargs, name", [({"category": "IV"}, "category"),
                                           ({"category": 3}, "category"),
-                                          ({"nominal_hz": 0.0}, "nominal_hz")])
+                                          ({"category": ["III"]}, "category"),
+                                          ({"nominal_hz": 0.0}, "nominal_hz"),
+                                          ({"nominal_hz": 1e-3}, "nominal_hz")])
 def test_ieee1547_refuses_an_unknown_category_or_frequency(kwargs, name):
     with pytest.raises(ValueError, match=name):
         RelaySettings.ieee1547(**kwargs)

@@ -114,6 +114,13 @@ def test_an_attack_spec_is_checked():
                          "record"),
                         ([{"op": "drop", "field": "pc"}], "drop takes no field"),
                         ([{"op": "bias", "field": "pc", "value": math.nan}], "finite"),
+                        ([{"op": "bias", "field": "pc", "value": 10 ** 400}], "finite"),
+                        ([{"op": "bias", "field": "pc", "value": 0.1, "start": "0.5"}],
+                         r"attack\[0\].start must be a number"),
+                        ([{"op": "scale", "field": "pc", "factor": True}],
+                         r"attack\[0\].factor must be a number"),
+                        ([{"op": "delay", "field": "pc", "periods": True}],
+                         r"attack\[0\].periods must be an integer >= 1"),
                         ("fig9", "one of")):
         with pytest.raises(ValueError, match=match):
             WireAttack(spec)

@@ -22,8 +22,8 @@ import numpy as np
 from scipy import sparse
 from scipy.optimize import linprog
 
-from lfc._validate import (ParameterTypeError, check_finite, check_multiple, check_nonnegative,
-                           check_positive, check_range, check_seed)
+from lfc._validate import (ParameterTypeError, check_finite, check_integer, check_multiple,
+                           check_nonnegative, check_positive, check_range)
 from lfc.model import LFCParams, discretize
 from lfc.relays import RelaySettings, relays_or_default
 from lfc.signals import Step
@@ -111,7 +111,7 @@ def governor_ride_through(params: LFCParams, relays: RelaySettings, step: float,
     ratio = check_multiple("control_period", control_period, "dt", dt)
     periods = check_multiple("horizon", horizon, "control_period", control_period)
     check_nonnegative("settle", settle)
-    check_seed("delay_periods", delay_periods)
+    check_integer("delay_periods", delay_periods)
     if settle >= horizon or delay_periods >= periods:
         raise ValueError(f"settle ({settle} s) and delay_periods ({delay_periods}) must leave "
                          f"free commands within horizon ({horizon} s, {periods} periods)")

@@ -27,7 +27,8 @@ from dataclasses import fields
 
 import numpy as np
 
-from lfc._validate import ParameterTypeError, check_array, check_number, check_positive
+from lfc._validate import (ParameterTypeError, as_float, check_array, check_number,
+                           check_positive)
 from lfc.filters.base import (ALARM_BITS, ALARM_FLAGS, MEMORY, Backend, FilterInfo, Options,
                               binding_names, flag)
 from lfc.filters.certified import CertifiedFilter, CertifiedOptions
@@ -216,8 +217,8 @@ class SafetyFilter:
             raise ValueError(f"x must have 5 entries {STATES}, got shape {x.shape}")
         check_number("u_ref", u_ref)
         check_number("p_load", p_load)
-        u_ref = float(u_ref)
-        out = decide(self.method_id, self.data, x, u_ref, float(p_load), self._memory)
+        u_ref = as_float(u_ref)
+        out = decide(self.method_id, self.data, x, u_ref, as_float(p_load), self._memory)
         return out[0], self.backend.info(u_ref, out)
 
     def filter_batch(self, x: np.ndarray, u_ref: np.ndarray, p_load: np.ndarray | None = None

@@ -94,7 +94,8 @@ import numpy as np
 from scipy.linalg import expm, solve_continuous_lyapunov
 
 from lfc._jit import inline, jit, maxnum, minnum
-from lfc._validate import check_nonnegative, check_positive, check_range
+from lfc._validate import (ParameterTypeError, as_float, check_array, check_index,
+                           check_nonnegative, check_number, check_positive, check_range)
 from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, MAX_ABS_INPUT, OUTSIDE,
                               applied_flags, built_once, check_limits, hold_invalid,
                               valid_input)
@@ -207,6 +208,7 @@ class CoupledOptions:
                              f"by load_bound")
         check_range("horizon", self.horizon, 0.2, 20.0, closed=True)
         check_range("tightening", self.tightening, 1e-4, 0.1, closed=True)
+        check_number("margin", self.margin)
         if not 0.0 <= self.margin < 1.0:
             raise ValueError(f"margin must be in [0, 1), got {self.margin!r}")
         check_limits(self.u_min, self.u_max)
@@ -373,6 +375,11 @@ class CoupledSet:
                  options: CoupledOptions) -> None:
         self.params, self.relays, self.options = params, relays, options
         o = options
+        if np.linalg.matrix_rank(params.incidence()) != params.n_areas - 1:
+            raise ValueError(f"the coupled certificate needs a connected grid (tie-lines "
+                             f"reaching every area: one equilibrium frequency), got ties "
+                             f"{params.tie!r} on {params.n_areas} areas; give separate grids "
+                             f"a filter per area (\"certified\" or \"contract\")")
         A, Bu, Bl, R = held_grid(params, "the coupled certificate needs it")
         n_a, n_r = params.n_areas, len(A)
         C = output_rows(n_a, n_r)
@@ -844,7 +851,7 @@ class CoupledFilter:
         if not isinstance(params, MultiAreaParams):
             raise ValueError(f"params must be a MultiAreaParams, got {type(params).__name__}")
         if not isinstance(relays, RelaySettings):
-            raise ValueError(f"relays must be a RelaySettings, got {relays!r}")
+            raise ParameterTypeError(f"relays must be a RelaySettings, got {relays!r}")
         self.params, self.relays = params, relays
         # the model holds within its command range: the commands stay there
         options = {"u_min": -params.command_range, "u_max": params.command_range, **options}
@@ -903,14 +910,19 @@ class CoupledFilter:
             :meth:`reason` of the flags.
         """
         n = self.params.n_areas
-        x = np.ascontiguousarray(x, float)
-        u, p = np.ascontiguousarray(u, float), np.ascontiguousarray(p, float)
+        x = np.ascontiguousarray(check_array("x", x))
+        u, p = np.ascontiguousarray(check_array("u", u)), np.ascontiguousarray(check_array("p", p))
         if x.shape != (self.params.n_states,) or u.shape != (n,) or p.shape != (n,):
             raise ValueError(f"x must have {self.params.n_states} entries and u, p {n}, got "
                              f"shapes {x.shape}, {u.shape}, {p.shape}")
-        if not (isinstance(area, int) and 0 <= area < n):
-            raise ValueError(f"area must be an area index in [0, {n - 1}], got {area!r}")
-        out = decide_once(self.data, x, u, p, area, float(u_ref), memory)
+        area = check_index("area", area, n)
+        check_number("u_ref", u_ref)
+        if not (isinstance(memory, np.ndarray) and memory.dtype == np.float64
+                and memory.shape == (2,) and memory.flags.writeable
+                and np.isfinite(memory).all()):
+            raise ValueError(f"memory must be a writable float64 array of shape (2,) with "
+                             f"finite values (the area's memory, updated), got {memory!r:.80}")
+        out = decide_once(self.data, x, u, p, area, as_float(u_ref), memory)
         return out[0], int(out[1]), self.reason(int(out[1]))
 
     def reason(self, flags: int) -> str:

@@ -359,8 +359,8 @@ def _grid(params: list[list[str]]) -> dict[str, list]:
             raise ValueError(f"parameter {name!r} has no values")
         grid.setdefault(name, []).extend(runner.parse_value(v) for v in values)
     for name, values in grid.items():
-        seen = [repr(v) for v in values]
-        twice = sorted({v for v in seen if seen.count(v) > 1})
+        seen = [runner.value_key(v) for v in values]
+        twice = sorted({repr(v) for v, k in zip(values, seen) if seen.count(k) > 1})
         if twice:
             raise ValueError(f"parameter {name!r} lists {', '.join(twice)} more than once")
     return grid

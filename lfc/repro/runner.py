@@ -514,7 +514,7 @@ def validate_parameters(notebook: Path, parameters: dict[str, list]) -> dict:
         if not isinstance(values, (list, tuple)) or not values:
             raise ValueError(f"parameter {name!r} needs a non-empty list of values, "
                              f"got {values!r}")
-        seen = [repr(v) for v in values]
+        seen = [value_key(v) for v in values]
         if len(set(seen)) < len(seen):
             raise ValueError(f"parameter {name!r} lists a value more than once: {values!r}")
         default = parse_value(known[name]["default"])
@@ -527,6 +527,14 @@ def validate_parameters(notebook: Path, parameters: dict[str, list]) -> dict:
             if name == "plant":
                 check_plant(value, ALL_PLANTS)
     return known
+
+
+def value_key(value: object) -> object:
+    """What makes two values of a parameter the same point: a number's value (3
+    and 3.0 are one point), anything else its ``repr``."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return float(value)
+    return repr(value)
 
 
 def run_id(point: dict) -> str:
@@ -543,8 +551,10 @@ def sweep(notebook: str | Path, grid: dict[str, list], out: Path | None = None,
     forked process pool would deadlock on the kernel managers' threads).
 
     Each run writes into ``out/<run_id>/`` (executed notebook, figures,
-    ``metrics.json``) and a ``done.json`` marker last, so an interrupted sweep
-    rerun skips finished runs and repeats nothing.  Claims are not asserted
+    ``metrics.json``) and a ``done.json`` marker last, holding the run's key (the
+    notebook, the point and the code: :func:`run_key`), so an interrupted sweep
+    rerun skips finished runs and repeats nothing, and a folder run by another
+    notebook or other code is run again, not read.  Claims are not asserted
     (``check_claims=False``) unless the grid sets it.  The table, one row per
     run and panel with the parameters as columns, is written to ``out/sweep.csv``.
     """
@@ -558,7 +568,9 @@ def sweep(notebook: str | Path, grid: dict[str, list], out: Path | None = None,
         _prepare_testbed()
     out = Path(out or ROOT / "build" / "sweeps" / notebook.stem).resolve()
     points = [dict(zip(grid, combo)) for combo in itertools.product(*grid.values())]
-    todo = [(p, out / run_id(p)) for p in points if not _finished(out / run_id(p))]
+    keys = {run_id(p): run_key(notebook, {"check_claims": False, **p}) for p in points}
+    todo = [(p, out / run_id(p)) for p in points
+            if not _finished(out / run_id(p), keys[run_id(p)])]
     workers = jobs or os.cpu_count() or 1
     if len(todo) > 1 and workers > 1:
         compile_kernels()            # once, not in every kernel that finds the cache cold
@@ -567,55 +579,62 @@ def sweep(notebook: str | Path, grid: dict[str, list], out: Path | None = None,
     for point, folder in todo:
         params = {"check_claims": False, **point, "figures_dir": str(folder),
                   "results_dir": str(folder)}
-        futures[pool.submit(_sweep_one, notebook, folder, params, point)] = point
+        futures[pool.submit(_sweep_one, notebook, folder, params, point,
+                            keys[run_id(point)])] = point
     failures = [r for r in _progress(futures, f"sweep {notebook.stem}") if r]
     if executor is None:
         pool.shutdown()
-    table = collect(out, points)
+    table = collect(out, points, keys)
     write_atomic(out / "sweep.csv", table.to_csv(index=False))
     if failures:
         raise RuntimeError(f"{len(failures)} run(s) failed: " + "; ".join(failures))
     return table
 
 
-def _sweep_one(notebook: Path, folder: Path, params: dict, point: dict) -> str:
+def _sweep_one(notebook: Path, folder: Path, params: dict, point: dict, key: str) -> str:
     """One run of a sweep, under its folder's lock: a concurrent sweep of the same
     point waits and then finds it finished."""
     with folder_lock(folder):
-        if _finished(folder):
+        if _finished(folder, key):
             return ""
         try:
             execute(notebook, folder / notebook.name, params)
         except pm.PapermillExecutionError as err:
             return f"{run_id(point)}: {err.ename}: {err.evalue}"
-        write_atomic(folder / "done.json", json.dumps(point))
+        write_atomic(folder / "done.json", json.dumps({"point": point, "key": key}))
     return ""
 
 
-def _finished(folder: Path) -> bool:
-    """Whether a sweep run finished: its ``done.json`` (written last) and a
-    readable ``metrics.json``.  A damaged one is reported and run again."""
+def _finished(folder: Path, key: str) -> bool:
+    """Whether a sweep run finished with the run's ``key`` (:func:`run_key`): its
+    ``done.json`` (written last) holding that key, and a readable ``metrics.json``.
+    A damaged run, or one of another notebook or other code, is reported and run
+    again."""
     if not (folder / "done.json").exists():
         return False
+    why = "done.json or metrics.json unreadable"
     try:
-        json.loads((folder / "done.json").read_text())
+        done = json.loads((folder / "done.json").read_text())
         metrics = json.loads((folder / "metrics.json").read_text())
         if isinstance(metrics, dict) and all(isinstance(m, dict) for m in metrics.values()):
-            return True
+            if isinstance(done, dict) and done.get("key") == key:
+                return True
+            why = "made by another notebook, other parameters or other code"
     except (OSError, ValueError):
         pass
-    warnings.warn(f"sweep run {folder} is damaged (done.json or metrics.json unreadable); "
-                  "running it again", stacklevel=3)
+    warnings.warn(f"sweep run {folder} is stale or damaged ({why}); running it again",
+                  stacklevel=3)
     (folder / "done.json").unlink(missing_ok=True)
     return False
 
 
-def collect(out: Path, points: list[dict]) -> pd.DataFrame:
-    """One row per finished run and panel: parameters, panel name, flat metrics."""
+def collect(out: Path, points: list[dict], keys: dict[str, str]) -> pd.DataFrame:
+    """One row per finished run and panel (its key in ``keys``, by :func:`run_id`):
+    parameters, panel name, flat metrics."""
     rows = []
     for point in points:
         folder = out / run_id(point)
-        if not _finished(folder):
+        if not _finished(folder, keys[run_id(point)]):
             continue
         for panel, m in json.loads((folder / "metrics.json").read_text()).items():
             flat = {k: v for k, v in m.items() if k != "parameters"}

@@ -38,6 +38,7 @@ from __future__ import annotations
 import math
 
 from lfc import signals
+from lfc._validate import check_finite, check_integer, check_number
 from lfc.wire.registers import COMMAND, REPORT
 
 OPS = ("add", "scale", "bias", "delay", "replay", "drop")
@@ -144,20 +145,19 @@ class WireAttack:
         elif field not in fields:
             raise ValueError(f"attack[{k}].field must be one of {fields} for {kind}, got "
                              f"{field!r}")
+        for key in ("start", "stop", "record"):
+            if key in op:
+                check_number(f"attack[{k}].{key}", op[key])
         out = dict(op, start=float(op.get("start", 0.0)), stop=float(op.get("stop", math.inf)))
         if not out["stop"] > out["start"] >= 0.0:
             raise ValueError(f"attack[{k}]: need 0 <= start < stop, got {op!r}")
         if kind == "add":
             out["signal"] = signal_from_spec(op.get("signal"))
         elif kind in ("scale", "bias"):
-            key = "factor" if kind == "scale" else "value"
-            if not isinstance(op.get(key), (int, float)) or not math.isfinite(op[key]):
-                raise ValueError(f"attack[{k}].{key} must be a finite number, got "
-                                 f"{op.get(key)!r}")
+            check_finite(f"attack[{k}].{'factor' if kind == 'scale' else 'value'}",
+                         op.get("factor" if kind == "scale" else "value"))
         elif kind == "delay":
-            if not isinstance(op.get("periods"), int) or op["periods"] < 1:
-                raise ValueError(f"attack[{k}].periods must be an int >= 1, got "
-                                 f"{op.get('periods')!r}")
+            out["periods"] = check_integer(f"attack[{k}].periods", op.get("periods"), 1)
         elif kind == "replay":
             if not 0.0 <= float(op.get("record", -1.0)) < out["start"]:
                 raise ValueError(f"attack[{k}].record must lie in [0, start), got "

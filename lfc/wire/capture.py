@@ -92,8 +92,10 @@ def read_commands(path: str | Path, protocol: str = "modbus",
                 and pkt[TCP].dport == transport.PORT:
             if protocol == "modbus":
                 layer = pkt[TCP].payload.payload          # the ADU's PDU
-                if getattr(layer, "funcCode", None) == 16:
-                    out.append(read_command(list(layer.outputsValue)))
+                command = (read_command(list(layer.outputsValue))
+                           if getattr(layer, "funcCode", None) == 16 else None)
+                if command is not None:
+                    out.append(command)
             else:
                 command = transport.Codec.command(bytes(pkt[TCP].payload))
                 if command is not None:

@@ -116,10 +116,16 @@ class Codec:
         # transport byte, application control, function, then g41v4 with 4 points
         if len(data) < 7 or data[2] != DIRECT_OPERATE or tuple(data[3:6]) != (41, 4, 0x17):
             return None
+        if len(data) < 7 + 10 * data[6]:                # cut short: not a command
+            return None
         values = {}
         for k in range(data[6]):
             o = 7 + 10 * k
+            if data[o] >= len(COMMAND_POINTS):
+                return None
             values[COMMAND_POINTS[data[o]]] = struct.unpack("<d", data[o + 1:o + 9])[0]
+        if set(values) != set(COMMAND_POINTS) or not math.isfinite(values["seq"]):
+            return None                                   # a point missing: not a command
         seq = int(values.pop("seq"))
         return values, seq
 
@@ -155,6 +161,8 @@ class Codec:
         if o is None:
             return None
         n = data[9] - data[8] + 1
+        if n != len(REPORT_POINTS) or len(data) < o + 5 * n:
+            return None
         return from_counts([struct.unpack("<i", data[o + 5 * k + 1:o + 5 * k + 5])[0]
                             for k in range(n)])
 

@@ -98,10 +98,13 @@ def frames(buffer: bytearray) -> list[bytes]:
 
 
 def write_values(frame: bytes) -> list[int] | None:
-    """The registers a function-16 request at address 0 writes, else None."""
+    """The registers a function-16 request at address 0 writes, else None (also
+    for a frame shorter than its register count says)."""
     if len(frame) < 13 or frame[7] != WRITE:
         return None
     address, count = struct.unpack(">HH", frame[8:12])
+    if len(frame) < 13 + 2 * count:
+        return None
     return list(struct.unpack(f">{count}H", frame[13:13 + 2 * count])) if address == 0 else None
 
 
@@ -116,10 +119,13 @@ def write_ack(frame: bytes) -> bytes:
 
 
 def read_values(frame: bytes) -> list[int] | None:
-    """The registers of a function-4 response, else None."""
+    """The registers of a function-4 response, else None (also for a frame
+    shorter than its byte count says)."""
     if len(frame) < 9 or frame[7] != READ:
         return None
     n = frame[8] // 2
+    if len(frame) < 9 + 2 * n:
+        return None
     return list(struct.unpack(f">{n}H", frame[9:9 + 2 * n]))
 
 
@@ -175,7 +181,10 @@ class Centre:
         reply = self.client.read_input_registers(0, count=N_REPORT, device_id=1)
         if reply.isError():
             raise ConnectionError(f"the outstation refused the read: {reply}")
-        return read_report(list(reply.registers))
+        report = read_report(list(reply.registers))
+        if report is None:
+            raise ConnectionError(f"the report read is malformed: {reply.registers!r:.80}")
+        return report
 
     def close(self) -> None:
         self.client.close()

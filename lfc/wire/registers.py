@@ -63,8 +63,18 @@ def command_registers(values: dict[str, float], seq: int) -> list[int]:
     return encode([values[c] for c in COMMAND]) + [seq % 65536]
 
 
-def read_command(registers: list[int]) -> tuple[dict[str, float], int]:
-    """``(values, seq)`` of :func:`command_registers`'s registers."""
+def _well_formed(registers: list[int], n: int) -> bool:
+    """Whether ``registers`` are ``n`` values of 16 bits."""
+    return len(registers) == n and all(isinstance(r, int) and 0 <= r <= 0xFFFF
+                                       for r in registers)
+
+
+def read_command(registers: list[int]) -> tuple[dict[str, float], int] | None:
+    """``(values, seq)`` of :func:`command_registers`'s registers; None for a
+    malformed write (not ``N_COMMAND`` registers of 16 bits), which the
+    generator side then counts as a command that did not arrive."""
+    if not _well_formed(registers, N_COMMAND):
+        return None
     return dict(zip(COMMAND, decode(registers[:SEQ]))), registers[SEQ]
 
 
@@ -75,8 +85,11 @@ def report_registers(seq: int, values: dict[str, float], flags: int, trips: int,
                                                                    int(trips), int(link)]
 
 
-def read_report(registers: list[int]) -> dict:
-    """The fields of :func:`report_registers`'s registers."""
+def read_report(registers: list[int]) -> dict | None:
+    """The fields of :func:`report_registers`'s registers; None for a malformed
+    response (not ``N_REPORT`` registers of 16 bits)."""
+    if not _well_formed(registers, N_REPORT):
+        return None
     out = dict(zip(REPORT, decode(registers[1:FLAGS])))
     out.update(seq=registers[0], flags=registers[FLAGS], trips=registers[TRIPS],
                link=registers[LINK])

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from lfc._validate import check_seed
 from lfc.engine import GeneratorSide, check_area_keys, sample_signal
 from lfc.filters import SafetyFilter
 from lfc.filters.coupled import CoupledFilter
@@ -194,6 +195,7 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
         raise ValueError(f"agc must be one of {AGC}, got {agc!r}")
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+    check_seed("seed", seed)
     if testbed is not None:
         return _on_andes(params, testbed, duration=duration, attack=attack, scc=scc,
                          protocol=protocol, load=load, noise_std=noise_std, seed=seed,
@@ -266,13 +268,14 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
                 tie += inc[a, line] * x[m * n_a + line]
             u[a] = gen.step(j, x[m * a:m * (a + 1)], float(p[k0, a] + tie), tie)
         bits, x_j = np.zeros(n_a, np.int64), x
-        for k in range(k0, min(k0 + ratio, n_steps)):
-            x = A @ x + Bu @ u + Bl @ p[k]
-            xs[k + 1] = x
-            for a in range(n_a):
-                trips[k + 1, a] = relay_sample((k + 1) * dt, x[m * a + 3], x[m * a + 4], limits,
-                                               delays, start[a], due[a])
-                bits[a] |= trips[k + 1, a]
+        with np.errstate(over="ignore", invalid="ignore"):   # non-finite: refused after the run
+            for k in range(k0, min(k0 + ratio, n_steps)):
+                x = A @ x + Bu @ u + Bl @ p[k]
+                xs[k + 1] = x
+                for a in range(n_a):
+                    trips[k + 1, a] = relay_sample((k + 1) * dt, x[m * a + 3], x[m * a + 4],
+                                                   limits, delays, start[a], due[a])
+                    bits[a] |= trips[k + 1, a]
         state["x"] = x
         for a, gen in enumerate(gens):   # what each measured at the sample
             link.publish(j, a, gen, x_j[m * a:m * (a + 1)], links[a], bits[a], lateness)
@@ -288,6 +291,10 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
             _realtime(n_ctrl, period, link.send, generate, link.read)
     finally:
         link.close()
+    if not np.isfinite(xs).all():
+        raise ValueError("the plant became non-finite: an attack (a bias or a factor so large "
+                         "that the plant overflows) or a load signal gives a non-finite value, "
+                         "and no filter stood in the way; lfc.simulate refuses the same run")
     trip_rows = [pd.DataFrame([(RELAY_NAMES[r], float(t[k])) for k in np.flatnonzero(trips[:, a])
                                for r in range(3) if trips[k, a] >> r & 1],
                               columns=["relay", "t"]) for a in range(n_a)]
