@@ -146,14 +146,14 @@ def check_integer(name: str, value: object, low: int = 0, high: int | None = Non
                   high_text: str | None = None) -> int:
     """Raise unless ``value`` is an integer (not a bool, not 2.0) with ``low <= value``
     (and ``value < high``; ``high_text`` writes ``high`` in the message); return it."""
+    if _is_integer(value) and low <= value and (high is None or value < high):
+        return int(value)                       # the common case: no message to build
     want = (f"an integer >= {low}" if high is None else
             f"an integer in [{low}, {high_text or high})")
     if not _is_integer(value):
         raise ParameterTypeError(f"{name} must be {want}, got {value!r} "
                                  f"({type(value).__name__})")
-    if value < low or (high is not None and value >= high):
-        raise ValueError(f"{name} must be {want}, got {value!r}")
-    return int(value)
+    raise ValueError(f"{name} must be {want}, got {value!r}")
 
 
 def check_seed(name: str, value: object) -> int:
