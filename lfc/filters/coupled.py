@@ -478,7 +478,14 @@ class CoupledSet:
                 P = solve_continuous_lyapunov(A.T, -np.diag(scale ** -2.0))
             else:
                 room = np.minimum(limits - o.load_bound * load - 2 * t_max, hold)
-                P = shaped_terminal(A, C, Eh @ ql, np.maximum(room, 1e-9 * limits))
+                try:
+                    P = shaped_terminal(A, C, Eh @ ql, np.maximum(room, 1e-9 * limits))
+                except ValueError as err:
+                    advice = ("try terminal='lyapunov'" if o.terminal == "sdp" else
+                              f"and the Lyapunov ellipsoid, tried first, leaves no room "
+                              f"(tightenings: {self._describe()}); lower load_bound or "
+                              f"tightening")
+                    raise ValueError(f"{err}; {advice}") from None
             K = np.linalg.cholesky(P)                                    # P = K K'
             sigma = np.sqrt(np.einsum("ij,jk,ik->i", C, np.linalg.inv(P), C))
             kappa = float(np.max(np.linalg.norm(K.T @ Eh @ ql, axis=0)))
@@ -595,7 +602,7 @@ def shaped_terminal(A: np.ndarray, C: np.ndarray, loads: np.ndarray,
             return P
     raise ValueError(f"the shaped terminal ellipsoid's semidefinite program gives no ellipsoid "
                      f"invariant in floating point (Q's smallest eigenvalue floored at "
-                     f"{', '.join(f'{f:g}' for f in Q_FLOORS)}); use terminal='lyapunov'")
+                     f"{', '.join(f'{f:g}' for f in Q_FLOORS)})")
 
 
 def _load_error_steps(kalman: GridKalman, A: np.ndarray, Bl: np.ndarray, period: float,
