@@ -917,8 +917,7 @@ class CoupledFilter:
             :meth:`reason` of the flags.
         """
         n = self.params.n_areas
-        x = np.ascontiguousarray(check_array("x", x))
-        u, p = np.ascontiguousarray(check_array("u", u)), np.ascontiguousarray(check_array("p", p))
+        x, u, p = check_array("x", x), check_array("u", u), check_array("p", p)   # fresh copies
         if x.shape != (self.params.n_states,) or u.shape != (n,) or p.shape != (n,):
             raise ValueError(f"x must have {self.params.n_states} entries and u, p {n}, got "
                              f"shapes {x.shape}, {u.shape}, {p.shape}")

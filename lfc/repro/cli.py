@@ -352,17 +352,12 @@ def _plot_sweep(args) -> int:
 
 def _grid(params: list[list[str]]) -> dict[str, list]:
     """The sweep grid of ``-p NAME VALUE...`` options: a repeated name adds its
-    values; a value given twice for one name is refused."""
+    values (a value given twice is refused by :func:`runner.validate_parameters`)."""
     grid: dict[str, list] = {}
     for name, *values in params:
         if not values:
             raise ValueError(f"parameter {name!r} has no values")
         grid.setdefault(name, []).extend(runner.parse_value(v) for v in values)
-    for name, values in grid.items():
-        seen = [runner.value_key(v) for v in values]
-        twice = sorted({repr(v) for v, k in zip(values, seen) if seen.count(k) > 1})
-        if twice:
-            raise ValueError(f"parameter {name!r} lists {', '.join(twice)} more than once")
     return grid
 
 

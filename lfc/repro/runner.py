@@ -515,8 +515,10 @@ def validate_parameters(notebook: Path, parameters: dict[str, list]) -> dict:
             raise ValueError(f"parameter {name!r} needs a non-empty list of values, "
                              f"got {values!r}")
         seen = [value_key(v) for v in values]
-        if len(set(seen)) < len(seen):
-            raise ValueError(f"parameter {name!r} lists a value more than once: {values!r}")
+        twice = sorted({repr(v) for v, k in zip(values, seen) if seen.count(k) > 1})
+        if twice:
+            raise ValueError(f"parameter {name!r} lists {', '.join(twice)} more than once "
+                             f"(one point)")
         default = parse_value(known[name]["default"])
         for value in values:
             check_type(name, value, default)
