@@ -271,6 +271,21 @@ def test_andes_warnings_become_one_summary_line_per_case(monkeypatch, capsys):
     assert "a warning after the load" in capsys.readouterr().err
 
 
+def test_an_andes_run_leaves_nothing_in_the_temp_folder(tmp_path):
+    """ANDES' logger setup makes a folder ``andes-*`` in the temp directory for a
+    log file even when none is written, one per process, never removed (51 of
+    them after one day's runs on this machine): getting ANDES ready passes it a
+    log path instead, and a run on the microgrid leaves the folder empty."""
+    import os
+    import subprocess
+    import sys
+    code = ("import lfc\nfrom lfc.testbed import MicrogridCase\n"
+            "lfc.simulate(MicrogridCase(), duration=0.1)\n")
+    subprocess.run([sys.executable, "-c", code], check=True, capture_output=True,
+                   env={**os.environ, "TMPDIR": str(tmp_path)}, timeout=600)
+    assert list(tmp_path.iterdir()) == []
+
+
 @pytest.mark.parametrize("duration", [1.6, 1.605])
 def test_a_run_whose_steps_fall_a_rounding_short_of_its_end_completes(duration):
     """Found: 0.005 s added 320 times falls 2e-16 s short of 1.6 s, and ANDES then

@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import sys
+import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -46,7 +47,10 @@ def prepare_andes() -> None:
     import andes
     from andes.utils.paths import get_pycode_path
 
-    andes.config_logger(stream_level=logging.WARNING, file=False)
+    # a log_path, although no file is written: without one config_logger makes an empty
+    # folder in the temp directory (get_log_dir), one per process, never removed
+    andes.config_logger(stream_level=logging.WARNING, file=False,
+                        log_path=tempfile.gettempdir())
     logger = logging.getLogger("andes")
     for h in logger.handlers[:]:
         if isinstance(h, logging.StreamHandler) and not isinstance(h, (logging.FileHandler,
