@@ -175,3 +175,36 @@ def test_biases_0p035_to_0p04_pu_are_stopped(bias, alpha, estimator):
                  scc=SafetyFilter(P, alpha=alpha), estimator=estimator,
                  noise_std=(1e-4, 1e-3) if estimator else (0.0, 0.0))
     assert not r.metrics()["tripped"], r.metrics()
+
+
+def test_the_edge_table_does_not_read_the_scans_first_amplitude_as_an_edge():
+    """At 0.5 Hz the scan's first amplitude (0.2 pu) already trips without the SCC
+    and with α = 20 (slow sinusoids beat α = 20: chapter 06's map): the edge lies
+    at or below it, and the table says so in words; at 1 Hz the first failure
+    lies inside the scan and is a number."""
+    from lfc import simulate_many
+    from lfc.experiments.surface import amplitude_scan, first_failures
+
+    def table(freq_hz: float) -> dict:
+        scan = amplitude_scan("sinusoid", [0.2, 0.27, 0.3], freq_hz, [3.0, 20.0])
+        edges = first_failures(simulate_many(P, scan, duration=10.0, progress=False))
+        return dict(zip(edges.SCC, edges["smallest amplitude that trips (pu)"]))
+
+    slow, fast = table(0.5), table(1.0)
+    assert slow["no SCC"] == slow["SCC α=20"] == "≤ 0.2 (the scan's first)"
+    assert np.isnan(slow["SCC α=3"])
+    assert fast["no SCC"] == 0.27 and np.isnan(fast["SCC α=20"])
+
+
+def test_the_tutorials_logging_claim_needs_an_intervention():
+    """"the filter intervened and logged every intervention": true on the tutorial's
+    attack; false, and saying why in its name, on an attack too weak to make the
+    filter intervene (0.05 pu), where there is nothing to log."""
+    runs = {k: simulate(P, duration=5, pc_attack=Sinusoid(a, 1.0, start=1),
+                        scc=SafetyFilter(P, alpha=20.0) if k.startswith("scc") else None)
+            for k, a in (("no_scc", 0.5), ("scc", 0.5), ("scc_weak", 0.05))}
+    name = "the filter intervened and logged every intervention"
+    assert paper_claims.tutorial_claims(runs, 0.0)[name]
+    weak = dict(runs, scc=runs["scc_weak"])
+    assert runs["scc_weak"].metrics()["alarms"] == 0
+    assert not paper_claims.tutorial_claims(weak, 0.0)[name]

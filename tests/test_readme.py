@@ -109,6 +109,15 @@ def test_the_readmes_quick_start_runs_and_stops_the_attack(tmp_path, monkeypatch
     exec(compile(code, "README.md (quick start)", "exec"), space)
     metrics = space["res"].metrics()
     assert not metrics["tripped"] and metrics["alarms"] > 0
+    # what the text under the block says it prints
+    text = " ".join(README.read_text().split("## Quick start", 1)[1].split("## Figures")[0].split())
+    lfc = space["lfc"]
+    alone = lfc.simulate(space["p"], duration=10, pc_attack=space["attack"]).metrics()
+    assert alone["first_trip_relay"] == "ROCOF" and f"at {alone['first_trip_t']:.2f} s" in text
+    assert f"about {round(metrics['alarms'], -1)} alarms" in text
+    assert round(metrics["scc_active_fraction"], 1) == 0.5 and "about half" in text
+    assert f"up to about {metrics['max_abs_modification']:.1f} pu" in text
+    assert metrics["max_abs_modification"] > 0.5 and metrics["outside"] > 0
     assert {p.name for p in (tmp_path / "build" / "run").iterdir()} >= {
         "trace.csv", "controls.csv", "trips.csv", "alarms.csv", "metrics.json"}
 

@@ -12,6 +12,7 @@ import itertools
 import numpy as np
 import pandas as pd
 
+from lfc._format import number
 from lfc._validate import ParameterTypeError, check_sizes, is_sequence
 from lfc.experiments.scenarios import ATTACK_START
 from lfc.filters import CONFLICT_RULES, DEFAULT_READING, OUTSIDE_RULES, PREDICTIONS
@@ -132,14 +133,18 @@ def amplitude_scan(waveform: str, amplitudes: list[float], freq_hz: float,
 def first_failures(results: pd.DataFrame) -> pd.DataFrame:
     """Per SCC setting of an :func:`amplitude_scan`: the smallest amplitude (pu)
     that trips a relay, its first relay, and how many amplitudes of the scan trip
-    (NaN and 0 if none does)."""
+    (NaN and 0 if none does).  Where the scan's first amplitude already trips, the
+    edge lies at or below it, and the smallest amplitude is the text ``"≤ a (the
+    scan's first)"``, not a number that would read as the edge."""
     rows = []
     for alpha, grp in results.groupby(results.alpha.fillna(-1.0), sort=False):
         tripped = grp[grp.tripped].sort_values("amplitude", kind="stable")
         first = tripped.iloc[0] if len(tripped) else None
+        smallest = np.nan if first is None else float(first.amplitude)
+        if smallest <= grp.amplitude.min():
+            smallest = f"≤ {number(smallest)} (the scan's first)"
         rows.append({"SCC": scc_label(np.nan if alpha < 0 else alpha),
-                     "smallest amplitude that trips (pu)":
-                         float(first.amplitude) if first is not None else np.nan,
+                     "smallest amplitude that trips (pu)": smallest,
                      "first relay": first.first_trip_relay if first is not None else "none",
                      "amplitudes that trip": f"{len(tripped)} of {len(grp)}"})
     return pd.DataFrame(rows)

@@ -91,10 +91,15 @@ def _parser() -> argparse.ArgumentParser:
                "        -p load_step 0.05 0.1 0.2 --out build/steps\n"
                "writes OUT/sweep.csv (a row per run and panel: parameters and metrics)\n"
                "and each run's executed notebook and figures in its own folder of OUT\n"
-               "(a rerun skips finished runs); plot it with\n"
+               "(a rerun skips finished runs); the paper's claims are not asserted\n"
+               "(check_claims False) unless -p check_claims True; a list parameter\n"
+               "takes one value per -p, as Python or YAML: -p edge_durations '[10, 30]';\n"
+               "plot it with\n"
                "    python -m lfc plot-sweep OUT/sweep.csv -x amplitude -y max_abs_rocof_meas "
                "--by alpha")
-    sw.add_argument("notebook", type=Path)
+    sw.add_argument("notebook", type=Path,
+                    help="the chapter to run, e.g. notebooks/02_fig4_rocof_attack.ipynb; its "
+                         "parameters are the names in its cell tagged 'parameters'")
     sw.add_argument("-p", "--param", nargs="+", action="append", default=[],
                     metavar=("NAME", "VALUE"),
                     help="a parameter and its values (repeating a name adds values)")
