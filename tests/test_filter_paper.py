@@ -294,3 +294,25 @@ def test_a_command_within_a_few_ulps_of_its_bound_is_not_clipped(ulps):
     assert u == u_ref and not info.active
     u, info = EXACT.filter(STEADY_X, bound + 64 * np.spacing(bound))
     assert info.active and u == bound
+
+
+@given(flags=st.integers(0, 2 ** 15 - 1))
+def test_what_info_reads_from_the_flags_is_each_filters_own(flags):
+    """``FilterInfo``'s booleans, binding bounds and reason depend on the flag bits
+    and the filter's frozen options only, and are worked out once per flag value
+    and filter: a filter that pushes back and one that holds word an ``outside``
+    differently, whichever was asked first, and every answer equals the one
+    computed afresh (the same for the batch's kinds)."""
+    from lfc.filters import base
+    from lfc.filters.paper import _kinds
+    push, hold = (SafetyFilter(P, outside_rule=rule).backend for rule in ("push", "hold"))
+    out = (0.1, flags, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.5, -0.5)
+    for backend in (hold, push, hold):
+        info = backend.info(0.2, out)
+        assert info.reason == (backend.reason(flags) if flags & base.ALARM_BITS else "")
+        assert info.binding == (base.binding_names(flags) if flags & base.ACTIVE else ())
+        assert (info.active, info.outside) == (bool(flags & base.ACTIVE),
+                                               bool(flags & base.OUTSIDE))
+        assert info.details["kind"] == _kinds(flags)
+    if flags & base.OUTSIDE:
+        assert push.info(0.2, out).reason != hold.info(0.2, out).reason

@@ -264,12 +264,25 @@ class Backend:
     def info(self, u_ref: float, out: tuple) -> FilterInfo:
         """A :class:`FilterInfo` from one compiled ``decide`` result."""
         u, flags, h0, h1, m0, m1, y0, y1, d0, d1 = out
-        return FilterInfo(u_ref, u, bool(flags & ACTIVE), bool(flags & INFEASIBLE),
-                          bool(flags & OUTSIDE), bool(flags & INVALID),
-                          bool(flags & SOLVER_ERROR), h0, h1, m0, m1, y0, y1,
-                          binding_names(flags) if flags & ACTIVE else (),
-                          self.reason(flags) if flags & ALARM_BITS else "",
+        active, infeasible, outside, invalid, error, binding, reason = self._by_flags(flags)
+        return FilterInfo(u_ref, u, active, infeasible, outside, invalid, error,
+                          h0, h1, m0, m1, y0, y1, binding, reason,
                           self.details(d0, d1, flags))
+
+    def _by_flags(self, flags: int) -> tuple:
+        """What :meth:`info` reads from the flag bits alone (the booleans, the binding
+        bounds and the reason), worked out once per value of ``flags`` (a handful
+        occur; the options that word the reason are frozen)."""
+        try:
+            return self.__dict__["_flag_memo"][flags]
+        except KeyError:
+            memo = self.__dict__.setdefault("_flag_memo", {})
+            memo[flags] = (bool(flags & ACTIVE), bool(flags & INFEASIBLE),
+                           bool(flags & OUTSIDE), bool(flags & INVALID),
+                           bool(flags & SOLVER_ERROR),
+                           binding_names(flags) if flags & ACTIVE else (),
+                           self.reason(flags) if flags & ALARM_BITS else "")
+            return memo[flags]
 
 
 def given(value: object) -> bool:

@@ -60,6 +60,7 @@ numeric trouble; every call returns a finite command.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import ClassVar
@@ -206,7 +207,8 @@ class PaperFilter(Backend):
         return "; ".join(parts)
 
     def details(self, d0: float, d1: float, flags: int) -> dict:
-        return {"kind": _kinds(flags), "bound": (d0, d1)}
+        return {"kind": _kinds_of(flags) if isinstance(flags, int) else _kinds(flags),
+                "bound": (d0, d1)}
 
     def decide_python(self, x: np.ndarray, u_ref: float, p_load: float,
                       memory: np.ndarray) -> tuple:
@@ -224,6 +226,12 @@ class PaperFilter(Backend):
             return (out[0], out[1] | SOLVER_ERROR) + out[2:]
         memory[0] = u
         return (u,) + out[1:]
+
+
+@functools.cache
+def _kinds_of(flags: int) -> tuple[int, int]:
+    """:func:`_kinds` of one call's flags, worked out once per value."""
+    return _kinds(flags)
 
 
 def _kinds(flags):
