@@ -240,6 +240,7 @@ class Backend:
     def __init__(self, params: LFCParams, relays: RelaySettings, options: Options) -> None:
         self.params, self.relays, self.options = params, relays, options
         self.data = np.zeros(1)
+        self._flag_memo: dict[int, tuple] = {}     # _by_flags' answers, per flag value
 
     def __getattr__(self, name: str):
         if name == "options":
@@ -273,16 +274,14 @@ class Backend:
         """What :meth:`info` reads from the flag bits alone (the booleans, the binding
         bounds and the reason), worked out once per value of ``flags`` (a handful
         occur; the options that word the reason are frozen)."""
-        try:
-            return self.__dict__["_flag_memo"][flags]
-        except KeyError:
-            memo = self.__dict__.setdefault("_flag_memo", {})
+        memo = self._flag_memo
+        if flags not in memo:
             memo[flags] = (bool(flags & ACTIVE), bool(flags & INFEASIBLE),
                            bool(flags & OUTSIDE), bool(flags & INVALID),
                            bool(flags & SOLVER_ERROR),
                            binding_names(flags) if flags & ACTIVE else (),
                            self.reason(flags) if flags & ALARM_BITS else "")
-            return memo[flags]
+        return memo[flags]
 
 
 def given(value: object) -> bool:

@@ -154,8 +154,8 @@ class WireAttack:
         if kind == "add":
             out["signal"] = signal_from_spec(op.get("signal"))
         elif kind in ("scale", "bias"):
-            check_finite(f"attack[{k}].{'factor' if kind == 'scale' else 'value'}",
-                         op.get("factor" if kind == "scale" else "value"))
+            key = "factor" if kind == "scale" else "value"
+            check_finite(f"attack[{k}].{key}", op.get(key))
         elif kind == "delay":
             out["periods"] = check_integer(f"attack[{k}].periods", op.get("periods"), 1)
         elif kind == "replay":
