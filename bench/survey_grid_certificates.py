@@ -39,8 +39,11 @@ Prints, from one run:
 * with ``--andes``: each fitted model's command range (the ladder of
   ``lfc.testbed.grid_fit.validated_range``), then the red team's coordinated
   search (every family of ``MULTI_FAMILIES``, both areas at once) against the
-  contract, the coupled certificate (its commands within the range) and the
-  coupled certificate without the range, on Kundur's and the IEEE 39-bus
+  contract, the coupled certificate (its commands within the range), the
+  coupled certificate without the range and the coupled certificate on its grid
+  Kalman estimate (noise (1e-4 pu, 1e-3 pu/s), ``horizon`` 16 s on Kundur, 12 s on
+  IEEE 39-bus: ``tests/test_coupled_estimate.py``; on ANDES it reads
+  the metered frequency, ROCOF and exports), on Kundur's and the IEEE 39-bus
   system's areas as fitted to ANDES,
   and its winner replayed on ANDES with the same filters (anti-windup): the
   fitted model's worst severity, and on ANDES whether anything tripped, the
@@ -172,15 +175,21 @@ def andes() -> None:
         fit = grid_design(case)
         unbounded = CoupledFilter(fit, lfc.RelaySettings(), control_period=0.01,
                                   u_min=-np.inf, u_max=np.inf)
-        for kind in ("contract", "coupled", "coupled, no range"):
-            filters = {a: unbounded if kind == "coupled, no range" else kind for a in range(2)}
+        estimating = CoupledFilter(fit, lfc.RelaySettings(), control_period=0.01,
+                                   noise_std=NOISE,
+                                   horizon=16.0 if case.name == "kundur" else 12.0)
+        for kind in ("contract", "coupled", "coupled, no range", "coupled, estimate"):
+            filters = {a: {"coupled, no range": unbounded, "coupled, estimate": estimating}
+                       .get(kind, kind) for a in range(2)}
+            more = ({"estimator": "kalman", "noise_std": NOISE} if kind == "coupled, estimate"
+                    else {})
             for family in MULTI_FAMILIES:
                 found = coordinated_search(fit, filters, family, duration=20.0, maxiter=2,
-                                           popsize=4, jobs=1)
+                                           popsize=4, jobs=1, scenario=more)
                 try:
                     r = lfc.simulate(case, duration=20.0, filters=filters, anti_windup=True,
                                      attacks=coordinated_attacks(family, found["theta"], 2,
-                                                                 20.0))
+                                                                 20.0), **more)
                 except TestbedError as err:      # a finding, not a crash of the survey
                     print(f"| {case.name} | {kind} | {family} | {found['severity']:.3f} | "
                           f"ANDES diverged: {err} | | |", flush=True)

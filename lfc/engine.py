@@ -957,7 +957,16 @@ def check_coupled(filters: dict, grid: MultiAreaParams, estimator,
     if built.n_areas != grid.n_areas or [t[:2] for t in built.tie] != [t[:2] for t in grid.tie]:
         raise ValueError(f"the coupled filter was built for {built!r}, not for this grid's "
                          f"{grid.n_areas} areas and tie-lines {grid.tie}")
-    estimates = coupled[0].kalman is not None
+    check_coupled_estimator(coupled[0], estimator, noise_std)
+
+
+def check_coupled_estimator(filt: CoupledFilter, estimator,
+                            noise_std: tuple[float, float]) -> None:
+    """``ValueError`` unless ``filt`` (a :class:`~lfc.filters.coupled.CoupledFilter`)
+    is given what its certificate covers: the exact state (``estimator=None``) if
+    built without ``noise_std``; its own grid Kalman filter (``"kalman"``) on
+    measurement noise no larger than it was built for, if with it."""
+    estimates = filt.kalman is not None
     if estimator is None and estimates:
         raise ValueError("the coupled filter was built with noise_std (it covers its grid "
                          "Kalman estimate): give estimator='kalman'")
@@ -967,7 +976,7 @@ def check_coupled(filters: dict, grid: MultiAreaParams, estimator,
                          f"state (a wide-area measurement); give estimator=None, or build it "
                          f"with noise_std and give estimator='kalman' (its own grid-wide "
                          f"Kalman filter)")
-    built_for = coupled[0].options.noise_std
+    built_for = filt.options.noise_std
     if estimates and any(s > b for s, b in zip(noise_std, built_for)):
         raise ValueError(f"noise_std={tuple(noise_std)} exceeds the noise the coupled filter "
                          f"was built for ({built_for}): its error bound would not hold; build "
@@ -1047,21 +1056,19 @@ class GeneratorSide:
                  wref_attack, load_feedforward: bool, period: float, *, ace_attack=None,
                  k_agc: tuple[float, float] | None = None, anti_windup: bool = False,
                  network: bool = False) -> None:
-        if isinstance(scc, CoupledFilter) and (estimator is not None or scc.kalman is not None):
-            raise ValueError(f"estimator={estimator!r}: on a testbed the coupled filter reads "
-                             f"the grid's metered state (a wide-area measurement); give "
-                             f"estimator=None and a filter built without noise_std (its grid "
-                             f"Kalman filter runs on the linear grid only)")
         if scc is not None:
             scc.check_period(period)
         self.tc, self.scc = tc, scc
         self.noise = make_noise(noise_std, len(tc), seed)
-        kf = make_estimator(estimator, design, period, noise_std)
+        if isinstance(scc, CoupledFilter):     # its grid Kalman filter, if any, shared:
+            check_coupled_estimator(scc, estimator, noise_std)   # state and measurements
+            kf = scc.kalman                    # come with step's grid (area 0 steps it)
+        else:
+            kf = make_estimator(estimator, design, period, noise_std)
         self.est = -1 if kf is None else 0
-        self.ka, self.kb, self.kc, self.kg, kdim = _kalman_tables([kf] if kf else [])
-        n = int(kdim[0, 0]) if kf else 0
-        self.ka, self.kb = self.ka[0, :n, :n].copy(), self.kb[0, :n, :1].copy()
-        self.kc, self.kg = self.kc[0, :2, :n].copy(), self.kg[0, :n, :2].copy()
+        self.ka, self.kb, self.kc, self.kg = (
+            np.ascontiguousarray(m, float) for m in ((kf.A, kf.B, kf.C, kf.gain) if kf else
+                                                     (np.zeros((0, 0)),) * 4))
         if network and (pc_attack is not None or wref_attack is not None
                         or ace_attack is not None):
             raise ValueError("network=True: the command channels arrive by receive(); give "
@@ -1100,9 +1107,16 @@ class GeneratorSide:
         disturbance, load plus tie-line export — and the measured tie-line
         export ``tie`` (pu); return the command to hold (pu).  A coupled filter
         (:mod:`lfc.filters.coupled`) also reads ``grid``: ``(area, grid state,
-        every area's latest command, every area's load)``."""
-        if self.method == COUPLED and grid is None:
-            raise ValueError("the coupled filter needs grid=(area, state, commands, loads)")
+        every area's latest command, every area's load)``; on its grid Kalman
+        estimate (``estimator="kalman"``) also ``(measurements, scratch,
+        estimator state)``, shared by every area: the measurements (3 n_areas
+        values, then as many of scratch: each area's ``dw_meas`` and
+        ``rocof_meas`` with its noise, then each area's metered export), the
+        estimate's grid state (n_states) and the estimator's state (2, its
+        states), which area 0's call steps."""
+        if self.method == COUPLED and (grid is None or len(grid) != (7 if self.est >= 0 else 4)):
+            raise ValueError("the coupled filter needs grid=(area, state, commands, loads), and "
+                             "on its estimate also (measurements, scratch, estimator state)")
         kinds, params, offsets, st, sv = self.signals
         t = float(self.tc[j])
         tie += _signal(ACE, kinds, params, offsets, st, sv, t, j)
@@ -1117,7 +1131,8 @@ class GeneratorSide:
                                     self.memory[:0], self.memory[:0], self.kstate)
                                    if grid is None else
                                    (int(grid[0]), *(np.ascontiguousarray(v, float)
-                                                    for v in grid[1:]), self.memory[:0],
-                                    self.memory[:0], self.kstate))
+                                                    for v in grid[1:4]),
+                                    *(grid[4:] if len(grid) == 7 else
+                                      (self.memory[:0], self.memory[:0], self.kstate))))
         self.n_done = j + 1
         return u

@@ -151,9 +151,13 @@ def coupled_filter(params: MultiAreaParams, relays: RelaySettings, control_perio
                       "coupled_filter", params, relays, control_period, noise_std)
 
 
-def _kalman(estimator: object) -> bool:
-    """Whether ``estimator`` asks for the Kalman estimate (``"kalman"``)."""
-    return isinstance(estimator, str) and estimator == "kalman"
+def estimate_noise(estimator: object, noise_std) -> tuple[float, float] | None:
+    """The measurement noise ``"coupled"`` (:func:`area_filter`) is built for: with
+    ``estimator="kalman"``, ``noise_std`` (checked; its grid Kalman estimate),
+    else None (the exact state)."""
+    if isinstance(estimator, str) and estimator == "kalman":
+        return tuple(check_noise_std("noise_std", noise_std))
+    return None
 
 
 @dataclass
@@ -268,7 +272,7 @@ def simulate_grid_linear(params: MultiAreaParams, *, duration: float,
         raise ValueError(f"params must be a MultiAreaParams, got {type(params).__name__}")
     relays = relays_or_default(relays)
     filters = check_area_keys(filters, params.n_areas, "filters")
-    estimate = check_noise_std("noise_std", noise_std) if _kalman(estimator) else None
+    estimate = estimate_noise(estimator, noise_std)
     built = {a: area_filter(params, a, f, relays, control_period, estimate)
              for a, f in filters.items()}
     sc = Scenarios(params, duration=duration, dt=dt, control_period=control_period,
@@ -366,8 +370,7 @@ def simulate_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
                              f"got {s!r}")
         filters = check_area_keys(s.get("filters"), params.n_areas, f"scenarios[{k}].filters")
         built = {}
-        estimate = tuple(s.get("noise_std", (0.0, 0.0))) if _kalman(s.get("estimator")) \
-            else None
+        estimate = estimate_noise(s.get("estimator"), s.get("noise_std", (0.0, 0.0)))
         for a, f in filters.items():
             key = (a, f if isinstance(f, str) else id(f), estimate)
             if key not in cache:

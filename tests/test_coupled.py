@@ -360,9 +360,10 @@ def test_finding_a_lightly_damped_area_flags_outside_but_trips_nothing():
 
 
 def test_the_filters_share_one_certificate_and_refuse_what_breaks_it():
-    """Every area must have the same coupled filter; no estimator (exact state);
-    the simulation's period; a generator side driven by another plant (ANDES) must
-    be given the grid."""
+    """Every area must have the same coupled filter; no estimator (exact state),
+    or its own grid Kalman filter if built with ``noise_std``; the simulation's
+    period; a generator side driven by another plant (ANDES) must be given the
+    grid, and on the estimate the estimator's arrays."""
     grid = MultiAreaParams.two_area()
     filt = CoupledFilter(grid, RELAYS)
     with pytest.raises(ValueError, match="same CoupledFilter at every area"):
@@ -377,13 +378,22 @@ def test_the_filters_share_one_certificate_and_refuse_what_breaks_it():
     with pytest.raises(ValueError, match="built for"):
         lfc.simulate(THREE, duration=1.0, filters={a: filt for a in range(3)})
     from lfc.engine import GeneratorSide
-    with pytest.raises(ValueError, match="metered state"):
+    with pytest.raises(ValueError, match="exact state"):
         GeneratorSide(grid.areas[0], filt, "kalman", (1e-4, 1e-3), 0, np.arange(3) * 0.01,
                       None, None, False, 0.01)
     side = GeneratorSide(grid.areas[0], filt, None, (0.0, 0.0), 0, np.arange(3) * 0.01, None,
                          None, False, 0.01)
     with pytest.raises(ValueError, match="needs grid"):
         side.step(0, np.zeros(5), 0.0)
+    estimating = CoupledFilter(grid, RELAYS, noise_std=(1e-4, 1e-3))
+    with pytest.raises(ValueError, match="give estimator='kalman'"):
+        GeneratorSide(grid.areas[0], estimating, None, (1e-4, 1e-3), 0, np.arange(3) * 0.01,
+                      None, None, False, 0.01)
+    side = GeneratorSide(grid.areas[0], estimating, "kalman", (1e-4, 1e-3), 0,
+                         np.arange(3) * 0.01, None, None, False, 0.01)
+    with pytest.raises(ValueError, match="on its estimate also"):   # the estimator's arrays
+        side.step(0, np.zeros(5), 0.0, 0.0, (0, np.zeros(grid.n_states), np.zeros(2),
+                                             np.zeros(2)))
 
 
 def test_the_tightest_case_a_search_found_reaches_the_certificates_ceiling_and_holds():

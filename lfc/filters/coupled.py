@@ -77,8 +77,10 @@ push gigawatts over a tie the model treats as linear.
 **Not covered.**  Other estimators (refused), plants other
 than the design grid, an area without this filter.  On ANDES (``lfc.simulate``
 of a ``GridCase``) the filters read each area's metered states and tie-line
-export (:meth:`CoupledFilter.grid_state`) and the certificate is the fitted
-model's: measured there, not proven.  Without the command range a red-team
+export (:meth:`CoupledFilter.grid_state`), or on the estimate the grid Kalman
+filter reads the metered frequency, ROCOF and exports, and the certificate (and
+the estimate's error bound) is the fitted model's: measured there, not proven
+(``tests/test_coupled_estimate.py::test_on_andes_the_coupled_filters_run_on_their_estimate``).  Without the command range a red-team
 attack found against the IEEE 39-bus system's fitted model trips ROCOF on ANDES;
 within it the winners trip nothing there, though ``outside`` is flagged
 (``tests/test_coupled.py::test_on_andes_ieee39_the_red_teams_winner_trips_the_coupled_filters_only_beyond_the_range``).
@@ -145,6 +147,10 @@ class CoupledOptions:
         assumption.  Default 0.01 pu.
     horizon : float
         Look-ahead before the terminal ellipsoid (s), in [0.2, 20].  Default 8 s.
+        On the estimate, a horizon that builds may still leave new vectors almost
+        no radius (``data[RHO_NEW]``), which holds legitimate AGC after a load
+        step: Kundur as fitted to ANDES needs 16 s, not the 12 that build
+        (``docs/coupled-certificate.md``, "With estimates", Cost).
     tightening : float
         How far (fraction of each limit) an output may move between two
         certificate samples, in [1e-4, 0.1]; sets their spacing.  Default 0.005.

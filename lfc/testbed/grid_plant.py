@@ -48,7 +48,8 @@ from lfc.engine import (GeneratorSide, check_area_keys, check_attacks, check_cou
                         sample_signal)
 from lfc.multiarea import MultiAreaParams
 from lfc.relays import RelaySettings, relays_or_default
-from lfc.simulate_multiarea import MultiAreaResult, area_filter, multiarea_result
+from lfc.simulate_multiarea import (MultiAreaResult, area_filter, estimate_noise,
+                                    multiarea_result)
 from lfc.testbed.grid import GridCase, build_grid
 from lfc.testbed.loop import AndesLoop, AndesPlant, TestbedError
 
@@ -120,8 +121,10 @@ def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
     filters = check_area_keys(filters, n_a, "filters")
     for a, load in loads.items():
         sample_signal(load, np.arange(0.0, duration + step, step), f"loads[{a}]")
-    built = {a: area_filter(params, a, f, relays, control_period) for a, f in filters.items()}
-    check_coupled(built, params, estimator)
+    estimate = estimate_noise(estimator, noise_std)
+    built = {a: area_filter(params, a, f, relays, control_period, estimate)
+             for a, f in filters.items()}
+    check_coupled(built, params, estimator, noise_std)
     n_ctrl = int(np.ceil(duration / control_period - 1e-9))
     tc = np.arange(n_ctrl) * control_period
     k_freq, k_tie = params.agc_gains()

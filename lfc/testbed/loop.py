@@ -188,6 +188,7 @@ class AndesLoop:
         self.stopped: tuple | None = None
         self.next_j = 0
         self.commands = np.zeros(plant.n_areas)   # each area's latest command (pu)
+        self._kalman: tuple | None = None         # a coupled filter's grid estimator's
         self._load_at = (math.nan, np.zeros(plant.n_areas))
 
     def run(self, duration: float, step: float) -> bool:
@@ -264,7 +265,7 @@ class AndesLoop:
             grid = None
             if coupled is not None:     # the grid's state as its design model sees it
                 grid = [0, coupled.grid_state(state[:, :5], state[:, 6]), self.commands,
-                        state[:, 5]]
+                        state[:, 5], *self._estimate(coupled, state, self.next_j)]
             net, j = self.network, self.next_j
             if net is not None:
                 net.send(j)
@@ -280,6 +281,26 @@ class AndesLoop:
                     net.publish(j, a, gen, state[a, :5], links[a], 0)
                 net.read(j)
             self.next_j += 1
+
+
+    def _estimate(self, coupled: CoupledFilter, state: np.ndarray, j: int) -> tuple:
+        """What a coupled filter on its grid Kalman estimate reads at control sample
+        ``j`` besides the grid (:meth:`lfc.engine.GeneratorSide.step`): each area's
+        metered ``dw_meas`` and ``rocof_meas`` with its generator side's noise, each
+        area's metered export, the scratch, and the estimator's state, kept
+        across samples; nothing without the estimate."""
+        if coupled.kalman is None:
+            return ()
+        if self._kalman is None:
+            n_a = self.plant.n_areas
+            self._kalman = (np.zeros(6 * n_a), np.zeros(coupled.params.n_states),
+                            np.zeros((2, coupled.kalman.n)))
+        ym = self._kalman[0]
+        n_a = self.plant.n_areas
+        for a, gen in enumerate(self.gens):
+            ym[2 * a:2 * a + 2] = state[a, 3:5] + gen.noise[j]
+            ym[2 * n_a + a] = state[a, 6]
+        return self._kalman
 
 
 def _by_area(found: list[tuple[str, int, int]], t: np.ndarray, n_areas: int
