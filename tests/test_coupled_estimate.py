@@ -325,7 +325,10 @@ def test_finding_on_kundur_a_12_s_horizon_holds_agc_after_a_legitimate_step():
     a radius of 0.0009 (the exact state's at 12 s: 0.037), so a new command is
     certified only once a step's response has decayed to a few percent (the
     slowest mode, 0.116 1/s: about 30 s), and each move starts it again; the held
-    vector's check still passes, so nothing is flagged and AGC waits.  At
+    vector's check still passes, so nothing is flagged and AGC waits.
+    :meth:`CoupledFilter.held_after_step` says so before any run: the held
+    command is not certifiable as new until 29.7 s after such a step (0 at 16 s;
+    6.5 s for the exact state's filter at 8 s).  At
     ``horizon=16`` (radius 0.021) it restores in 20.3 and 18.5 s, exactly as
     without filters.  The IEEE 39-bus system's filters at 12 s (radius 0.024)
     restore as without filters (16.8 and 19.3 s)."""
@@ -334,6 +337,12 @@ def test_finding_on_kundur_a_12_s_horizon_holds_agc_after_a_legitimate_step():
     radius = {h: CoupledFilter(grid, RELAYS, noise_std=NOISE, horizon=h).data[RHO_NEW]
               for h in (12.0, 16.0)}
     assert radius[12.0] < 0.001 < 0.02 < radius[16.0]
+    held = {h: CoupledFilter(grid, RELAYS, noise_std=NOISE, horizon=h).held_after_step()
+            for h in (12.0, 16.0)}
+    assert held == {12.0: pytest.approx(29.73, abs=0.01), 16.0: 0.0}
+    assert CoupledFilter(grid, RELAYS).held_after_step() == pytest.approx(6.51, abs=0.01)
+    with pytest.raises(ValueError, match="size must lie in"):
+        CoupledFilter(grid, RELAYS).held_after_step(0.07)
     for area, alone in ((0, 20.3), (1, 18.5)):
         step = {area: lfc.Step(-0.05, start=1.001)}
         r = simulate_grid_linear(grid, duration=91.0, loads=step, anti_windup=True)
