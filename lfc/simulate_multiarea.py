@@ -116,8 +116,14 @@ def area_filter(params: MultiAreaParams, area: int,
     if kind is None or isinstance(kind, (SafetyFilter, CoupledFilter)):
         return kind
     if kind == "coupled":
-        return coupled_filter(params, relays, control_period,
-                              None if noise_std is None else tuple(noise_std))
+        try:
+            return coupled_filter(params, relays, control_period,
+                                  None if noise_std is None else tuple(noise_std))
+        except ValueError as err:
+            raise ValueError(f"filters[{area}]='coupled' (the default options) cannot be "
+                             f"built: {err}; build a CoupledFilter with other options (e.g. "
+                             f"horizon) and give it to every area (check that it still "
+                             f"follows a legitimate load step: held_after_step)") from err
     model = params.areas[area]
     if kind == "contract":
         share = contract_design(params, relays, control_period=control_period)

@@ -118,6 +118,9 @@ def test_the_battery_on_the_estimate_trips_nothing(name):
     if horizon > 8.0:
         with pytest.raises(ValueError, match="raise horizon"):
             CoupledFilter(grid, RELAYS, noise_std=NOISE)
+        with pytest.raises(ValueError, match=r"'coupled' \(the default options\) cannot be "
+                                             r"built: .*raise horizon.*held_after_step"):
+            lfc.simulate(grid, duration=1.0, filters={0: "coupled", 1: "coupled"}, **ESTIMATE)
     filt = CoupledFilter(grid, RELAYS, noise_std=NOISE, horizon=horizon)
     runs, tripped, outside = battery(grid, filt, anti_windup=(True,), **ESTIMATE)
     assert runs == 40 * grid.n_areas and tripped == 0
