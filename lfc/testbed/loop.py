@@ -188,7 +188,8 @@ class AndesLoop:
         self.stopped: tuple | None = None
         self.next_j = 0
         self.commands = np.zeros(plant.n_areas)   # each area's latest command (pu)
-        self._kalman: tuple | None = None         # a coupled filter's grid estimator's
+        self._kalman: tuple | None = None   # a coupled filter's estimator: measurements,
+                                            # scratch, state (:meth:`_estimate`)
         self._load_at = (math.nan, np.zeros(plant.n_areas))
 
     def run(self, duration: float, step: float) -> bool:
@@ -282,7 +283,6 @@ class AndesLoop:
                 net.read(j)
             self.next_j += 1
 
-
     def _estimate(self, coupled: CoupledFilter, state: np.ndarray, j: int) -> tuple:
         """What a coupled filter on its grid Kalman estimate reads at control sample
         ``j`` besides the grid (:meth:`lfc.engine.GeneratorSide.step`): each area's
@@ -291,12 +291,11 @@ class AndesLoop:
         across samples; nothing without the estimate."""
         if coupled.kalman is None:
             return ()
+        n_a = self.plant.n_areas
         if self._kalman is None:
-            n_a = self.plant.n_areas
             self._kalman = (np.zeros(6 * n_a), np.zeros(coupled.params.n_states),
                             np.zeros((2, coupled.kalman.n)))
         ym = self._kalman[0]
-        n_a = self.plant.n_areas
         for a, gen in enumerate(self.gens):
             ym[2 * a:2 * a + 2] = state[a, 3:5] + gen.noise[j]
             ym[2 * n_a + a] = state[a, 6]
