@@ -960,6 +960,7 @@ class CoupledFilter:
         g = self.params
         Ad, _, Bl = discretize_grid(g, o.control_period)
         u, n = np.zeros(g.n_areas), int(round(duration / o.control_period))
+        memory = np.zeros(2)
         held = 0.0
         for j in range(g.n_areas):
             for sign in (1.0, -1.0):
@@ -969,9 +970,9 @@ class CoupledFilter:
                 for k in range(1, n + 1):
                     x = Ad @ x + Bl @ p
                     for a in range(g.n_areas):
-                        lo_f, hi_f, lo_r, hi_r, _, _ = _intervals(self.data, x, u, p, a)
-                        if not max(lo_f, lo_r, self.data[U_MIN]) <= 0.0 <= min(
-                                hi_f, hi_r, self.data[U_MAX]):
+                        memory[0] = 0.0               # the held command; the call's own
+                        lo, hi = decide_once(self.data, x, u, p, a, 0.0, memory)[-2:]
+                        if not lo <= 0.0 <= hi:       # new interval (decide's last two)
                             held = max(held, k * o.control_period)
                             break
         return held
