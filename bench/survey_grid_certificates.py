@@ -53,7 +53,9 @@ Prints, from one run:
   system's areas as fitted to ANDES,
   and its winner replayed on ANDES with the same filters (anti-windup): the
   fitted model's worst severity, and on ANDES whether anything tripped, the
-  ``outside`` samples per area and the peak |ROCOF| per area.
+  ``outside`` samples per area and the peak |ROCOF| per area; then the end of an
+  attack on ANDES with the coupled certificate on its estimate (Kundur, 16 s):
+  whether anything tripped, ``outside``, the last alarm and the restoration after it.
 
 ``docs/coupled-certificate.md`` quotes its numbers.
 
@@ -207,6 +209,28 @@ def andes() -> None:
                       f"{r.tripped} | {outside} | {peak} |", flush=True)
 
 
+def andes_recovery() -> None:
+    from lfc.filters.coupled import CoupledFilter
+    from lfc.testbed import GridCase, grid_design
+    from test_coupled import restored_after
+    case = GridCase.kundur()
+    filt = CoupledFilter(grid_design(case), RELAYS, noise_std=NOISE, horizon=16.0)
+    print("\n| Kundur on ANDES, coupled on the estimate (horizon 16 s), attack 1-11 s, "
+          "-0.05 pu step at 5 s | tripped | outside samples | last alarm after the end (s) | "
+          "restored after the end (s) |")
+    print("|---|---|---|---|---|")
+    for name, channel, signal in (
+            ("-2.5 pu ACE bias", "ace", lfc.Step(-2.5, start=1.0, stop=11.0)),
+            ("0.6 pu 0.5 Hz sinusoid on P_c", "pc", lfc.Sinusoid(0.6, 0.5, start=1.0, stop=11.0))):
+        r = lfc.simulate(case, duration=51.0, anti_windup=True, filters={0: filt, 1: filt},
+                         attacks={a: {channel: signal} for a in range(2)},
+                         loads={1: lfc.Step(-0.05, start=5.001)}, estimator="kalman",
+                         noise_std=NOISE)
+        last = max(float(a.alarms.t.max()) for a in r.areas if len(a.alarms)) - 11.0
+        print(f"| {name} | {r.tripped} | {[int(a.alarms.outside.sum()) for a in r.areas]} | "
+              f"{last:.2f} | {restored_after(r.trace, 2, 11.0):.1f} |", flush=True)
+
+
 def held_levels() -> None:
     from lfc.filters.coupled import CoupledFilter
     instants = np.round(np.arange(1.0, 6.0, 0.5) + 0.001, 6)[::3]   # s, 1 ms after a sample
@@ -300,6 +324,7 @@ def main() -> None:
     if args.andes:
         mismatch()
         andes()
+        andes_recovery()
 
 
 if __name__ == "__main__":
