@@ -60,13 +60,16 @@ ROCOF and tie-line export; its error is independent of every command and attack
 by both.  Proven (theorem A'): if the loads' total variation over the run is at
 most ``load_bound`` and the noise's part of the error lies in its ellipsoid at
 ``confidence`` at each certification, no relay trips.  Theorem B (a held check
-proves the coming period safe) is not proven on an estimate.  The held
-re-check's level is a choice (``held_level``): ``"sharp"`` (default) flags
-``outside`` early when the loads move beyond the bounds, and sometimes with
-nothing wrong (measured); ``"widened"`` is proven (theorem C') never to flag it
-while the loads' total variation over the run is at most ``load_bound -
-recheck_bound`` and the noise's part lies in its ellipsoid at the certification
-and the re-check, and misses moderate excesses.
+proves the coming period safe) holds on an estimate only at the strict held
+level.  The held re-check's level is a choice (``held_level``): ``"sharp"``
+(default) flags ``outside`` early when the loads move beyond the bounds, and
+sometimes with nothing wrong (measured); ``"widened"`` is proven (theorem C')
+never to flag it while the loads' total variation over the run is at most
+``load_bound - recheck_bound`` and the noise's part lies in its ellipsoid at the
+certification and the re-check, and misses moderate excesses; ``"strict"`` is
+proven (theorem B') to keep the coming period safe whenever its check passes, if
+every control period's load variation so far is at most ``recheck_bound`` and the
+noise's part lies in its ellipsoid, and flags ``outside`` most often.
 
 **Where the model holds.**  Every command stays within ``±command_range`` of
 the design model (:class:`lfc.multiarea.MultiAreaParams`; ∞ but for a model
@@ -119,13 +122,15 @@ EXPORT_STD = 1e-4    # pu: the grid Kalman filter's noise model of the metered t
 
 
 TERMINALS = ("auto", "lyapunov", "sdp")
-HELD_LEVELS = ("sharp", "widened")
+HELD_LEVELS = ("sharp", "widened", "strict")
 OUTSIDE_WHY = {   # what an outside flag may mean: the exact state, then each held level
     None: "the loads moved by more than the bounds",
     "sharp": "the loads moved by more than the bounds, or the estimator has not yet seen a "
              "load step",
     "widened": "the loads moved by more than the bounds, or the estimate's noise left its "
-               "ellipsoid"}
+               "ellipsoid",
+    "strict": "the loads moved by more than the bounds, the estimator has not yet seen a "
+              "load change, or the estimate's noise left its ellipsoid"}
 Q_FLOORS = (1e-12, 1e-6, 1e-5, 1e-4)   # shaped_terminal's floors on Q's eigenvalues, in turn
 
 
@@ -173,7 +178,7 @@ class CoupledOptions:
         Probability, in (0, 1), that the estimate's error lies in the ellipsoid
         the certificate covers (chi-square of the error covariance's dimension).
         Default 0.9999.  Only with ``noise_std``.
-    held_level : {"sharp", "widened"}
+    held_level : {"sharp", "widened", "strict"}
         The held re-check's level on the estimate (``docs/coupled-certificate.md``,
         "With estimates").  ``"sharp"`` (default): the exact state's, tightened by
         the noise's part of the error; it flags ``outside`` early when the loads
@@ -182,7 +187,13 @@ class CoupledOptions:
         the error may move the re-check; proven never to flag ``outside`` while the
         loads' total variation is at most ``load_bound - recheck_bound`` and the
         noise's part lies in its ellipsoid (theorem C'), but blind to moderate
-        excesses (a 0.1 pu step that trips, unflagged).  Only with ``noise_std``.
+        excesses (a 0.1 pu step that trips, unflagged).  ``"strict"``: the sharp
+        level, and on the rows of the coming control period (new and held) less
+        what the loads may have moved the error if every period's load variation
+        has been at most ``recheck_bound``; proven (theorem B') that a vector
+        applied there keeps every output within its limit over the coming period
+        while every period's variation is at most ``recheck_bound`` and the
+        noise's part lies in its ellipsoid.  Only with ``noise_std``.
     terminal : {"auto", "lyapunov", "sdp"}
         The terminal ellipsoid: ``"lyapunov"`` solves ``A'P + PA = -W`` (W from
         the relay limits); ``"sdp"`` shapes it (:func:`shaped_terminal`) so that a
@@ -428,6 +439,7 @@ class CoupledSet:
 
         kappa_e = math.sqrt(chi2.ppf(o.confidence, len(cov))) if cov is not None else 0.0
         est, est0 = np.zeros(tau.shape), np.zeros(len(limits))
+        ell, ell0 = np.zeros(tau.shape), np.zeros(len(limits))   # theorem B' (strict)
         load_rows, load_0 = np.broadcast_to(load, tau.shape), load
         g, g0 = np.zeros(tau.shape), np.zeros(len(limits))
         if cov is not None:
@@ -441,6 +453,11 @@ class CoupledSet:
             steps = _load_error_steps(self.kalman, A, Bl, o.control_period)
             g, g0 = 1.01 * _sup_abs(w, steps), 1.01 * _sup_abs(w0, steps)
             load_rows, load_0 = np.maximum(load, g), np.maximum(load, g0)
+            if o.held_level == "strict":     # the coming period's rows (theorem B')
+                coming = np.arange(len(times)) <= np.searchsorted(times, o.control_period)
+                tail = _error_tail(self.kalman)
+                ell[coming] = _sum_abs(w[coming], steps, 11 * n_a, tail)
+                ell0 = _sum_abs(w0, steps, 11 * n_a, tail)
         self.budget = {"load": _by_kind(o.load_bound * load),
                        "re-check": _by_kind(o.recheck_bound * again),
                        "between samples": _by_kind(t_max + tau0),
@@ -456,6 +473,11 @@ class CoupledSet:
         bound_held = held - t_max + (est + spent * g if widened else -est)
         y0_new = limits - o.load_bound * load_0 - t_max - tau0 - est0
         y0_held = held - tau0 + (est0 + spent * g0 if widened else -est0)
+        if o.held_level == "strict":   # B': the coming period's rows, new and held, less
+            # the error's loads' part at a variation of recheck_bound in every period
+            bound_held -= o.recheck_bound * ell
+            y0_held -= o.recheck_bound * ell0
+            bound_new, y0_new = np.minimum(bound_new, bound_held), np.minimum(y0_new, y0_held)
         if np.any(bound_new <= 0) or np.any(y0_new <= 0) or np.any(bound_held <= 0):
             raise ValueError(f"the tightenings leave nothing of the relay limits: "
                              f"{self._describe()}; lower load_bound or tightening")
@@ -651,6 +673,31 @@ def _load_error_steps(kalman: GridKalman, A: np.ndarray, Bl: np.ndarray, period:
     else:
         raise ValueError("the grid Kalman filter's error does not decay")
     return np.vstack(out)
+
+
+def _error_tail(kalman: GridKalman) -> float:
+    """``rho / (1 - rho)``, ``rho`` the spectral radius of the error's map from one
+    sample to the next, ``(I - K C) A``: what the ages beyond
+    :func:`_load_error_steps`' last add to a sum over ages, per unit of the last
+    (at the slowest mode's rate)."""
+    n_k = len(kalman.A)
+    rho = float(np.max(np.abs(np.linalg.eigvals(
+        (np.eye(n_k) - kalman.gain @ kalman.C) @ kalman.A))))
+    if rho >= 1.0:
+        raise ValueError("the grid Kalman filter's error does not decay")
+    return rho / (1.0 - rho)
+
+
+def _sum_abs(w: np.ndarray, steps: np.ndarray, per_age: int, tail: float) -> np.ndarray:
+    """``1.01 (sum_m max_(d,j) |w e(m; d, j)| + tail * max_(d,j) |w e(M; d, j)|)``
+    for each row of ``w`` (shape ``(..., n_k)``): how far a load path whose
+    variation within every control period is at most 1 moves ``w e``, its steps
+    of age ``m`` (``steps``' blocks of ``per_age`` rows, :func:`_load_error_steps`)
+    each by at most their variation times the age's largest response; the ages
+    after the last, ``M``, at most ``tail`` (:func:`_error_tail`) times it; 1 %
+    for the instants between the offsets, as in the callers of :func:`_sup_abs`."""
+    ages = np.max(np.abs(w @ steps.T).reshape(*w.shape[:-1], -1, per_age), axis=-1)
+    return 1.01 * (np.sum(ages, axis=-1) + tail * ages[..., -1])
 
 
 def _sup_abs(w: np.ndarray, steps: np.ndarray, chunk: int = 4096) -> np.ndarray:
