@@ -41,7 +41,11 @@ Prints, from one run:
   0.025 pu steps in both areas 0–1 s apart, and ±0.05 pu steps under ten more
   noise seeds (theorem C' says: no ``outside``, no trip); then steps beyond the
   bound (0.1 and 0.2 pu on two areas; 0.06, 0.1 and 0.2 pu on Kundur) at both
-  levels: runs with a trip, runs flagged ``outside``, trips never flagged;
+  levels: runs with a trip, runs flagged ``outside``, trips never flagged; and the
+  strict level (theorem B'): load paths varying by exactly ``recheck_bound`` every
+  period landing 0.5, 5.5 and 9.5 ms after a sample, noise seeds 1–2, at the sharp
+  and strict levels (runs that trip before their first ``outside``), and each
+  level's ``outside`` flags under ±0.05 pu steps (two-area; Kundur at 16 s);
 * with ``--andes``: each fitted model's command range (the ladder of
   ``lfc.testbed.grid_fit.validated_range``), then the red team's coordinated
   search (every family of ``MULTI_FAMILIES``, both areas at once) against the
@@ -271,6 +275,39 @@ def held_levels() -> None:
                   f"{time.perf_counter() - t0:.0f} s |", flush=True)
 
 
+def strict_level() -> None:
+    """Theorem B' (``held_level="strict"``) beyond its test: load paths varying by
+    exactly ``recheck_bound`` every period, landing 0.5, 5.5 and 9.5 ms after a
+    sample, two more noise seeds; and each level's price under ±0.05 pu steps."""
+    from lfc.filters.coupled import CoupledFilter
+    from test_coupled_estimate import every_period, trips_before_outside
+    instants = np.round(np.arange(1.0, 6.0, 0.5) + 0.001, 6)    # s, 1 ms after a sample
+    print("| grid | level | load paths | runs | with a trip | trips before the first outside "
+          "/ runs flagged outside | time |")
+    print("|---|---|---|---|---|---|---|")
+    for name, grid, horizon in (("two-area", lfc.MultiAreaParams.two_area(), 8.0),
+                                ("Kundur", kundur(), 16.0)):
+        for held in ("sharp", "strict"):
+            filt = CoupledFilter(grid, RELAYS, noise_std=NOISE, horizon=horizon,
+                                 held_level=held)
+            t0 = time.perf_counter()
+            tally = np.zeros(3, int)
+            for offset in (0.0005, 0.0055, 0.0095):
+                for seed in (1, 2):
+                    tally += trips_before_outside(grid, filt, every_period(2, offset=offset),
+                                                  seed)
+            print(f"| {name} | {held} | every period's variation exactly 0.01 pu, 3 offsets, "
+                  f"seeds 1–2 | {tally[0]} | {tally[1]} | {tally[2]} before | "
+                  f"{time.perf_counter() - t0:.0f} s |", flush=True)
+            t0 = time.perf_counter()
+            steps = [{a: lfc.Step(s * 0.05, start=t)} for a in range(2) for t in instants
+                     for s in (1, -1)]
+            runs = runs_of(grid, on_the_estimate(grid, filt, steps, 0))
+            print(f"| {name} | {held} | ±0.05 pu steps every 0.5 s | {len(runs)} | "
+                  f"{int(runs.tripped.sum())} | {int((runs.outside > 0).sum())} flagged | "
+                  f"{time.perf_counter() - t0:.0f} s |", flush=True)
+
+
 def restoration() -> None:
     from lfc.filters.coupled import CoupledFilter
     from lfc.simulate_multiarea import simulate_grid_linear
@@ -319,6 +356,7 @@ def main() -> None:
     tightness()
     if args.held_levels:
         held_levels()
+        strict_level()
     if args.restoration:
         restoration()
     if args.andes:

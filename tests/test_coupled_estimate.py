@@ -188,21 +188,22 @@ def widened() -> CoupledFilter:
                          held_level="widened")
 
 
-def every_period(n_areas: int, seconds: float = 10.0) -> list[dict]:
+def every_period(n_areas: int, seconds: float = 10.0, offset: float = 0.0015) -> list[dict]:
     """Load paths whose variation within every control period is exactly
     ``recheck_bound`` (0.01 pu), theorem B's assumption at its edge: a ramp of
     ±1 pu/s (0.01 pu per 10 ms period) for 1 s in one area or shared by all; a
     ±0.005 pu square wave at 50 Hz (a 0.01 pu swing every period); a random walk
-    of ±0.01 pu every period (seeded).  The steps land 1.5 ms after a control
-    sample (the estimator sees them only at the next one)."""
+    of ±0.01 pu every period (seeded).  The steps land ``offset`` s (default 1.5
+    ms) after a control sample (the estimator sees them only at the next one)."""
     paths = []
     for sign in (1, -1):
-        paths += [{a: lfc.Ramp(sign, start=1.0015, stop=2.0015)} for a in range(n_areas)]
-        paths.append({a: lfc.Ramp(sign / n_areas, start=1.0015, stop=2.0015)
+        paths += [{a: lfc.Ramp(sign, start=1.0 + offset, stop=2.0 + offset)}
+                  for a in range(n_areas)]
+        paths.append({a: lfc.Ramp(sign / n_areas, start=1.0 + offset, stop=2.0 + offset)
                       for a in range(n_areas)})
-    paths += [{a: lfc.Square(0.005, 50.0, start=1.0015)} for a in range(n_areas)]
+    paths += [{a: lfc.Square(0.005, 50.0, start=1.0 + offset)} for a in range(n_areas)]
     for a in range(n_areas):
-        at = np.arange(1.0, seconds, 0.01) + 0.0015
+        at = np.arange(1.0, seconds, 0.01) + offset
         walk = np.cumsum(np.random.default_rng(a).choice([-0.01, 0.01], len(at)))
         paths.append({a: lfc.Samples(np.ravel(np.column_stack([at - 1e-6, at])),
                                      np.ravel(np.column_stack([np.r_[0.0, walk[:-1]], walk])))})
@@ -280,14 +281,15 @@ def test_at_the_strict_level_outside_comes_before_every_trip_at_the_sharp_one_no
     assert battery(two, strict, anti_windup=(True,), **ESTIMATE) == (80, 0, 7)
 
 
-def trips_before_outside(grid: MultiAreaParams, filt: CoupledFilter) -> tuple[int, int, int]:
+def trips_before_outside(grid: MultiAreaParams, filt: CoupledFilter, paths: list | None = None,
+                         seed: int = 0) -> tuple[int, int, int]:
     """``(runs, runs that trip, runs that trip before their first outside flag)``
-    of the five attacks x :func:`every_period` with ``filt`` at every area (10 s,
-    noise seed 0, anti-windup)."""
+    of the five attacks x ``paths`` (default :func:`every_period`) with ``filt`` at
+    every area (10 s, noise ``seed``, anti-windup)."""
     runs = trips = early = 0
     for attack in attacks(grid.n_areas).values():
-        for loads in every_period(grid.n_areas):
-            r = lfc.simulate(grid, duration=10.0, attacks=attack, loads=loads, seed=0,
+        for loads in paths or every_period(grid.n_areas):
+            r = lfc.simulate(grid, duration=10.0, attacks=attack, loads=loads, seed=seed,
                              filters={a: filt for a in range(grid.n_areas)},
                              anti_windup=True, **ESTIMATE)
             runs += 1
