@@ -122,6 +122,7 @@ EXPORT_STD = 1e-4    # pu: the grid Kalman filter's noise model of the metered t
 
 
 TERMINALS = ("auto", "lyapunov", "sdp")
+ERROR_OFFSETS = 11   # instants in a control period at which the error lemma steps a load
 HELD_LEVELS = ("sharp", "widened", "strict")
 OUTSIDE_WHY = {   # what an outside flag may mean: the exact state, then each held level
     None: "the loads moved by more than the bounds",
@@ -456,8 +457,8 @@ class CoupledSet:
             if o.held_level == "strict":     # the coming period's rows (theorem B')
                 coming = np.arange(len(times)) <= np.searchsorted(times, o.control_period)
                 tail = _error_tail(self.kalman)
-                ell[coming] = _sum_abs(w[coming], steps, 11 * n_a, tail)
-                ell0 = _sum_abs(w0, steps, 11 * n_a, tail)
+                ell[coming] = _sum_abs(w[coming], steps, ERROR_OFFSETS * n_a, tail)
+                ell0 = _sum_abs(w0, steps, ERROR_OFFSETS * n_a, tail)
         self.budget = {"load": _by_kind(o.load_bound * load),
                        "re-check": _by_kind(o.recheck_bound * again),
                        "between samples": _by_kind(t_max + tau0),
@@ -635,7 +636,7 @@ def shaped_terminal(A: np.ndarray, C: np.ndarray, loads: np.ndarray,
 
 
 def _load_error_steps(kalman: GridKalman, A: np.ndarray, Bl: np.ndarray, period: float,
-                      offsets: int = 11, tol: float = 1e-6) -> np.ndarray:
+                      offsets: int = ERROR_OFFSETS, tol: float = 1e-6) -> np.ndarray:
     """The grid Kalman filter's error (reduced states, then loads) at every
     control sample after a unit load step in any area at any instant: rows
     ``e(m; d, j)`` for ages ``m >= 1`` samples, ``offsets`` instants ``d`` in the
