@@ -307,6 +307,24 @@ def test_the_tutorials_attack_waveform_is_a_parameter(tmp_path):
         run_chapter("tutorial", tmp_path / "bad", waveform="sawtooth", check_claims=False)
 
 
+@pytest.mark.parametrize("name, knobs", [
+    ("tutorial", {"M": 2.0}), ("tutorial", {"relay_category": "I"}),
+    ("tutorial", {"relay_category": "II"}),
+    *[(name, {"M": 2.0, "relay_category": "I"}) for name in ("fig4", "fig5", "fig6", "kalman")]])
+def test_the_physical_knobs_run_at_the_values_the_chapters_suggest(tmp_path, name, knobs):
+    """A lighter machine (M = 2 s) and stricter relays (IEEE 1547 categories I and
+    II), as chapter 01's "What to try next" suggests: each single-area chapter runs
+    and records them.  Found by a newcomer's test (2026-11-28): chapter 01 failed
+    at each of them ("Problem data contains NaN"), its demonstration state fixed in
+    the code, whose prediction then left the safe set, where the paper's log barrier
+    is not defined; the state is now a third of the limits, the command halved until
+    its prediction is inside."""
+    run_chapter(name, tmp_path, check_claims=False, **knobs)
+    metrics = json.loads((tmp_path / "res" / "metrics.json").read_text())
+    for panel in metrics.values():
+        assert {k: panel["parameters"][k] for k in knobs} == knobs
+
+
 def test_a_cached_frame_is_computed_once_per_inputs_and_read_back_exactly(tmp_path,
                                                                          monkeypatch):
     """``cached_frame`` (chapter 02's edge scan): the second call with the same
