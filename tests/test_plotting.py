@@ -51,3 +51,17 @@ def test_a_long_title_wraps_inside_the_figure():
     box = text.get_window_extent(fig.canvas.get_renderer())
     assert "\n" in text.get_text() and text.get_text().replace("\n", " ") == title
     assert 0 <= box.x0 and box.x1 <= fig.bbox.width
+
+
+def test_the_rocof_setting_is_printed_to_three_digits():
+    """A newcomer's test (2026-11-28): IEEE 1547 category II's setting (2 Hz/s)
+    read "±0.0333333 pu/s" in the legend; three significant digits, as the
+    paper's 0.05 pu/s stays (the committed figures unchanged)."""
+    from lfc.repro.plotting import rocof_figure
+    P = lfc.LFCParams()
+    runs = {"no_scc": lfc.simulate(P, duration=1.0)}
+    for relays, text in ((lfc.RelaySettings.ieee1547("II"), "0.0333"),
+                         (lfc.RelaySettings(), "0.05")):
+        fig = rocof_figure(runs, {"no_scc": "no SCC"}, relays, "title")
+        legend = fig.axes[1].get_legend_handles_labels()[1]
+        assert f"ROCOF setting $\\pm${text} pu/s" in legend

@@ -66,7 +66,7 @@ def _rocof(ax, runs: dict[str, SimResult], labels: dict[str, str], relays: Relay
             ax.plot([t], [y], marker="x", ms=9, mew=2, ls="none", color=COLORS[key],
                     label=f"{label}: {m['first_trip_relay']} trips at {t:.2f} s")
     _limits(ax, [relays.rocof_limit, -relays.rocof_limit],
-            f"ROCOF setting $\\pm${relays.rocof_limit:g} pu/s")
+            f"ROCOF setting $\\pm${relays.rocof_limit:.3g} pu/s")
     ax.set_ylabel("Measured ROCOF $\\hat{\\dot\\omega}$ (pu/s)")
 
 
@@ -467,7 +467,7 @@ def areas_figure(runs: dict, labels: dict[str, str], relays: RelaySettings, titl
             _frequency_limits(ax, moved, relays)
         elif panel == "rocof":
             _limits(ax, [relays.rocof_limit, -relays.rocof_limit],
-                    f"ROCOF setting $\\pm${relays.rocof_limit:g} pu/s")
+                    f"ROCOF setting $\\pm${relays.rocof_limit:.3g} pu/s")
         ax.set_ylabel(ylabel[panel])
     _finish(axes, title)
     return fig
