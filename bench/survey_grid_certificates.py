@@ -83,9 +83,10 @@ from lfc.experiments.redteam import MULTI_FAMILIES, coordinated_attacks, coordin
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from test_contract import RELAYS, combined_worst_case, worst_commands  # noqa: E402  (the tests', not copies)
-from test_coupled import LIGHT, THREE, battery, ieee39, kundur, ring  # noqa: E402
+from test_coupled import LIGHT, THREE, battery, ieee39, kundur, restored_after, ring  # noqa: E402
 from test_coupled_baseline import runs_of  # noqa: E402
-from test_coupled_estimate import NOISE, on_the_estimate  # noqa: E402
+from test_coupled_estimate import (NOISE, every_period, on_the_estimate,  # noqa: E402
+                                   trips_before_outside)
 
 
 def grids() -> None:
@@ -216,7 +217,6 @@ def andes() -> None:
 def andes_recovery() -> None:
     from lfc.filters.coupled import CoupledFilter
     from lfc.testbed import GridCase, grid_design
-    from test_coupled import restored_after
     case = GridCase.kundur()
     filt = CoupledFilter(grid_design(case), RELAYS, noise_std=NOISE, horizon=16.0)
     print("\n| Kundur on ANDES, coupled on the estimate (horizon 16 s), attack 1-11 s, "
@@ -280,7 +280,6 @@ def strict_level() -> None:
     exactly ``recheck_bound`` every period, landing 0.5, 5.5 and 9.5 ms after a
     sample, two more noise seeds; and each level's price under ±0.05 pu steps."""
     from lfc.filters.coupled import CoupledFilter
-    from test_coupled_estimate import every_period, trips_before_outside
     instants = np.round(np.arange(1.0, 6.0, 0.5) + 0.001, 6)    # s, 1 ms after a sample
     print("| grid | level | load paths | runs | with a trip | trips before the first outside "
           "/ runs flagged outside | time |")
@@ -311,7 +310,6 @@ def strict_level() -> None:
 def restoration() -> None:
     from lfc.filters.coupled import CoupledFilter
     from lfc.simulate_multiarea import simulate_grid_linear
-    from test_coupled import restored_after
     print("| grid | filters | held after a 0.05 pu step (held_after_step) | restored after a "
           "step of -0.05, +0.05 pu in area 0, then in area 1 |")
     print("|---|---|---|---|")

@@ -653,8 +653,7 @@ def _load_error_steps(kalman: GridKalman, A: np.ndarray, Bl: np.ndarray, period:
     most ``V sup |w e(m; d, j)|`` (1 % is added for the instants between the
     offsets by the callers)."""
     n_r, n_a = len(A), Bl.shape[1]
-    n_k = n_r + n_a
-    ikc = np.eye(n_k) - kalman.gain @ kalman.C
+    ikc = _correction(kalman)
     phi = ikc @ kalman.A
     jumps = []
     for d in np.linspace(0.0, period, offsets):
@@ -676,14 +675,17 @@ def _load_error_steps(kalman: GridKalman, A: np.ndarray, Bl: np.ndarray, period:
     return np.vstack(out)
 
 
+def _correction(kalman: GridKalman) -> np.ndarray:
+    """``I - K C``: what a measurement update leaves of the estimate's error."""
+    return np.eye(len(kalman.A)) - kalman.gain @ kalman.C
+
+
 def _error_tail(kalman: GridKalman) -> float:
     """``rho / (1 - rho)``, ``rho`` the spectral radius of the error's map from one
     sample to the next, ``(I - K C) A``: what the ages beyond
     :func:`_load_error_steps`' last add to a sum over ages, per unit of the last
     (at the slowest mode's rate)."""
-    n_k = len(kalman.A)
-    rho = float(np.max(np.abs(np.linalg.eigvals(
-        (np.eye(n_k) - kalman.gain @ kalman.C) @ kalman.A))))
+    rho = float(np.max(np.abs(np.linalg.eigvals(_correction(kalman) @ kalman.A))))
     if rho >= 1.0:
         raise ValueError("the grid Kalman filter's error does not decay")
     return rho / (1.0 - rho)
