@@ -230,6 +230,8 @@ def test_the_strict_held_level_takes_off_what_every_periods_loads_move_the_error
     w0 = np.hstack([c.C, np.zeros((4, 2))])
     bound = 0.01 * _sum_abs(w0, steps, 22, _error_tail(strict.kalman))
     np.testing.assert_allclose(bound, [9.09e-5, 9.935e-3] * 2, rtol=1e-3)
+    untailed = 0.01 * _sum_abs(w0, steps, 22, 0.0)   # the tail's term: below 1e-6 of it
+    assert np.all(bound - untailed < 1e-6 * bound)
     reached = np.zeros(4)
     for loads in every_period(2):
         r = lfc.simulate(grid, duration=10.0, loads=loads, filters={0: strict, 1: strict},
