@@ -65,3 +65,18 @@ def test_the_rocof_setting_is_printed_to_three_digits():
         fig = rocof_figure(runs, {"no_scc": "no SCC"}, relays, "title")
         legend = fig.axes[1].get_legend_handles_labels()[1]
         assert f"ROCOF setting $\\pm${text} pu/s" in legend
+
+
+def test_a_titles_own_line_breaks_are_kept_and_each_line_wraps():
+    """Chapter 01's titles put the physical knobs (M, relays, α, T_s) on a second line;
+    ``textwrap.fill`` alone joined the lines into one that wrapped mid-phrase."""
+    import textwrap
+
+    from lfc.repro.plotting import TITLE_WIDTH, wrap_title
+    assert wrap_title("Tutorial: an attack\nM = 4 s, T_s = 0.25 s") == \
+        "Tutorial: an attack\nM = 4 s, T_s = 0.25 s"
+    long = " ".join(["word"] * 40)
+    wrapped = wrap_title(f"{long}\nknobs")
+    assert wrapped.endswith("\nknobs") and all(len(line) <= TITLE_WIDTH
+                                                for line in wrapped.split("\n"))
+    assert wrap_title(long) == textwrap.fill(long, TITLE_WIDTH)   # one line: as before

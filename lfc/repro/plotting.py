@@ -29,6 +29,12 @@ COLORS = {"a": "tab:blue", "b": "tab:orange", "c": "tab:green", "d": "tab:red",
           "scc_kalman": "tab:green"}
 
 
+def wrap_title(title: str) -> str:
+    """``title`` with each of its lines wrapped at ``TITLE_WIDTH`` characters; a line
+    break the caller wrote is kept (``textwrap.fill`` alone would join the lines)."""
+    return "\n".join(textwrap.fill(line, TITLE_WIDTH) for line in title.split("\n"))
+
+
 def _limits(ax, values: list[float], label: str) -> None:
     for i, v in enumerate(values):
         ax.axhline(v, color="k", ls="--", lw=1, label=label if i == 0 else None)
@@ -50,7 +56,7 @@ def _finish(axes, title: str) -> None:
     for ax in axes:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1))
-    axes[0].set_title(textwrap.fill(title, TITLE_WIDTH))
+    axes[0].set_title(wrap_title(title))
 
 
 def _rocof(ax, runs: dict[str, SimResult], labels: dict[str, str], relays: RelaySettings,
@@ -273,7 +279,7 @@ def bias_figure(results, relays: RelaySettings, title: str) -> Figure:
                   "numbers: first trip time (s)")
     _trip_legend(fig)
     ax.legend(fontsize=8, loc="lower left")
-    ax.set_title(textwrap.fill(title, TITLE_WIDTH))
+    ax.set_title(wrap_title(title))
     return fig
 
 
@@ -340,7 +346,7 @@ def severity_figure(red, title: str) -> Figure:
     ax.set_ylabel("Severity: max(|ROCOF| / setting, |Δω̂| / F)")
     ax.grid(alpha=0.3, axis="y")
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1))
-    ax.set_title(textwrap.fill(title, TITLE_WIDTH))
+    ax.set_title(wrap_title(title))
     return fig
 
 
@@ -428,7 +434,7 @@ def box_figure(worst, limit_label: str, title: str) -> Figure:
     ax.set_ylabel("Worst severity over the attacks:\nmax(|ROCOF| / setting, |Δω̂| / F)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1))
-    ax.set_title(textwrap.fill(title, TITLE_WIDTH))
+    ax.set_title(wrap_title(title))
     return fig
 
 
@@ -508,7 +514,7 @@ def scaling_figure(table, title: str, load_step: float = 0.05) -> Figure:
                 ax.xaxis.set_minor_formatter(NullFormatter())
             ax.set_xticks(part.x)
             ax.xaxis.set_major_formatter(ScalarFormatter())
-    fig.suptitle(textwrap.fill(title, TITLE_WIDTH))
+    fig.suptitle(wrap_title(title))
     return fig
 
 
