@@ -17,6 +17,7 @@ from lfc._files import _computing
 from lfc.repro import runner
 from lfc.repro.book import APPENDICES, build_book
 from lfc.repro.cli import main
+from lfc.repro.manifest import CHAPTERS
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
@@ -40,12 +41,16 @@ def book(tmp_path_factory, worker_id):
 
 
 PAGES = ["introduction", "tutorial", "kalman", *(f"appendix-{a}" for a in APPENDICES)]
+# the gallery's figures: the two chapters' (lfc.repro.manifest), on the linear model
+GALLERY = [png for c in CHAPTERS if c.name in ("tutorial", "kalman")
+           for png in c.figure_files("linear")]
 
 
 @pytest.mark.long(80)
 def test_the_book_has_an_index_with_the_gallery_and_a_page_per_notebook(book):
     text = book.read_text()
-    for png in ("tutorial_attack.png", "kalman_scc.png"):
+    assert {"tutorial_attack.png", "tutorial_barriers.png", "kalman_scc.png"} <= set(GALLERY)
+    for png in GALLERY:
         assert f'src="figures/{png}"' in text and (book.parent / "figures" / png).exists()
     assert text.count("claims reproduced") == 2 and "4 of 4 claims reproduced" in text
     for page in ("tutorial.html", "kalman.html"):
@@ -58,7 +63,7 @@ def test_the_book_has_an_index_with_the_gallery_and_a_page_per_notebook(book):
     assert toc[1][1].startswith("01 · ") and toc[2][1].startswith("07 · ")
     assert toc[3][1].startswith("A · ") and toc[-1][1].startswith(f"{chr(64 + len(APPENDICES))} · ")
     captions = re.findall(r"<figcaption>(.*?)</figcaption>", text)
-    assert len(captions) == 2 and len(set(captions)) == len(captions)
+    assert len(captions) == len(GALLERY) and len(set(captions)) == len(captions)
 
 
 def test_every_page_has_previous_and_next_links_in_reading_order(book):
@@ -158,13 +163,12 @@ def test_the_browser_check_sees_a_missing_figure(book, tmp_path):
     """The check above can fail: a gallery whose figure files are gone."""
     broken = tmp_path / "index.html"
     broken.write_text(book.read_text())           # figures/ is not beside it
-    assert images_loaded(broken) == "images 0 of 2"
+    assert images_loaded(broken) == f"images 0 of {len(GALLERY)}"
 
 
 def test_no_two_pages_of_the_full_book_share_a_file():
     """Chapter 11's page is ``wire.html``; the appendix ``docs/wire.md`` is
     ``appendix-wire.html`` (it once overwrote the chapter)."""
-    from lfc.repro.manifest import CHAPTERS
     from lfc.repro.notebook import figure_name
     labels = [figure_name(c.name, p) for c in CHAPTERS for p in c.plants]
     assert len(set(labels)) == len(labels) and "wire" in labels

@@ -52,7 +52,7 @@ class Chapter:
 CHAPTERS = (
     Chapter("tutorial", "01_tutorial_cbf_lfc.ipynb",
             "The model, the safe set and the CBF-QP, step by step", ("linear",),
-            ("tutorial_attack",), {"duration": 3.0}),
+            ("tutorial_attack", "tutorial_barriers"), {"duration": 3.0}),
     Chapter("fig4", "02_fig4_rocof_attack.ipynb",
             "Fig. 4: a ROCOF-tripping attack, the SCC with α = 3 and 20", PLANTS,
             ("fig4_rocof_attack",),
