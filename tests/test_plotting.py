@@ -80,3 +80,23 @@ def test_a_titles_own_line_breaks_are_kept_and_each_line_wraps():
     assert wrapped.endswith("\nknobs") and all(len(line) <= TITLE_WIDTH
                                                 for line in wrapped.split("\n"))
     assert wrap_title(long) == textwrap.fill(long, TITLE_WIDTH)   # one line: as before
+
+
+def test_a_frequency_trip_is_a_dotted_line_at_its_time_not_a_cross_on_the_rocof_curve():
+    """A newcomer's test: an OF2 trip was drawn as a cross on the ROCOF curve (the
+    panel has no frequency), where it read as a ROCOF trip; now a dotted line at its
+    time, its legend naming the relay and what it measures."""
+    from lfc.repro.plotting import rocof_figure
+    P, relays = lfc.LFCParams(), lfc.RelaySettings()
+    runs = {"no_scc": lfc.simulate(P, duration=6.0, wref_attack=lfc.Step(0.1, start=1.0))}
+    m = runs["no_scc"].metrics()
+    assert m["first_trip_relay"] == "OF2"
+    fig = rocof_figure(runs, {"no_scc": "no SCC"}, relays, "title", mark_trips=True)
+    ax = fig.axes[1]
+    handles, names = ax.get_legend_handles_labels()
+    trip = [(h, n) for h, n in zip(handles, names) if "trips" in n]
+    assert [n for _, n in trip] == [f"no SCC: OF2 (over-frequency) trips at "
+                                    f"{m['first_trip_t']:.2f} s"]
+    line = trip[0][0]
+    assert line.get_linestyle() == ":" and list(line.get_xdata()) == [m["first_trip_t"]] * 2
+    assert not any(h.get_marker() == "x" for h in handles)

@@ -24,6 +24,7 @@ from lfc.relays import RelaySettings
 from lfc.simulate import SimResult
 
 TITLE_WIDTH = 90   # characters per line of a title above a legend column: longer ones wrap
+FREQUENCY_RELAYS = {"OF2": "over-frequency", "UF2": "under-frequency"}
 COLORS = {"a": "tab:blue", "b": "tab:orange", "c": "tab:green", "d": "tab:red",
           "no_scc": "tab:blue", "scc": "tab:orange", "scc_true": "tab:orange",
           "scc_kalman": "tab:green"}
@@ -66,11 +67,15 @@ def _rocof(ax, runs: dict[str, SimResult], labels: dict[str, str], relays: Relay
         ax.plot(tr.t, tr.rocof_meas, color=COLORS[key], lw=1.2, label=label,
                 ls="--" if key in dashed else "-")
         m = runs[key].metrics() if mark_trips else {"tripped": False}
-        if m["tripped"]:                      # the first trip, on the curve
+        if m["tripped"] and m["first_trip_relay"] == "ROCOF":   # the first trip, on the curve
             t = m["first_trip_t"]
             y = float(np.interp(t, tr.t, tr.rocof_meas))
             ax.plot([t], [y], marker="x", ms=9, mew=2, ls="none", color=COLORS[key],
-                    label=f"{label}: {m['first_trip_relay']} trips at {t:.2f} s")
+                    label=f"{label}: ROCOF trips at {t:.2f} s")
+        elif m["tripped"]:      # a frequency relay: its time only (no frequency panel here)
+            t, relay = m["first_trip_t"], m["first_trip_relay"]
+            ax.axvline(t, color=COLORS[key], ls=":", lw=1.5,
+                       label=f"{label}: {relay} ({FREQUENCY_RELAYS[relay]}) trips at {t:.2f} s")
     _limits(ax, [relays.rocof_limit, -relays.rocof_limit],
             f"ROCOF setting $\\pm${relays.rocof_limit:.3g} pu/s")
     ax.set_ylabel("Measured ROCOF $\\hat{\\dot\\omega}$ (pu/s)")
@@ -79,7 +84,8 @@ def _rocof(ax, runs: dict[str, SimResult], labels: dict[str, str], relays: Relay
 def rocof_figure(runs: dict[str, SimResult], labels: dict[str, str], relays: RelaySettings,
                  title: str, mark_trips: bool = False) -> Figure:
     """Command (top) and measured ROCOF (bottom, pu/s) with the ROCOF setting dashed;
-    ``mark_trips``: each run's first relay trip as a cross on its ROCOF curve."""
+    ``mark_trips``: each run's first relay trip, a ROCOF trip as a cross on its ROCOF
+    curve, a frequency relay's (OF2, UF2) as a dotted line at its time."""
     fig, (top, bot) = plt.subplots(2, 1, sharex=True, figsize=(10, 6.5), layout="constrained")
     _command(top, runs, labels)
     _rocof(bot, runs, labels, relays, mark_trips=mark_trips)
