@@ -53,18 +53,20 @@ def test_a_long_title_wraps_inside_the_figure():
     assert 0 <= box.x0 and box.x1 <= fig.bbox.width
 
 
-def test_the_rocof_setting_is_printed_to_three_digits():
+def test_the_rocof_setting_is_printed_to_three_digits_in_pu_and_hz_per_second():
     """A newcomer's test (2026-11-28): IEEE 1547 category II's setting (2 Hz/s)
-    read "±0.0333333 pu/s" in the legend; three significant digits, as the
-    paper's 0.05 pu/s stays (the committed figures unchanged)."""
+    read "±0.0333333 pu/s" in the legend; three significant digits, and the
+    setting in Hz/s beside it (IEEE 1547 and the relays speak Hz/s, the paper pu/s)."""
     from lfc.repro.plotting import rocof_figure
     P = lfc.LFCParams()
     runs = {"no_scc": lfc.simulate(P, duration=1.0)}
-    for relays, text in ((lfc.RelaySettings.ieee1547("II"), "0.0333"),
-                         (lfc.RelaySettings(), "0.05")):
-        fig = rocof_figure(runs, {"no_scc": "no SCC"}, relays, "title")
+    for relays, f_nominal, text in (
+            (lfc.RelaySettings.ieee1547("II"), 60.0, "0.0333 pu/s (2 Hz/s at 60 Hz)"),
+            (lfc.RelaySettings(), 60.0, "0.05 pu/s (3 Hz/s at 60 Hz)"),
+            (lfc.RelaySettings(), 50.0, "0.05 pu/s (2.5 Hz/s at 50 Hz)")):
+        fig = rocof_figure(runs, {"no_scc": "no SCC"}, relays, "title", f_nominal=f_nominal)
         legend = fig.axes[1].get_legend_handles_labels()[1]
-        assert f"ROCOF setting $\\pm${text} pu/s" in legend
+        assert f"ROCOF setting $\\pm${text}" in legend
 
 
 def test_a_titles_own_line_breaks_are_kept_and_each_line_wraps():

@@ -36,6 +36,13 @@ def wrap_title(title: str) -> str:
     return "\n".join(textwrap.fill(line, TITLE_WIDTH) for line in title.split("\n"))
 
 
+def rocof_setting_label(relays: RelaySettings, f_nominal: float) -> str:
+    """The ROCOF setting's legend entry, in pu/s and in Hz/s at ``f_nominal`` (Hz): the
+    paper's settings are in pu/s, IEEE 1547's and the relays' own in Hz/s."""
+    lim = relays.rocof_limit
+    return f"ROCOF setting $\\pm${lim:.3g} pu/s ({lim * f_nominal:.3g} Hz/s at {f_nominal:g} Hz)"
+
+
 def _limits(ax, values: list[float], label: str) -> None:
     for i, v in enumerate(values):
         ax.axhline(v, color="k", ls="--", lw=1, label=label if i == 0 else None)
@@ -61,7 +68,7 @@ def _finish(axes, title: str) -> None:
 
 
 def _rocof(ax, runs: dict[str, SimResult], labels: dict[str, str], relays: RelaySettings,
-           dashed: tuple[str, ...] = (), mark_trips: bool = False) -> None:
+           f_nominal: float, dashed: tuple[str, ...] = (), mark_trips: bool = False) -> None:
     for key, label in labels.items():
         tr = runs[key].trace
         ax.plot(tr.t, tr.rocof_meas, color=COLORS[key], lw=1.2, label=label,
@@ -76,25 +83,26 @@ def _rocof(ax, runs: dict[str, SimResult], labels: dict[str, str], relays: Relay
             t, relay = m["first_trip_t"], m["first_trip_relay"]
             ax.axvline(t, color=COLORS[key], ls=":", lw=1.5,
                        label=f"{label}: {relay} ({FREQUENCY_RELAYS[relay]}) trips at {t:.2f} s")
-    _limits(ax, [relays.rocof_limit, -relays.rocof_limit],
-            f"ROCOF setting $\\pm${relays.rocof_limit:.3g} pu/s")
+    _limits(ax, [relays.rocof_limit, -relays.rocof_limit], rocof_setting_label(relays, f_nominal))
     ax.set_ylabel("Measured ROCOF $\\hat{\\dot\\omega}$ (pu/s)")
 
 
 def rocof_figure(runs: dict[str, SimResult], labels: dict[str, str], relays: RelaySettings,
-                 title: str, mark_trips: bool = False) -> Figure:
-    """Command (top) and measured ROCOF (bottom, pu/s) with the ROCOF setting dashed;
+                 title: str, mark_trips: bool = False, f_nominal: float = 60.0) -> Figure:
+    """Command (top) and measured ROCOF (bottom, pu/s) with the ROCOF setting dashed
+    (in pu/s and in Hz/s at ``f_nominal``, Hz);
     ``mark_trips``: each run's first relay trip, a ROCOF trip as a cross on its ROCOF
     curve, a frequency relay's (OF2, UF2) as a dotted line at its time."""
     fig, (top, bot) = plt.subplots(2, 1, sharex=True, figsize=(10, 6.5), layout="constrained")
     _command(top, runs, labels)
-    _rocof(bot, runs, labels, relays, mark_trips=mark_trips)
+    _rocof(bot, runs, labels, relays, f_nominal, mark_trips=mark_trips)
     _finish((top, bot), title)
     return fig
 
 
 def rocof_panels_figure(runs: dict[str, SimResult], labels: dict[str, str],
-                        relays: RelaySettings, title: str, attacks: dict[str, str]) -> Figure:
+                        relays: RelaySettings, title: str, attacks: dict[str, str],
+                        f_nominal: float = 60.0) -> Figure:
     """One panel per run, as the paper's Fig. 4 (a)–(d): the command (applied and,
     where the filter changed it, incoming) above the measured ROCOF (pu/s) with
     the ROCOF setting dashed and the first trip marked; ``attacks`` names each
@@ -114,7 +122,7 @@ def rocof_panels_figure(runs: dict[str, SimResult], labels: dict[str, str],
         _command(cmd, runs, {key: labels[key]})
         cmd.set_ylabel("$\\Delta P_c$ (pu)")
         cmd.tick_params(labelbottom=False)
-        _rocof(roc, runs, {key: labels[key]}, relays, mark_trips=True)
+        _rocof(roc, runs, {key: labels[key]}, relays, f_nominal, mark_trips=True)
         roc.set_ylabel("ROCOF $\\hat{\\dot\\omega}$ (pu/s)")
         roc.set_xlabel("Time (s)")
         cmd.set_title(f"{labels[key]}: {attacks[key]}", fontsize=10)
@@ -186,7 +194,7 @@ def fault_figure(runs: dict[str, SimResult], currents: dict[str, tuple[np.ndarra
     axes[0].set_ylabel(f"Phase-A current, line {line_label} (A)")
     axes[0].set_xlabel("Time (s)")
     _frequency(axes[1], runs, labels, relays, f_nominal, dashed)
-    _rocof(axes[2], runs, labels, relays, dashed)
+    _rocof(axes[2], runs, labels, relays, f_nominal, dashed)
     _finish(axes, title)
     return fig
 
@@ -479,7 +487,7 @@ def areas_figure(runs: dict, labels: dict[str, str], relays: RelaySettings, titl
             _frequency_limits(ax, moved, relays)
         elif panel == "rocof":
             _limits(ax, [relays.rocof_limit, -relays.rocof_limit],
-                    f"ROCOF setting $\\pm${relays.rocof_limit:.3g} pu/s")
+                    rocof_setting_label(relays, f_nominal))
         ax.set_ylabel(ylabel[panel])
     _finish(axes, title)
     return fig
