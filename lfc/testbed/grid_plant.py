@@ -40,12 +40,17 @@ Sn_k / Σ Sn``.  The relays of each area read its meter bus.
 
 from __future__ import annotations
 
+import inspect
+import pickle
+import struct
+from dataclasses import dataclass
 
 import numpy as np
 
 from lfc._validate import check_count, check_flag, check_multiple, check_positive
 from lfc.engine import (GeneratorSide, check_area_keys, check_attacks, check_coupled,
                         sample_signal)
+from lfc.filters.coupled import CoupledFilter
 from lfc.multiarea import MultiAreaParams
 from lfc.relays import RelaySettings, relays_or_default
 from lfc.simulate_multiarea import (MultiAreaResult, area_filter, estimate_noise,
@@ -99,6 +104,53 @@ def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
     TestbedError
         If ANDES does not converge (with the time and ANDES' reason).
     """
+    return _run(_setup(**locals()))[0]     # the arguments, with their defaults
+
+
+@dataclass
+class _Setup:
+    """One scenario of :func:`simulate_andes_grid`, checked and ready to run: the
+    plant, every area's generator side, and what its result records."""
+
+    params: MultiAreaParams
+    plant: AndesPlant
+    loads: dict
+    gens: list[GeneratorSide]
+    relays: RelaySettings
+    stop_on_trip: bool
+    network: object
+    duration: float
+    step: float
+    tc: np.ndarray
+    built: dict
+    settings: dict
+
+    @property
+    def shareable(self) -> bool:
+        """Its run is a function of its commands and its plant-side inputs alone
+        (:attr:`lfc.testbed.loop.AndesLoop.samples`): no network, and no coupled
+        filter (which reads every area's commands)."""
+        return self.network is None and not any(isinstance(g.scc, CoupledFilter)
+                                                for g in self.gens)
+
+
+@dataclass
+class _Shared:
+    """What a finished run leaves for a run that differs from it only in its
+    filters: its logged trace, its trips and its control samples (the states the
+    generator sides read, the commands they returned)."""
+
+    t: np.ndarray
+    per_area: np.ndarray
+    trips: list
+    states: np.ndarray          # (control samples run, n_areas, 8): MEASURED
+    commands: np.ndarray        # (control samples run, n_areas), pu
+
+
+def _setup(params: MultiAreaParams, *, duration: float, attacks, loads, filters, relays,
+           estimator, noise_std, seed, control_period, step, stop_on_trip, feedforward,
+           anti_windup, case, plant, network) -> _Setup:
+    """:func:`simulate_andes_grid`'s checks, then its plant and generator sides."""
     if plant is not None and case is not None:
         raise ValueError("give case (a GridCase) or plant (an AndesPlant), not both")
     plant = plant if plant is not None else GridPlant(case or GridCase.kundur())
@@ -134,12 +186,6 @@ def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
                           k_agc=(float(k_freq[a]), float(k_tie[a])), anti_windup=anti_windup,
                           network=network is not None)
             for a, area in enumerate(params.areas)]
-    loop = AndesLoop(plant, loads, gens, relays, stop_on_trip, network)
-    loop.run(duration, step)
-    rows = np.array(loop.rows)
-    t = rows[:, 0].round(9)              # ANDES accumulates its time in floating point
-    per_area = rows[:, 1:1 + 8 * n_a].reshape(len(rows), n_a, 8)   # then the plant's extra
-    trips = loop.trips(t)
     settings = {"plant": "testbed", "case": repr(getattr(plant, "case", plant)),
                 "params": repr(params),
                 "relays": vars(relays), "duration": duration, "step": step,
@@ -148,9 +194,69 @@ def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
                 "filters": {a: repr(f) for a, f in built.items()},
                 "stop_on_trip": stop_on_trip, "feedforward": feedforward,
                 "anti_windup": anti_windup}
-    return multiarea_result(params, t, per_area[:, :, :5], per_area[:, :, 5],
-                            per_area[:, :, 6], trips, tc, [g.ctrl for g in gens], built,
-                            settings, p_net=per_area[:, :, 7])
+    return _Setup(params, plant, loads, gens, relays, stop_on_trip, network, duration, step,
+                  tc, built, settings)
+
+
+def _run(setup: _Setup) -> tuple[MultiAreaResult, _Shared]:
+    """Run ``setup`` on ANDES: its result, and what it leaves to share."""
+    loop = AndesLoop(setup.plant, setup.loads, setup.gens, setup.relays, setup.stop_on_trip,
+                     setup.network)
+    loop.run(setup.duration, setup.step)
+    rows = np.array(loop.rows)
+    t = rows[:, 0].round(9)              # ANDES accumulates its time in floating point
+    n_a = setup.plant.n_areas
+    per_area = rows[:, 1:1 + 8 * n_a].reshape(len(rows), n_a, 8)   # then the plant's extra
+    n_j = len(loop.samples)
+    shared = _Shared(t, per_area, loop.trips(t),
+                     np.array([s for s, _ in loop.samples]).reshape(n_j, n_a, 8),
+                     np.array([u for _, u in loop.samples]).reshape(n_j, n_a))
+    return _result(setup, shared), shared
+
+
+def _result(setup: _Setup, run: _Shared) -> MultiAreaResult:
+    """The result of ``setup``'s generator sides on the run ``run``."""
+    per_area = run.per_area
+    return multiarea_result(setup.params, run.t, per_area[:, :, :5], per_area[:, :, 5],
+                            per_area[:, :, 6], run.trips, setup.tc,
+                            [g.ctrl for g in setup.gens], setup.built, setup.settings,
+                            p_net=per_area[:, :, 7])
+
+
+def _replay(setup: _Setup, run: _Shared) -> MultiAreaResult | None:
+    """``setup``'s result without running ANDES, if it is ``run``: its generator
+    sides read ``run``'s control samples and return the same commands, bit for
+    bit, at every one (then ANDES would integrate the same run: the plant, its
+    loads, relays and times are the same, :func:`_share_key`); None at the first
+    command that differs (a filter that acts), or for a setup that is not
+    shareable."""
+    if not setup.shareable:
+        return None
+    for j, (state, commands) in enumerate(zip(run.states, run.commands)):
+        for a, gen in enumerate(setup.gens):
+            u = gen.step(j, state[a, :5], state[a, 7], state[a, 6])
+            if not _same_float(u, float(commands[a])):
+                return None
+    return _result(setup, run)
+
+
+def _same_float(a: float, b: float) -> bool:
+    """``a`` and ``b`` are the same float, bit for bit (0.0 is not -0.0)."""
+    return struct.pack("<d", a) == struct.pack("<d", b)
+
+
+def _share_key(call: dict) -> bytes | None:
+    """Scenarios of one table with equal keys differ in their ``filters`` alone: the
+    plant, its loads, relays, times, attacks and noise are the same (equal
+    pickles); None for one that shares with none (a network, or arguments that
+    do not pickle)."""
+    rest = {k: v for k, v in sorted(call.items()) if k != "filters"}
+    if rest.get("network") is not None:
+        return None
+    try:
+        return pickle.dumps(rest, protocol=5)
+    except (pickle.PicklingError, TypeError, AttributeError):
+        return None
 
 
 class GridPlant:
@@ -249,10 +355,17 @@ def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
                               **common) -> list[MultiAreaResult]:
     """Many :func:`simulate_andes_grid` runs in ``jobs`` processes (ANDES holds the
     GIL), each scenario a dict of its keyword arguments, ``common`` the ones
-    they share; the results in the scenarios' order."""
-    from concurrent.futures import ProcessPoolExecutor
+    they share; the results in the scenarios' order.
 
-    from lfc._pool import completed
+    Scenarios that differ only in their ``filters`` share ANDES' work: one of
+    them runs (the one without filters, if there is one), and each other one's
+    generator sides read that run's control samples; where they return the same
+    commands at every sample (filters that never act: a legitimate load step),
+    its result is that run with its own generator sides' records, equal bit for
+    bit to running it, and ANDES is not run again.  Where a command differs,
+    the scenario runs.  While a shared run is under way, a process that would
+    otherwise wait runs one of the scenarios that wait on it."""
+    from concurrent.futures import ProcessPoolExecutor
 
     from tqdm.auto import tqdm
 
@@ -262,18 +375,81 @@ def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
                                                            for s in scenarios):
         raise ValueError(f"scenarios must be a list of dicts, got {scenarios!r}")
     calls = [{**common, **s} for s in scenarios]
+    keys = [_share_key(kw) for kw in calls]
+    leader = {}                          # a group's key -> the scenario that runs for it
+    for i in sorted(range(len(calls)), key=lambda i: (bool(calls[i].get("filters")), i)):
+        if keys[i] is not None:
+            leader.setdefault(keys[i], i)
+    out: list[MultiAreaResult | None] = [None] * len(calls)
+    shared: dict[bytes, _Shared] = {}    # a finished leader's run
+    todo = list(range(len(calls)))
     bar = tqdm(total=len(calls), unit="run", desc="simulate", disable=not progress)
+
+    def replay_ready() -> None:
+        """Every waiting scenario whose leader has finished: its result from the
+        leader's run, or it runs."""
+        for i in [i for i in todo if keys[i] in shared and leader[keys[i]] != i]:
+            result = _replay(_setup_call(params, calls[i]), shared[keys[i]])
+            keys[i] = None               # it runs, or it is done
+            if result is not None:
+                out[i] = result
+                todo.remove(i)
+                bar.update()
+
+    def next_run() -> int:
+        """The next scenario to run: one that waits on no run, else (rather than
+        a process idle) the first that waits."""
+        free = [i for i in todo if keys[i] is None or leader[keys[i]] == i]
+        i = (free or todo)[0]
+        keys[i] = keys[i] if free else None
+        todo.remove(i)
+        return i
+
+    def finished(i: int, result: MultiAreaResult, run: _Shared | None) -> None:
+        out[i] = result
+        if keys[i] is not None and run is not None:
+            shared[keys[i]] = run
+        elif keys[i] is not None:        # nothing to share: the others of its group run
+            for k in [k for k in todo if keys[k] == keys[i]]:
+                keys[k] = None
+        bar.update()
+
     if jobs == 1 or len(calls) <= 1:
-        out = []
-        for kw in calls:
-            out.append(simulate_andes_grid(params, **kw))
-            bar.update()
-        bar.close()
-        return out
-    with ProcessPoolExecutor(max_workers=min(jobs, len(calls))) as pool:
-        futures = [pool.submit(simulate_andes_grid, params, **kw) for kw in calls]
-        for _ in completed(futures):
-            bar.update()
-        out = [f.result() for f in futures]
+        while todo:
+            replay_ready()
+            if todo:
+                i = next_run()
+                finished(i, *_run_call(params, calls[i], keys[i] is not None))
+    else:
+        from concurrent.futures import FIRST_COMPLETED, wait
+
+        from lfc._pool import POLL
+        with ProcessPoolExecutor(max_workers=min(jobs, len(calls))) as pool:
+            running = {}
+            while todo or running:
+                replay_ready()
+                while todo and len(running) < min(jobs, len(calls)):
+                    i = next_run()
+                    running[pool.submit(_run_call, params, calls[i], keys[i] is not None)] = i
+                done, _ = wait(running, timeout=POLL, return_when=FIRST_COMPLETED)
+                for future in done:
+                    finished(running.pop(future), *future.result())
     bar.close()
     return out
+
+
+def _setup_call(params: MultiAreaParams, call: dict) -> _Setup:
+    """:func:`_setup` of a table's scenario: its keywords with the defaults of
+    :func:`simulate_andes_grid`."""
+    bound = inspect.signature(simulate_andes_grid).bind(params, **call)
+    bound.apply_defaults()
+    return _setup(**bound.arguments)
+
+
+def _run_call(params: MultiAreaParams, call: dict, keep: bool
+              ) -> tuple[MultiAreaResult, _Shared | None]:
+    """Run a table's scenario (in a worker process); what it leaves to share if
+    ``keep`` and it is shareable."""
+    setup = _setup_call(params, call)
+    result, run = _run(setup)
+    return result, (run if keep and setup.shareable else None)
