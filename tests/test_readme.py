@@ -131,7 +131,8 @@ def test_a_reader_goes_from_the_readme_to_a_modified_attack_without_touching_fig
     (a square wave, α = 3) after ``mkdir -p build``.  Run as written from a folder
     that holds the notebooks and no ``build/`` (as a fresh clone: papermill does not
     create its output's folder), it executes, writes its figure under
-    ``build/figures`` and changes no tracked file."""
+    ``build/figures``, changes no tracked file, and its kernel prints no warning
+    (``--engine lfc``: over IPC, not TCP)."""
     import json
     import shlex
     import subprocess
@@ -158,6 +159,7 @@ def test_a_reader_goes_from_the_readme_to_a_modified_attack_without_touching_fig
     run = subprocess.run([sys.executable, "-m", *words], cwd=tmp_path, capture_output=True,
                          text=True, timeout=600)
     assert run.returncode == 0, run.stderr[-2000:]
+    assert "--engine" in words and "IPKernelApp" not in run.stderr   # no TCP warning
     assert (tmp_path / "build" / "01.ipynb").exists()
     assert figure.stat().st_size > 10_000
     assert subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
