@@ -13,9 +13,11 @@ README = runner.ROOT / "README.md"
 def test_readme_starts_with_the_two_commands():
     text = README.read_text()
     block = text.split("```bash\n", 1)[1].split("```", 1)[0].strip().splitlines()
-    assert block == ["pip install -r environment.txt && python -m lfc reproduce",
-                     "pip install -r environment.txt && python -m pytest"]
+    venv = "python3 -m venv .venv && . .venv/bin/activate && pip install -r environment.txt"
+    assert block == [f"{venv} && python -m lfc reproduce", f"{venv} && python -m pytest"]
     assert text.index("```bash") < text.index("##")
+    ci = (runner.ROOT / ".ci" / "run").read_text().splitlines()
+    assert block[1] in ci            # CI runs the README's test command as written
 
 
 def test_generated_tables_in_the_readme_and_docs_match_the_committed_results():
