@@ -115,30 +115,38 @@ def test_batch_equals_one_by_one_and_shares_the_runs_of_filters_that_never_act(
         fit, tmp_path, monkeypatch):
     """Every result of a table, in one process or two, equals its own run, bit for
     bit (trace, each area's controls, alarms and settings), and scenarios that
-    differ only in filters that never act share one ANDES run: a 0.01 pu step
-    with and without the certified filters (silent on it) is one run; under an
-    ACE bias (the filters act) each runs: 3 ANDES runs for 4 scenarios, counted
-    by ANDES' clock file."""
+    differ only in filters that never act share one ANDES run, counted by ANDES'
+    clock file.  A 0.01 pu step with and without the certified filters (silent
+    on it) is one run; under an ACE bias (the filters act) each runs: 3 runs for 4
+    scenarios.  A 0.05 pu step without filters, with the certified filters (they
+    act) and with the paper's SCC (silent): 2 runs for 3, also in two processes,
+    where the idle one runs the certified filters' scenario early and the
+    paper's waits for the run it shares."""
     certified = {0: "certified", 1: "certified"}
-    step = {"loads": {1: lfc.Step(-0.01, 0.5)}}
+    paper = {a: lfc.SafetyFilter(area, alpha=20.0) for a, area in enumerate(fit.params.areas)}
+    small, large = ({"loads": {1: lfc.Step(-size, 0.5)}} for size in (0.01, 0.05))
     bias = {"attacks": {a: {"ace": lfc.Step(-2.5, 0.5)} for a in range(2)}}
-    scenarios = [step, {**step, "filters": certified}, {**bias, "filters": certified}, bias]
-    ones = [lfc.simulate(CASE, design=fit.params, duration=2.0, anti_windup=True, **s)
-            for s in scenarios]
-    for jobs in (1, 2):
-        clock = tmp_path / f"andes-clock-{jobs}"
-        monkeypatch.setenv("LFC_ANDES_CLOCK", str(clock))
-        batch = lfc.simulate_many(CASE, scenarios, design=fit.params, duration=2.0,
-                                  jobs=jobs, anti_windup=True, progress=False)
-        assert len(clock.read_text().split()) == 3, jobs
-        for one, r in zip(ones, batch):
-            pd.testing.assert_frame_equal(one.trace, r.trace, check_exact=True)
-            for mine, theirs in zip(one.areas, r.areas):
-                pd.testing.assert_frame_equal(mine.controls, theirs.controls, check_exact=True)
-                pd.testing.assert_frame_equal(mine.alarms, theirs.alarms, check_exact=True)
-            assert one.settings == r.settings
-        assert all(a.alarms.empty for a in batch[1].areas)    # silent: it shared the run
-        assert all(len(a.alarms) for a in batch[2].areas)     # it acted: it ran
+    tables = ([small, {**small, "filters": certified}, {**bias, "filters": certified}, bias],
+              [large, {**large, "filters": certified}, {**large, "filters": paper}])
+    for scenarios, n_runs in zip(tables, (3, 2)):
+        ones = [lfc.simulate(CASE, design=fit.params, duration=2.0, anti_windup=True, **s)
+                for s in scenarios]
+        for jobs in (1, 2):
+            clock = tmp_path / f"andes-clock-{n_runs}-{jobs}"
+            monkeypatch.setenv("LFC_ANDES_CLOCK", str(clock))
+            batch = lfc.simulate_many(CASE, scenarios, design=fit.params, duration=2.0,
+                                      jobs=jobs, anti_windup=True, progress=False)
+            monkeypatch.delenv("LFC_ANDES_CLOCK")
+            assert len(clock.read_text().split()) == n_runs, jobs
+            for one, r in zip(ones, batch):
+                pd.testing.assert_frame_equal(one.trace, r.trace, check_exact=True)
+                for mine, theirs in zip(one.areas, r.areas):
+                    pd.testing.assert_frame_equal(mine.controls, theirs.controls,
+                                                  check_exact=True)
+                    pd.testing.assert_frame_equal(mine.alarms, theirs.alarms, check_exact=True)
+                assert one.settings == r.settings
+            assert all(a.alarms.empty for a in batch[1 if n_runs == 3 else 2].areas)  # shared
+            assert any(len(a.alarms) for a in batch[2 if n_runs == 3 else 1].areas)   # it acted
 
 
 @pytest.mark.parametrize("kwargs, message", [

@@ -364,7 +364,9 @@ def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
     its result is that run with its own generator sides' records, equal bit for
     bit to running it, and ANDES is not run again.  Where a command differs,
     the scenario runs.  While a shared run is under way, a process that would
-    otherwise wait runs one of the scenarios that wait on it."""
+    otherwise wait runs one of the scenarios that wait on it, one per shared run
+    (more would spend the CPU time sharing saves: measured on chapter 09's
+    Kundur load step, where a second one ran the filter that would have shared)."""
     from concurrent.futures import ProcessPoolExecutor
 
     from tqdm.auto import tqdm
@@ -382,6 +384,7 @@ def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
             leader.setdefault(keys[i], i)
     out: list[MultiAreaResult | None] = [None] * len(calls)
     shared: dict[bytes, _Shared] = {}    # a finished leader's run
+    speculated: set[bytes] = set()       # groups one of whose others started early
     todo = list(range(len(calls)))
     bar = tqdm(total=len(calls), unit="run", desc="simulate", disable=not progress)
 
@@ -396,12 +399,19 @@ def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
                 todo.remove(i)
                 bar.update()
 
-    def next_run() -> int:
+    def next_run() -> int | None:
         """The next scenario to run: one that waits on no run, else (rather than
-        a process idle) the first that waits."""
+        a process idle) the first that waits on a run none of whose others has
+        started; None: wait."""
         free = [i for i in todo if keys[i] is None or leader[keys[i]] == i]
-        i = (free or todo)[0]
-        keys[i] = keys[i] if free else None
+        if free:
+            i = free[0]
+        else:
+            i = next((i for i in todo if keys[i] not in speculated), None)
+            if i is None:
+                return None
+            speculated.add(keys[i])
+            keys[i] = None
         todo.remove(i)
         return i
 
@@ -430,6 +440,8 @@ def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
                 replay_ready()
                 while todo and len(running) < min(jobs, len(calls)):
                     i = next_run()
+                    if i is None:
+                        break
                     running[pool.submit(_run_call, params, calls[i], keys[i] is not None)] = i
                 done, _ = wait(running, timeout=POLL, return_when=FIRST_COMPLETED)
                 for future in done:
