@@ -20,9 +20,16 @@ cost; the last column measures it.
   area's AGC and no filter, and with the certified filter at every area (the
   fitted design models computed, or read from the cache, before timing);
 
-with the real-time factor of each and the loop's cost relative to ANDES alone.
+with the real-time factor of each and the loop's cost relative to ANDES alone;
 
-Run: python bench/bench_testbed.py [microgrid | grids]   (both by default)
+* ``shared``: chapter 09's load step (0.1 pu in area 0 at 1 s, 20 s here) with its
+  four defences (no filter, the paper's SCC at alpha = 3 and 20, the certified
+  filters) on both grids, as one ``lfc.simulate_many`` table in one process
+  (scenarios whose filters never act share one ANDES run) against one
+  ``lfc.simulate`` per scenario: wall time, ANDES' CPU seconds, the ANDES runs
+  each made, and the ratio.
+
+Run: python bench/bench_testbed.py [microgrid | grids | shared]   (all by default)
 """
 
 from __future__ import annotations
@@ -57,7 +64,13 @@ def median_time(fn) -> float:
 def loop_time(fn) -> tuple[float, float]:
     """Median wall time (s) of ``REPEAT`` calls of ``fn`` (an ANDES loop) and the
     median of ANDES' own CPU seconds in each call."""
-    walls, andes = [], []
+    wall, andes, _ = loop_runs(fn)
+    return wall, andes
+
+
+def loop_runs(fn) -> tuple[float, float, int]:
+    """:func:`loop_time`, and the ANDES runs of the last call."""
+    walls, andes, runs = [], [], 0
     with tempfile.TemporaryDirectory() as folder:
         clock = Path(folder) / "andes_seconds.txt"
         os.environ[CLOCK_ENV] = str(clock)
@@ -67,10 +80,12 @@ def loop_time(fn) -> tuple[float, float]:
                 t0 = time.perf_counter()
                 fn()
                 walls.append(time.perf_counter() - t0)
-                andes.append(sum(map(float, clock.read_text().split())))
+                seconds = clock.read_text().split()
+                andes.append(sum(map(float, seconds)))
+                runs = len(seconds)
         finally:
             del os.environ[CLOCK_ENV]
-    return statistics.median(walls), statistics.median(andes)
+    return statistics.median(walls), statistics.median(andes), runs
 
 
 def print_rows(label: str, bare: float, loops: dict[str, tuple[float, float]]) -> None:
@@ -136,8 +151,29 @@ def grids() -> None:
                 case, design=params, duration=DURATION, loads=load, filters=certified))})
 
 
+def shared() -> None:
+    load = {0: lfc.Step(0.1, 1.0)}
+    relays = lfc.RelaySettings()
+    print(f"shared: chapter 09's load step, {DURATION:g} s, four defences, one process, "
+          f"median of {REPEAT}")
+    print(f"{'':<8}{'run':<34}{'wall (s)':>9}{'ANDES (s)':>10}{'runs':>6}{'ratio':>8}")
+    for case in (GridCase.kundur(), GridCase.ieee39()):
+        params = grid_design(case)
+        defences = [{}, *({a: lfc.SafetyFilter(area, relays, alpha=alpha)
+                           for a, area in enumerate(params.areas)} for alpha in (3.0, 20.0)),
+                    {a: "certified" for a in range(case.n_areas)}]
+        common = {"design": params, "duration": DURATION, "loads": load, "relays": relays}
+        one = loop_runs(lambda: [lfc.simulate(case, filters=f, **common) for f in defences])
+        table = loop_runs(lambda: lfc.simulate_many(case, [{"filters": f} for f in defences],
+                                                    jobs=1, progress=False, **common))
+        for name, (wall, andes, runs) in (("one simulate per scenario", one),
+                                          ("one simulate_many table", table)):
+            print(f"{case.name:<8}{name:<34}{wall:>9.2f}{andes:>10.2f}{runs:>6}"
+                  f"{one[0] / wall:>8.2f}")
+
+
 def main() -> None:
-    parts = {"microgrid": microgrid, "grids": grids}
+    parts = {"microgrid": microgrid, "grids": grids, "shared": shared}
     chosen = sys.argv[1:] or list(parts)
     unknown = [p for p in chosen if p not in parts]
     if unknown:
