@@ -137,13 +137,13 @@ class _Setup:
 @dataclass
 class _Shared:
     """What a finished run leaves for a run that differs from it only in its
-    filters: its logged trace, its trips and its control samples (the states the
-    generator sides read, the commands they returned)."""
+    filters: its logged trace, its trips and its control samples (the row of the
+    trace each read, the commands its generator sides returned)."""
 
     t: np.ndarray
-    per_area: np.ndarray
+    per_area: np.ndarray        # (rows, n_areas, 8): MEASURED
     trips: list
-    states: np.ndarray          # (control samples run, n_areas, 8): MEASURED
+    read: np.ndarray            # (control samples run,): the row each sample read
     commands: np.ndarray        # (control samples run, n_areas), pu
 
 
@@ -207,10 +207,9 @@ def _run(setup: _Setup) -> tuple[MultiAreaResult, _Shared]:
     t = rows[:, 0].round(9)              # ANDES accumulates its time in floating point
     n_a = setup.plant.n_areas
     per_area = rows[:, 1:1 + 8 * n_a].reshape(len(rows), n_a, 8)   # then the plant's extra
-    n_j = len(loop.samples)
     shared = _Shared(t, per_area, loop.trips(t),
-                     np.array([s for s, _ in loop.samples]).reshape(n_j, n_a, 8),
-                     np.array([u for _, u in loop.samples]).reshape(n_j, n_a))
+                     np.array([k for k, _ in loop.samples], dtype=np.int64),
+                     np.array([u for _, u in loop.samples]).reshape(-1, n_a))
     return _result(setup, shared), shared
 
 
@@ -232,7 +231,8 @@ def _replay(setup: _Setup, run: _Shared) -> MultiAreaResult | None:
     shareable."""
     if not setup.shareable:
         return None
-    for j, (state, commands) in enumerate(zip(run.states, run.commands)):
+    for j, (row, commands) in enumerate(zip(run.read, run.commands)):
+        state = run.per_area[row]
         for a, gen in enumerate(setup.gens):
             u = gen.step(j, state[a, :5], state[a, 7], state[a, 6])
             if not _same_float(u, float(commands[a])):

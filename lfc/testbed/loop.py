@@ -172,12 +172,12 @@ class AndesLoop:
     stopped : tuple or None
         ``(found, t)`` when the relays ended the run: :meth:`RelayBank.update`'s
         trips and the time (s, rounded to 1 ns as the trace).
-    samples : list of (ndarray, ndarray)
-        One per control sample run: every area's ``MEASURED`` values the
-        generator sides read, (n_areas, 8), and the commands they returned
-        (n_areas,; pu).  The run is a function of these commands and of its
-        plant, loads, relays and times alone: a run whose generator sides
-        return the same commands at every sample is this run
+    samples : list of (int, ndarray)
+        One per control sample run: the index in :attr:`rows` of the state the
+        generator sides read, and the commands they returned (n_areas,; pu).
+        The run is a function of these commands and of its plant, loads, relays
+        and times alone: a run whose generator sides return the same commands
+        at every sample is this run
         (:func:`lfc.testbed.grid_plant.simulate_andes_grid_table` shares it).
     """
 
@@ -193,7 +193,7 @@ class AndesLoop:
         self._callback_seconds = 0.0
         self.rows: list[list[float]] = []
         self.stopped: tuple | None = None
-        self.samples: list[tuple[np.ndarray, np.ndarray]] = []
+        self.samples: list[tuple[int, np.ndarray]] = []
         self.next_j = 0
         self.commands = np.zeros(plant.n_areas)   # each area's latest command (pu)
         self._kalman: tuple | None = None   # a coupled filter's estimator: measurements,
@@ -289,7 +289,7 @@ class AndesLoop:
                 for a, gen in enumerate(self.gens):
                     net.publish(j, a, gen, state[a, :5], links[a], 0)
                 net.read(j)
-            self.samples.append((state.copy(), self.commands.copy()))
+            self.samples.append((len(self.rows) - 1, self.commands.copy()))
             self.next_j += 1
 
     def _estimate(self, coupled: CoupledFilter, state: np.ndarray, j: int) -> tuple:
