@@ -166,3 +166,71 @@ def test_a_reader_goes_from_the_readme_to_a_modified_attack_without_touching_fig
     assert figure.stat().st_size > 10_000
     assert subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
                           cwd=runner.ROOT, capture_output=True, text=True).stdout == tracked
+
+
+def test_the_readmes_jupyterlab_runs_a_cell_over_ipc_without_a_kernel_warning(tmp_path):
+    """``jupyter lab`` as the README starts it (plus a free port, a token, no browser,
+    and ``--allow-root`` where the suite runs as root): a kernel started through
+    JupyterLab's REST API runs a cell sent over its websocket, and the server's log
+    holds no line of the kernel's (without the README's option the kernel warns
+    there that its TCP traffic is unencrypted)."""
+    import asyncio
+    import json
+    import os
+    import shlex
+    import socket
+    import subprocess
+    import sys
+    import time
+    import urllib.request
+    import uuid
+
+    from tornado.websocket import websocket_connect
+
+    text = " ".join(README.read_text().split())
+    command = re.search(r"started with `(jupyter lab [^`]+)`", text).group(1)
+    words = shlex.split(command)
+    assert "--KernelManager.transport=ipc" in words
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    extra = [f"--port={port}", "--no-browser", "--IdentityProvider.token=t",
+             "--ServerApp.open_browser=False"] + (["--allow-root"] if os.getuid() == 0 else [])
+    (tmp_path / "notebooks").symlink_to(runner.NOTEBOOKS_DIR)
+    log = tmp_path / "lab.log"
+    with open(log, "w") as out:
+        server = subprocess.Popen([sys.executable, "-m", "jupyter", *words[1:], *extra],
+                                  cwd=tmp_path, stdout=out, stderr=subprocess.STDOUT)
+    base = f"http://127.0.0.1:{port}"
+
+    async def run_cell(kernel: str) -> str:
+        ws = await websocket_connect(f"ws://127.0.0.1:{port}/api/kernels/{kernel}/channels"
+                                     "?token=t")
+        ws.write_message(json.dumps({
+            "header": {"msg_id": uuid.uuid4().hex, "username": "reader",
+                       "session": uuid.uuid4().hex, "msg_type": "execute_request",
+                       "version": "5.3", "date": ""},
+            "parent_header": {}, "metadata": {}, "channel": "shell",
+            "content": {"code": "import lfc; print(lfc.__name__, 6 * 7)", "silent": False,
+                        "store_history": False, "user_expressions": {},
+                        "allow_stdin": False}}))
+        while True:
+            reply = json.loads(await asyncio.wait_for(ws.read_message(), 60))
+            if reply["msg_type"] in ("stream", "error"):
+                return reply["content"].get("text", str(reply["content"]))
+
+    try:
+        for _ in range(120):
+            try:
+                urllib.request.urlopen(f"{base}/api?token=t", timeout=2)
+                break
+            except OSError:
+                time.sleep(0.5)
+        request = urllib.request.Request(f"{base}/api/kernels?token=t", data=b"{}",
+                                         headers={"Content-Type": "application/json"})
+        kernel = json.load(urllib.request.urlopen(request, timeout=60))["id"]
+        assert asyncio.run(run_cell(kernel)) == "lfc 42\n"
+    finally:
+        server.terminate()
+        server.wait(timeout=30)
+    assert "IPKernelApp" not in log.read_text()      # the kernel printed nothing
