@@ -475,3 +475,30 @@ def test_finding_on_kundur_a_12_s_horizon_holds_agc_after_a_legitimate_step():
             assert not r.tripped
             assert restored_after(r.trace, 2, 1.0) == pytest.approx(restored, abs=0.1), (area, h)
             assert not any(a.alarms.outside.any() for a in r.areas)
+
+
+def test_an_auto_horizon_is_the_shortest_that_builds_and_keeps_agc_waiting_at_most_1_s():
+    """``horizon="auto"``, the finding above turned into a choice: on Kundur as
+    fitted to ANDES on the estimate, 8 s does not build (the estimate's error
+    takes the terminal set), 12 s holds a legitimate step 29.7 s, 16 s none, so it
+    takes 16 s and is the ``horizon=16`` filter; the two-area preset keeps 8 s
+    (it holds 0.25 s, within ``AUTO_HELD_MAX``).  An invalid other option is named
+    before anything is built, a horizon string other than "auto" is refused, and
+    a grid where no horizon builds says why at each."""
+    from lfc.filters.coupled import AUTO_HELD_MAX
+    auto = CoupledFilter(kundur(), RELAYS, noise_std=NOISE, horizon="auto")
+    assert auto.options.horizon == 16.0 and list(auto.horizons) == [8.0, 12.0, 16.0]
+    assert "raise horizon" in auto.horizons[8.0]
+    assert auto.horizons[12.0] == pytest.approx(29.73, abs=0.01) and auto.horizons[16.0] == 0.0
+    fixed = CoupledFilter(kundur(), RELAYS, noise_std=NOISE, horizon=16.0)
+    assert np.array_equal(auto.data, fixed.data) and fixed.horizons == {}
+    two = CoupledFilter(MultiAreaParams.two_area(), RELAYS, horizon="auto")
+    assert two.options.horizon == 8.0 and two.horizons == {8.0: pytest.approx(0.25, abs=0.01)}
+    assert 0.25 < AUTO_HELD_MAX
+    with pytest.raises(ValueError, match="tightening"):
+        CoupledFilter(MultiAreaParams.two_area(), RELAYS, horizon="auto", tightening=0.5)
+    with pytest.raises(TypeError, match="horizon must be a number of seconds in .* or 'auto'"):
+        CoupledFilter(MultiAreaParams.two_area(), RELAYS, horizon="longest")
+    with pytest.raises(ValueError, match="builds at none of 8 s .*; 12 s .*; 16 s .*; 20 s .*"
+                                         "lower load_bound"):
+        CoupledFilter(MultiAreaParams.two_area(), RELAYS, horizon="auto", load_bound=0.5)

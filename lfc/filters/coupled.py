@@ -122,6 +122,9 @@ EXPORT_STD = 1e-4    # pu: the grid Kalman filter's noise model of the metered t
 
 
 TERMINALS = ("auto", "lyapunov", "sdp")
+AUTO_HORIZONS = (8.0, 12.0, 16.0, 20.0)   # s: horizon="auto"'s candidates, shortest first
+AUTO_HELD_MAX = 1.0   # s: how long "auto" lets a legitimate step leave AGC waiting (it restores
+                      # in about 20 s on the grids of docs/coupled-certificate.md)
 ERROR_OFFSETS = 11   # instants in a control period at which the error lemma steps a load
 HELD_LEVELS = ("sharp", "widened", "strict")
 OUTSIDE_WHY = {   # what an outside flag may mean: the exact state, then each held level
@@ -157,7 +160,10 @@ class CoupledOptions:
         no radius (``data[RHO_NEW]``), which holds legitimate AGC after a load
         step: Kundur as fitted to ANDES needs 16 s, not the 12 that build
         (:meth:`held_after_step` measures it; ``docs/coupled-certificate.md``,
-        "With estimates", Cost).
+        "With estimates", Cost).  :class:`CoupledFilter` also takes ``"auto"``:
+        the shortest of :data:`AUTO_HORIZONS` whose certificate builds and holds
+        a legitimate step at most :data:`AUTO_HELD_MAX` (1 s;
+        :meth:`~CoupledFilter.held_after_step`).
     tightening : float
         How far (fraction of each limit) an output may move between two
         certificate samples, in [1e-4, 0.1]; sets their spacing.  Default 0.005.
@@ -889,6 +895,32 @@ def decide_once(fd: np.ndarray, x: np.ndarray, u: np.ndarray, p: np.ndarray, k: 
     return decide(fd, x, u, p, k, u_ref, mem)
 
 
+def auto_horizon(params: MultiAreaParams, relays: RelaySettings,
+                 options: dict) -> tuple[float, dict[float, float | str]]:
+    """``horizon="auto"`` (:class:`CoupledFilter`): the horizon chosen (s) and
+    what each one tried gave (:meth:`CoupledFilter.held_after_step`'s seconds, or
+    why it did not build)."""
+    if options["horizon"] != "auto":
+        raise ParameterTypeError(f"horizon must be a number of seconds in [0.2, 20] or "
+                                 f"'auto', got {options['horizon']!r}")
+    CoupledOptions(**{**options, "horizon": AUTO_HORIZONS[0]})   # the other options' errors
+    tried: dict[float, float | str] = {}
+    for h in AUTO_HORIZONS:
+        try:
+            filt = CoupledFilter(params, relays, **{**options, "horizon": h})
+        except ValueError as err:
+            tried[h] = str(err)
+            continue
+        tried[h] = filt.held_after_step()
+        if tried[h] <= AUTO_HELD_MAX:
+            return h, tried
+    held = {h: s for h, s in tried.items() if not isinstance(s, str)}
+    if not held:
+        raise ValueError("horizon='auto': the certificate builds at none of "
+                         + "; ".join(f"{h:g} s ({why})" for h, why in tried.items()))
+    return min(held, key=lambda h: (held[h], h)), tried
+
+
 class CoupledFilter:
     """The coupled certificate of one grid, shared by its areas (module docstring).
 
@@ -899,13 +931,32 @@ class CoupledFilter:
     relays : RelaySettings
         The relays of every area.
     **options
-        :class:`CoupledOptions`.
+        :class:`CoupledOptions`; ``horizon="auto"`` builds the certificate at each
+        of :data:`AUTO_HORIZONS` (8, 12, 16, 20 s) in turn and keeps the first
+        that builds and whose :meth:`held_after_step` is at most
+        :data:`AUTO_HELD_MAX` (1 s: a legitimate step of ``load_bound -
+        recheck_bound`` in any area leaves AGC waiting at most that long), or, if
+        none is, the one that holds the least (the shortest of equals).  Measured
+        (2026-11-28): the two-area preset keeps 8 s (it holds 0.25 s); Kundur as
+        fitted to ANDES 12 s on the exact state (8 s holds 6.5 s) and 16 s on the
+        estimate of ``noise_std=(1e-4, 1e-3)`` (8 s does not build, 12 s holds
+        29.7 s).
+
+    Attributes
+    ----------
+    options : CoupledOptions
+        The options it was built with (``horizon`` the one chosen).
+    horizons : dict
+        With ``horizon="auto"``: each horizon tried (s) and what it gave, the
+        seconds :meth:`held_after_step` returned or, for one that did not build,
+        the reason; else empty.
 
     Raises
     ------
     ValueError
         For an invalid option, a grid that is not stable with its commands held,
-        or tightenings that leave nothing of the limits (the message says which).
+        or tightenings that leave nothing of the limits (the message says which);
+        with ``horizon="auto"``, if no candidate builds (each one's reason).
     """
 
     method_id = METHOD_ID
@@ -919,6 +970,9 @@ class CoupledFilter:
         self.params, self.relays = params, relays
         # the model holds within its command range: the commands stay there
         options = {"u_min": -params.command_range, "u_max": params.command_range, **options}
+        self.horizons: dict[float, float | str] = {}
+        if isinstance(options.get("horizon"), str):
+            options["horizon"], self.horizons = auto_horizon(params, relays, options)
         self.options = o = CoupledOptions(**options)
         self.cert = built_once(lambda: CoupledSet(params, relays, o), CoupledSet, params,
                                relays, o, store=True)
