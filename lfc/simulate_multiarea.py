@@ -121,9 +121,9 @@ def area_filter(params: MultiAreaParams, area: int,
                                   None if noise_std is None else tuple(noise_std))
         except ValueError as err:
             raise ValueError(f"filters[{area}]='coupled' (the default options) cannot be "
-                             f"built: {err}; build a CoupledFilter with other options (e.g. "
-                             f"horizon) and give it to every area (check that it still "
-                             f"follows a legitimate load step: held_after_step)") from err
+                             f"built: {err}; build a CoupledFilter with other options and give "
+                             f"it to every area (with horizon='auto' its horizon also follows a "
+                             f"legitimate load step: held_after_step)") from err
     model = params.areas[area]
     if kind == "contract":
         share = contract_design(params, relays, control_period=control_period)

@@ -573,7 +573,8 @@ class CoupledSet:
             raise ValueError(f"the estimate's error moves the state at the horizon by "
                              f"{err_t:.3g} in the terminal set's norm (radius {r:.3g}) and the "
                              f"equilibrium frequency by {err_eq:.3g} pu (room {h:.3g}); lower "
-                             f"noise_std or confidence, or raise horizon")
+                             f"noise_std or confidence, or raise horizon (horizon='auto' "
+                             f"tries 8 to 20 s)")
         lift = np.ascontiguousarray(R.T)            # x = R' z: the full state of a reduced one
         head = np.zeros(HEAD)
         head[:] = (len(R.T), n_a, n_r, n_rows, o.u_min, o.u_max, relays.F, relays.rocof_limit,
