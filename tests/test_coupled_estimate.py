@@ -477,15 +477,19 @@ def test_finding_on_kundur_a_12_s_horizon_holds_agc_after_a_legitimate_step():
             assert not any(a.alarms.outside.any() for a in r.areas)
 
 
-def test_an_auto_horizon_is_the_shortest_that_builds_and_keeps_agc_waiting_at_most_1_s():
+def test_an_auto_horizon_is_the_shortest_that_builds_and_keeps_agc_waiting_at_most_1_s(
+        monkeypatch):
     """``horizon="auto"``, the finding above turned into a choice: on Kundur as
     fitted to ANDES on the estimate, 8 s does not build (the estimate's error
     takes the terminal set), 12 s holds a legitimate step 29.7 s, 16 s none, so it
     takes 16 s and is the ``horizon=16`` filter; the two-area preset keeps 8 s
-    (it holds 0.25 s, within ``AUTO_HELD_MAX``).  An invalid other option is named
+    (it holds 0.25 s, within ``AUTO_HELD_MAX``).  At the bound's corners on two
+    areas: a bound of exactly 0.25 s keeps 8 s, the next float below takes 12 s;
+    with no horizon within the bound it keeps the one that holds least, the
+    shortest of those that hold nothing (12 s of 12, 16, 20).  An invalid other option is named
     before anything is built, a horizon string other than "auto" is refused, and
     a grid where no horizon builds says why at each."""
-    from lfc.filters.coupled import AUTO_HELD_MAX
+    from lfc.filters.coupled import AUTO_HELD_MAX, AUTO_HORIZONS
     auto = CoupledFilter(kundur(), RELAYS, noise_std=NOISE, horizon="auto")
     assert auto.options.horizon == 16.0 and list(auto.horizons) == [8.0, 12.0, 16.0]
     assert "raise horizon" in auto.horizons[8.0]
@@ -495,6 +499,17 @@ def test_an_auto_horizon_is_the_shortest_that_builds_and_keeps_agc_waiting_at_mo
     two = CoupledFilter(MultiAreaParams.two_area(), RELAYS, horizon="auto")
     assert two.options.horizon == 8.0 and two.horizons == {8.0: pytest.approx(0.25, abs=0.01)}
     assert 0.25 < AUTO_HELD_MAX
+    import lfc.filters.coupled as coupled
+    held = two.horizons[8.0]
+    for bound, tried in ((held, [8.0]), (np.nextafter(held, 0.0), [8.0, 12.0])):
+        monkeypatch.setattr(coupled, "AUTO_HELD_MAX", bound)
+        f = CoupledFilter(MultiAreaParams.two_area(), RELAYS, horizon="auto")
+        assert list(f.horizons) == tried and f.options.horizon == tried[-1]
+    monkeypatch.setattr(coupled, "AUTO_HELD_MAX", -1.0)      # none within: the least held
+    least = CoupledFilter(MultiAreaParams.two_area(), RELAYS, horizon="auto")
+    assert list(least.horizons) == list(AUTO_HORIZONS) and least.options.horizon == 12.0
+    assert least.horizons[12.0] == least.horizons[16.0] == least.horizons[20.0] == 0.0
+    monkeypatch.undo()
     with pytest.raises(ValueError, match="tightening"):
         CoupledFilter(MultiAreaParams.two_area(), RELAYS, horizon="auto", tightening=0.5)
     with pytest.raises(TypeError, match="horizon must be a number of seconds in .* or 'auto'"):
