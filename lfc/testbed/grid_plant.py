@@ -50,13 +50,12 @@ import numpy as np
 from lfc._validate import check_count, check_flag, check_multiple, check_positive
 from lfc.engine import (GeneratorSide, check_area_keys, check_attacks, check_coupled,
                         sample_signal)
-from lfc.filters.coupled import CoupledFilter
 from lfc.multiarea import MultiAreaParams
 from lfc.relays import RelaySettings, relays_or_default
 from lfc.simulate_multiarea import (MultiAreaResult, area_filter, estimate_noise,
                                     multiarea_result)
 from lfc.testbed.grid import GridCase, build_grid
-from lfc.testbed.loop import AndesLoop, AndesPlant, TestbedError
+from lfc.testbed.loop import AndesLoop, AndesPlant, GeneratorSides, TestbedError
 
 
 def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
@@ -128,10 +127,9 @@ class _Setup:
     @property
     def shareable(self) -> bool:
         """Its run is a function of its commands and its plant-side inputs alone
-        (:attr:`lfc.testbed.loop.AndesLoop.samples`): no network, and no coupled
-        filter (which reads every area's commands)."""
-        return self.network is None and not any(isinstance(g.scc, CoupledFilter)
-                                                for g in self.gens)
+        (:attr:`lfc.testbed.loop.AndesLoop.samples`): no network (whose link has
+        a state of its own)."""
+        return self.network is None
 
 
 @dataclass
@@ -229,14 +227,13 @@ def _replay(setup: _Setup, run: _Shared) -> MultiAreaResult | None:
     loads, relays and times are the same, :func:`_share_key`); None at the first
     command that differs (a filter that acts), or for a setup that is not
     shareable."""
-    if not setup.shareable:
+    if not setup.shareable or len(run.read) != len(setup.tc) and not setup.stop_on_trip:
         return None
+    sides = GeneratorSides(setup.gens)
     for j, (row, commands) in enumerate(zip(run.read, run.commands)):
-        state = run.per_area[row]
-        for a, gen in enumerate(setup.gens):
-            u = gen.step(j, state[a, :5], state[a, 7], state[a, 6])
-            if not _same_float(u, float(commands[a])):
-                return None
+        u = sides.sample(j, run.per_area[row])
+        if not all(map(_same_float, u, commands)):
+            return None
     return _result(setup, run)
 
 

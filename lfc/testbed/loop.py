@@ -184,7 +184,6 @@ class AndesLoop:
     def __init__(self, plant: AndesPlant, loads: dict, gens: list[GeneratorSide],
                  relays: RelaySettings, stop_on_trip: bool, network=None) -> None:
         self.plant, self.loads, self.gens, self.relays = plant, loads, gens, relays
-        self.network = network
         self.bank = (RelayBank(relays, plant.n_areas)
                      if check_flag("stop_on_trip", stop_on_trip) else None)
         t0 = time.process_time()
@@ -195,9 +194,7 @@ class AndesLoop:
         self.stopped: tuple | None = None
         self.samples: list[tuple[int, np.ndarray]] = []
         self.next_j = 0
-        self.commands = np.zeros(plant.n_areas)   # each area's latest command (pu)
-        self._kalman: tuple | None = None   # a coupled filter's estimator: measurements,
-                                            # scratch, state (:meth:`_estimate`)
+        self.sides = GeneratorSides(gens, network)
         self._load_at = (math.nan, np.zeros(plant.n_areas))
 
     def run(self, duration: float, step: float) -> bool:
@@ -269,28 +266,59 @@ class AndesLoop:
                 self.stopped = (found, round(t, 9))
                 raise Stop
         tc = self.gens[0].tc
-        coupled = self.gens[0].scc if isinstance(self.gens[0].scc, CoupledFilter) else None
         while self.next_j < len(tc) and tc[self.next_j] <= t + 1e-7:
-            grid = None
-            if coupled is not None:     # the grid's state as its design model sees it
-                grid = [0, coupled.grid_state(state[:, :5], state[:, 6]), self.commands,
-                        state[:, 5], *self._estimate(coupled, state, self.next_j)]
-            net, j = self.network, self.next_j
-            if net is not None:
-                net.send(j)
-                links = net.deliver(j, self.gens)
-            for a, gen in enumerate(self.gens):
-                if grid is not None:
-                    grid[0] = a
-                u = gen.step(j, state[a, :5], state[a, 7], state[a, 6], grid)
-                self.commands[a] = u
-                self.plant.actuate(self.ss, a, u)
-            if net is not None:
-                for a, gen in enumerate(self.gens):
-                    net.publish(j, a, gen, state[a, :5], links[a], 0)
-                net.read(j)
-            self.samples.append((len(self.rows) - 1, self.commands.copy()))
+            u = self.sides.sample(self.next_j, state)
+            for a in range(self.plant.n_areas):
+                self.plant.actuate(self.ss, a, u[a])
+            self.samples.append((len(self.rows) - 1, u))
             self.next_j += 1
+
+
+class GeneratorSides:
+    """Every area's generator side at the control samples of a run: on ANDES
+    (:class:`AndesLoop`), or replaying a logged run's samples without it
+    (:func:`lfc.testbed.grid_plant.simulate_andes_grid_table`, the stored runs).
+
+    Parameters
+    ----------
+    gens : list of GeneratorSide
+        One per area, sharing the control sample times.
+    network : lfc.wire.link.Link, optional
+        The commands travel over it (:class:`AndesLoop`).
+    """
+
+    def __init__(self, gens: list[GeneratorSide], network=None) -> None:
+        self.gens, self.network = gens, network
+        self.commands = np.zeros(len(gens))   # each area's latest command (pu)
+        scc = gens[0].scc
+        self.coupled = scc if isinstance(scc, CoupledFilter) else None
+        self._kalman: tuple | None = None   # a coupled filter's estimator: measurements,
+                                            # scratch, state (:meth:`_estimate`)
+
+    def sample(self, j: int, state: np.ndarray) -> np.ndarray:
+        """Run control sample ``j`` on the areas' ``state`` ((n_areas, 8) in the
+        order of ``MEASURED``); return every area's command (pu, a new array).
+        A coupled filter reads the grid's state as its design model sees it and
+        the commands of the areas before it at this sample, of the others at the
+        last one."""
+        grid = None
+        coupled = self.coupled
+        if coupled is not None:
+            grid = [0, coupled.grid_state(state[:, :5], state[:, 6]), self.commands,
+                    state[:, 5], *self._estimate(coupled, state, j)]
+        net = self.network
+        if net is not None:
+            net.send(j)
+            links = net.deliver(j, self.gens)
+        for a, gen in enumerate(self.gens):
+            if grid is not None:
+                grid[0] = a
+            self.commands[a] = gen.step(j, state[a, :5], state[a, 7], state[a, 6], grid)
+        if net is not None:
+            for a, gen in enumerate(self.gens):
+                net.publish(j, a, gen, state[a, :5], links[a], 0)
+            net.read(j)
+        return self.commands.copy()
 
     def _estimate(self, coupled: CoupledFilter, state: np.ndarray, j: int) -> tuple:
         """What a coupled filter on its grid Kalman estimate reads at control sample
@@ -300,7 +328,7 @@ class AndesLoop:
         across samples; nothing without the estimate."""
         if coupled.kalman is None:
             return ()
-        n_a = self.plant.n_areas
+        n_a = len(self.gens)
         if self._kalman is None:
             self._kalman = (np.zeros(6 * n_a), np.zeros(coupled.params.n_states),
                             np.zeros((2, coupled.kalman.n)))
