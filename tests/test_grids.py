@@ -121,7 +121,9 @@ def test_batch_equals_one_by_one_and_shares_the_runs_of_filters_that_never_act(
     scenarios.  A 0.05 pu step without filters, with the certified filters (they
     act) and with the paper's SCC (silent): 2 runs for 3, also in two processes,
     where the idle one runs the certified filters' scenario early and the
-    paper's waits for the run it shares."""
+    paper's waits for the run it shares.  (Runs stored on disk off: the table
+    would read the one-by-one runs back, tests/test_stored_runs.py.)"""
+    monkeypatch.setenv("LFC_ANDES_RUNS", "off")
     certified = {0: "certified", 1: "certified"}
     paper = {a: lfc.SafetyFilter(area, alpha=20.0) for a, area in enumerate(fit.params.areas)}
     small, large = ({"loads": {1: lfc.Step(-size, 0.5)}} for size in (0.01, 0.05))

@@ -74,7 +74,8 @@ def _parser() -> argparse.ArgumentParser:
                           "(about a minute)")
     rep.add_argument("--no-cache", dest="cache", action="store_false",
                      help="run every notebook, even those unchanged since their last "
-                          "successful run (default: those are read back)")
+                          "successful run, and every ANDES run, even those stored "
+                          "(default: those are read back)")
     rep.add_argument("--compare-blas", metavar="CORE", type=_core,
                      help="then run the same notebooks again with OPENBLAS_CORETYPE=CORE "
                           "(e.g. Haswell) into BUILD_DIR/blas-CORE and list every claim "

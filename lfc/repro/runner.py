@@ -247,7 +247,9 @@ def _run_one(name: str, notebook: Path, results: Path, parameters: dict,
 
     With ``cache``, a run whose :func:`run_key` equals the last successful run's
     into the same folder, and whose files are all still there unchanged, is not
-    executed: its outcome is read back and marked ``cached``."""
+    executed: its outcome is read back and marked ``cached``; and the notebook's
+    grid runs on ANDES are read back where stored (:mod:`lfc.testbed.stored_runs`).
+    Without it, every ANDES run runs."""
     t0 = time.perf_counter()
     figures = Path(parameters["figures_dir"])
     key = run_key(notebook, parameters)
@@ -261,6 +263,7 @@ def _run_one(name: str, notebook: Path, results: Path, parameters: dict,
         for stale in RESULT_FILES:  # never report a claim an earlier run computed
             (results / stale).unlink(missing_ok=True)
         from lfc.testbed.loop import CLOCK_ENV   # here: lfc.testbed imports control, 1 s
+        from lfc.testbed.stored_runs import SWITCH
 
         error = ""
         start = time.time_ns()
@@ -268,7 +271,8 @@ def _run_one(name: str, notebook: Path, results: Path, parameters: dict,
         clock.unlink(missing_ok=True)
         try:
             execute(notebook, results / notebook.name, parameters,
-                    env={CLOCK_ENV: str(clock.resolve())})
+                    env={CLOCK_ENV: str(clock.resolve()),
+                         **({} if cache else {SWITCH: "off"})})
             ok = True
         except pm.PapermillExecutionError as err:
             ok, error = False, f"{err.ename}: {err.evalue}"

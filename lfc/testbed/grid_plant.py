@@ -43,6 +43,7 @@ from __future__ import annotations
 import inspect
 import pickle
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,6 +56,7 @@ from lfc.relays import RelaySettings, relays_or_default
 from lfc.simulate_multiarea import (MultiAreaResult, area_filter, estimate_noise,
                                     multiarea_result)
 from lfc.testbed.grid import GridCase, build_grid
+from lfc.testbed import stored_runs
 from lfc.testbed.loop import AndesLoop, AndesPlant, GeneratorSides, TestbedError
 
 
@@ -94,7 +96,11 @@ def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
     Returns
     -------
     MultiAreaResult
-        One trace row per accepted ANDES step.
+        One trace row per accepted ANDES step.  Read back without ANDES from a
+        run stored by an earlier call with the same arguments but ``filters``
+        whose generator sides returned the same commands at every control
+        sample (:mod:`lfc.testbed.stored_runs`: equal bit for bit; not with a
+        ``network``, or ``LFC_ANDES_RUNS=off``).
 
     Raises
     ------
@@ -103,7 +109,8 @@ def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
     TestbedError
         If ANDES does not converge (with the time and ANDES' reason).
     """
-    return _run(_setup(**locals()))[0]     # the arguments, with their defaults
+    call = locals()                         # the arguments, with their defaults
+    return _run_stored(lambda: _setup(**call), stored_runs.run_key(call))[0]
 
 
 @dataclass
@@ -194,6 +201,27 @@ def _setup(params: MultiAreaParams, *, duration: float, attacks, loads, filters,
                 "anti_windup": anti_windup}
     return _Setup(params, plant, loads, gens, relays, stop_on_trip, network, duration, step,
                   tc, built, settings)
+
+
+def _run_stored(make: Callable[[], _Setup], key: str | None
+                ) -> tuple[MultiAreaResult, _Shared | None]:
+    """The result of the setup ``make()`` builds, and its run if it is shareable
+    (else None): a run stored under ``key`` (:mod:`lfc.testbed.stored_runs`) that
+    its generator sides replay, or run on ANDES and stored (``key`` None: run,
+    not stored)."""
+    setup = make()
+    if not setup.shareable:
+        return _run(setup)[0], None
+    if key is None:
+        return _run(setup)
+    for run in stored_runs.stored(key):
+        result = _replay(setup, run)
+        if result is not None:
+            return result, run
+        setup = make()                  # its generator sides have moved on: fresh ones
+    result, run = _run(setup)
+    stored_runs.store(key, run, run.commands.tobytes())
+    return result, run
 
 
 def _run(setup: _Setup) -> tuple[MultiAreaResult, _Shared]:
@@ -354,9 +382,10 @@ def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
     GIL), each scenario a dict of its keyword arguments, ``common`` the ones
     they share; the results in the scenarios' order.
 
-    Scenarios that differ only in their ``filters`` share ANDES' work: one of
-    them runs (the one without filters, if there is one), and each other one's
-    generator sides read that run's control samples; where they return the same
+    Scenarios that differ only in their ``filters`` share ANDES' work (and each
+    reads back a run stored by an earlier call, as :func:`simulate_andes_grid`
+    does): one of them runs (the one without filters, if there is one), and each
+    other one's generator sides read that run's control samples; where they return the same
     commands at every sample (filters that never act: a legitimate load step),
     its result is that run with its own generator sides' records, equal bit for
     bit to running it, and ANDES is not run again.  Where a command differs,
@@ -450,15 +479,21 @@ def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
 def _setup_call(params: MultiAreaParams, call: dict) -> _Setup:
     """:func:`_setup` of a table's scenario: its keywords with the defaults of
     :func:`simulate_andes_grid`."""
+    return _setup(**_bound(params, call))
+
+
+def _bound(params: MultiAreaParams, call: dict) -> dict:
+    """A table's scenario as the arguments of :func:`simulate_andes_grid`, with
+    its defaults."""
     bound = inspect.signature(simulate_andes_grid).bind(params, **call)
     bound.apply_defaults()
-    return _setup(**bound.arguments)
+    return bound.arguments
 
 
 def _run_call(params: MultiAreaParams, call: dict, keep: bool
               ) -> tuple[MultiAreaResult, _Shared | None]:
     """Run a table's scenario (in a worker process); what it leaves to share if
     ``keep`` and it is shareable."""
-    setup = _setup_call(params, call)
-    result, run = _run(setup)
-    return result, (run if keep and setup.shareable else None)
+    result, run = _run_stored(lambda: _setup_call(params, call),
+                              stored_runs.run_key(_bound(params, call)))
+    return result, (run if keep else None)

@@ -1,0 +1,120 @@
+"""ANDES runs kept on disk, read back by a later scenario that would run the same.
+
+A grid run on ANDES is a function of its plant-side inputs (the case, loads,
+relays, times) and of the commands its generator sides return at every control
+sample (:attr:`lfc.testbed.loop.AndesLoop.samples`).  A finished run is stored
+under a key of every argument of its :func:`~lfc.testbed.grid_plant.simulate_andes_grid`
+call but its ``filters`` (:func:`run_key`); a later call with the same key
+replays each stored run's samples through its own generator sides, and where
+they return the same commands, bit for bit, at every sample, its result is
+that run with its own generator sides' records: equal to running it, without
+ANDES.  A call whose filters act differently runs, and its run is stored beside
+the others.
+
+Where: ``$LFC_CACHE_DIR/andes-runs/`` (:func:`lfc._files.cache_folder`), at most
+``LIMIT`` bytes, the oldest removed first; each file with its SHA-256 (a damaged
+one is run again, with a warning).  The key covers the sources of the package,
+the environment and ``OPENBLAS_CORETYPE`` (:func:`lfc._files.content_key`), so
+a run of other code is never found.  ``LFC_ANDES_RUNS=off`` in the environment
+turns the store off (every call runs ANDES).  The files are pickles: keep
+``$LFC_CACHE_DIR`` a folder only you can write to.
+"""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import io
+import os
+import pickle
+import types
+import zlib
+from pathlib import Path
+from typing import Any
+
+from lfc._files import _prune, cache_folder, content_key, read_stored, write_stored
+
+#: bytes: the most the folder keeps (the oldest files are removed first); a
+#: 20 s run of a two-area grid at 5 ms is about 0.2 MB
+LIMIT = 512 * 2**20
+
+#: the environment variable that turns the store off (``off``)
+SWITCH = "LFC_ANDES_RUNS"
+
+#: the modules whose functions and classes a key may name: their code is covered
+#: by the key (the package's sources, the installed numerical packages)
+_TRUSTED = ("lfc", "numpy", "pandas", "builtins", "copyreg", "collections", "_codecs")
+
+
+def enabled() -> bool:
+    """The store is on, unless ``$LFC_ANDES_RUNS`` is ``off``."""
+    return os.environ.get(SWITCH, "").strip().lower() != "off"
+
+
+def run_key(call: dict[str, Any]) -> str | None:
+    """The key under which a call's runs are stored: its arguments but
+    ``filters``, pickled, with :func:`lfc._files.content_key`; None when the store
+    is off, or for arguments it cannot key: a function or class from outside the
+    package and numpy (a notebook's own signal: its code is not in the key, and
+    an edited one would find the old run), or anything that does not pickle."""
+    if not enabled():
+        return None
+    rest = {k: v for k, v in sorted(call.items()) if k != "filters"}
+    buffer = io.BytesIO()
+    try:
+        _KeyPickler(buffer).dump(rest)
+    except (pickle.PicklingError, TypeError, AttributeError):
+        return None
+    return content_key("andes-run", buffer.getvalue())
+
+
+class _KeyPickler(pickle.Pickler):
+    """A pickler that refuses functions and classes from outside ``_TRUSTED``."""
+
+    def __init__(self, file: io.BytesIO) -> None:
+        super().__init__(file, protocol=5)
+
+    def reducer_override(self, obj: object) -> object:
+        if isinstance(obj, (type, types.FunctionType, types.BuiltinFunctionType,
+                            types.MethodType)):
+            module = getattr(obj, "__module__", None) or ""
+            if module.split(".")[0] not in _TRUSTED:
+                raise pickle.PicklingError(f"{obj!r} is from {module or 'nowhere'}")
+        return NotImplemented
+
+
+def stored(key: str) -> list[Any]:
+    """Every run stored under ``key``, oldest first (none if the store is off)."""
+    folder = cache_folder() / "andes-runs"
+    paths = sorted(folder.glob(f"{key}-*.json"), key=_mtime)
+    runs = (read_stored(path, _decode) for path in paths)
+    return [run for run in runs if run is not None]
+
+
+def store(key: str, run: Any, commands: bytes) -> None:
+    """Keep ``run`` under ``key``, named by its ``commands`` (the bytes of every
+    command it applied): a run with the same key and commands is the same run."""
+    folder = cache_folder() / "andes-runs"
+    name = hashlib.sha256(commands).hexdigest()[:16]
+    write_stored(folder / f"{key}-{name}.json", run, _encode)
+    _prune(folder, LIMIT)
+
+
+def _mtime(path: Path) -> float:
+    try:
+        return path.stat().st_mtime
+    except OSError:                 # another process removed it meanwhile
+        return 0.0
+
+
+def _encode(run: Any) -> dict:
+    data = zlib.compress(pickle.dumps(run, protocol=5), 6)
+    return {"run": base64.b64encode(data).decode("ascii")}
+
+
+def _decode(payload: dict) -> Any:
+    try:
+        return pickle.loads(zlib.decompress(base64.b64decode(payload["run"])))
+    except (pickle.UnpicklingError, zlib.error, EOFError, AttributeError,
+            ImportError) as err:
+        raise ValueError(f"cannot read the run: {err}") from err

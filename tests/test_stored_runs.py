@@ -1,0 +1,127 @@
+"""Grid runs on ANDES kept on disk (lfc.testbed.stored_runs): read back, bit for
+bit, by a later call whose generator sides return the same commands; run again
+where they do not, where the file is damaged, or with the store off; keyed by
+arguments whose code the key covers, the same in a fresh interpreter."""
+
+import subprocess
+import sys
+import textwrap
+
+import pandas as pd
+import pytest
+
+import lfc
+from lfc.testbed import GridCase, case_design, grid_design
+from lfc.testbed.loop import CLOCK_ENV
+from lfc.testbed.stored_runs import SWITCH, run_key
+
+CASE = GridCase.kundur()
+
+
+class MyStep(lfc.Step):
+    """A signal class of the caller's own (its code is not in the key)."""
+
+
+@pytest.fixture(scope="module")
+def design():
+    return grid_design(CASE)
+
+
+def assert_same(mine, theirs) -> None:
+    """Two grid results equal bit for bit: trace, each area's controls and alarms,
+    settings."""
+    pd.testing.assert_frame_equal(mine.trace, theirs.trace, check_exact=True)
+    for a, b in zip(mine.areas, theirs.areas):
+        pd.testing.assert_frame_equal(a.controls, b.controls, check_exact=True)
+        pd.testing.assert_frame_equal(a.alarms, b.alarms, check_exact=True)
+    assert mine.settings == theirs.settings
+
+
+def test_a_stored_run_is_read_back_by_filters_that_return_its_commands_and_run_by_others(
+        design, tmp_path, monkeypatch):
+    """A 0.01 pu load step runs ANDES once: the same call again, and the same call
+    with the certified or the coupled filters (silent on it), read the stored run
+    back.  Under an
+    ACE bias the certified filters act: that call runs, and its run is stored
+    beside the unfiltered one, so both read back next time.  Every result read
+    back equals the same call run with the store off, bit for bit; a damaged
+    file is run again, with a warning.  Runs counted by ANDES' clock file."""
+    monkeypatch.setenv("LFC_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.delenv(SWITCH, raising=False)
+    clock = tmp_path / "clock"
+    monkeypatch.setenv(CLOCK_ENV, str(clock))
+
+    def run(**kwargs):
+        return lfc.simulate(CASE, design=design, duration=2.0, anti_windup=True, **kwargs)
+
+    def runs() -> int:
+        return len(clock.read_text().split()) if clock.exists() else 0
+
+    certified = {0: "certified", 1: "certified"}
+    step = {"loads": {1: lfc.Step(-0.01, 0.5)}}
+    bias = {"attacks": {a: {"ace": lfc.Step(-2.5, 0.5)} for a in range(2)}}
+    coupled = {0: "coupled", 1: "coupled"}
+    calls = [step, step, {**step, "filters": certified}, {**step, "filters": coupled}, bias,
+             {**bias, "filters": certified}, bias, {**bias, "filters": certified}]
+    stored = [run(**kwargs) for kwargs in calls]
+    assert runs() == 3                              # the step once, the bias twice
+    assert all(a.alarms.empty for r in stored[2:4] for a in r.areas)      # silent
+    assert any(len(a.alarms) for a in stored[5].areas)                    # it acted
+    files = sorted((tmp_path / "cache" / "andes-runs").glob("*.json"))
+    assert len(files) == 3 and len({f.name.split("-")[0] for f in files}) == 2
+
+    monkeypatch.setenv(SWITCH, "off")
+    fresh = [run(**kwargs) for kwargs in calls[1:6]]
+    assert runs() == 3 + 5
+    for mine, theirs in zip(stored[1:6], fresh):
+        assert_same(mine, theirs)
+
+    monkeypatch.delenv(SWITCH)
+    for f in files:
+        f.write_text(f.read_text()[:-40] + "}")
+    with pytest.warns(RuntimeWarning, match="damaged cache file"):
+        again = run(**step)
+    assert runs() == 3 + 5 + 1
+    assert_same(again, stored[0])
+
+
+def test_the_key_leaves_out_the_filters_and_is_the_same_in_a_fresh_interpreter():
+    """A call's key is its arguments but ``filters`` (another filter: the same
+    key), computed the same in a fresh Python; a signal whose code the key does
+    not cover (a function or signal class of the caller's own) gives no key:
+    such a call runs, and is not stored."""
+    source = textwrap.dedent("""
+        import lfc
+        from lfc.testbed import GridCase, case_design
+        from lfc.testbed.stored_runs import run_key
+        CASE = GridCase.kundur()
+        CALL = {"params": case_design(CASE), "duration": 2.0, "case": CASE,
+                "loads": {1: lfc.Step(-0.01, 0.5)},
+                "attacks": {0: {"pc": lfc.Sinusoid(0.3, 0.5, start=1.0)}},
+                "relays": lfc.RelaySettings(), "seed": 3, "filters": None}
+        """)
+    here: dict = {}
+    exec(source, here)
+    call = here["CALL"]
+    key = run_key(call)
+    assert len(key) == 64
+    assert run_key({**call, "filters": {0: "certified"}}) == key
+    assert run_key({**call, "seed": 4}) != key
+    fresh = subprocess.run([sys.executable, "-c", source + "print(run_key(CALL))"],
+                           capture_output=True, text=True, check=True)
+    assert fresh.stdout.strip() == key
+
+    def own(t):
+        return 0.0 * t
+
+    assert run_key({**call, "loads": {1: own}}) is None
+    assert run_key({**call, "loads": {1: lambda t: 0.0 * t}}) is None
+    assert run_key({**call, "loads": {1: MyStep(-0.01, 0.5)}}) is None
+    assert run_key({**call, "params": case_design(CASE)}) == key
+
+
+def test_the_store_off_gives_no_key(monkeypatch):
+    monkeypatch.setenv(SWITCH, "off")
+    assert run_key({"params": case_design(CASE), "duration": 1.0}) is None
+    monkeypatch.setenv(SWITCH, "on")
+    assert run_key({"params": case_design(CASE), "duration": 1.0}) is not None
