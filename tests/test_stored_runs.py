@@ -120,8 +120,14 @@ def test_the_key_leaves_out_the_filters_and_is_the_same_in_a_fresh_interpreter()
     assert run_key({**call, "params": case_design(CASE)}) == key
 
 
-def test_the_store_off_gives_no_key(monkeypatch):
+def test_the_switch_is_on_or_off_and_anything_else_is_refused(monkeypatch):
+    """``LFC_ANDES_RUNS=off`` gives no key (every call runs); ``on`` or unset, a
+    key; a typo is refused, naming the variable, rather than read as on."""
+    call = {"params": case_design(CASE), "duration": 1.0}
     monkeypatch.setenv(SWITCH, "off")
-    assert run_key({"params": case_design(CASE), "duration": 1.0}) is None
-    monkeypatch.setenv(SWITCH, "on")
-    assert run_key({"params": case_design(CASE), "duration": 1.0}) is not None
+    assert run_key(call) is None
+    monkeypatch.setenv(SWITCH, " ON ")
+    assert run_key(call) is not None
+    monkeypatch.setenv(SWITCH, "of")
+    with pytest.raises(ValueError, match="LFC_ANDES_RUNS must be 'on' or 'off'.*'of'"):
+        run_key(call)

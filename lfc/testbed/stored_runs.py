@@ -47,8 +47,18 @@ _TRUSTED = ("lfc", "numpy", "pandas", "builtins", "copyreg", "collections", "_co
 
 
 def enabled() -> bool:
-    """The store is on, unless ``$LFC_ANDES_RUNS`` is ``off``."""
-    return os.environ.get(SWITCH, "").strip().lower() != "off"
+    """The store is on, unless ``$LFC_ANDES_RUNS`` is ``off`` (``on`` or unset: on).
+
+    Raises
+    ------
+    ValueError
+        For any other value (a typo would otherwise leave it on, unnoticed).
+    """
+    value = os.environ.get(SWITCH, "").strip().lower()
+    if value not in ("", "on", "off"):
+        raise ValueError(f"{SWITCH} must be 'on' or 'off' (or unset: on), got "
+                         f"{os.environ[SWITCH]!r}")
+    return value != "off"
 
 
 def run_key(call: dict[str, Any]) -> str | None:
