@@ -236,6 +236,22 @@ def test_reproduce_never_reports_claims_of_an_earlier_run(tmp_path, monkeypatch)
     assert list(runner.summary_table([outcome]).reproduced) == ["no"]
 
 
+def test_reproduce_without_its_cache_runs_every_andes_run_too(tmp_path, monkeypatch):
+    """``reproduce --no-cache`` turns the stored ANDES runs off in the kernel
+    (``LFC_ANDES_RUNS=off``: its timing is ANDES' full cost); with its cache the
+    kernel's environment leaves the store on."""
+    seen = []
+
+    def records(notebook, output, parameters, env=None):
+        seen.append(dict(env or {}))
+        raise runner.pm.PapermillExecutionError(0, 1, "", "RuntimeError", "stop here", [])
+    monkeypatch.setattr(runner, "execute", records)
+    for cache in (False, True):
+        runner.reproduce(["fig4"], "linear", figures_dir=tmp_path / "fig",
+                         build_dir=tmp_path / "build", cache=cache)
+    assert [env.get("LFC_ANDES_RUNS") for env in seen] == ["off", None]
+
+
 def test_a_broken_claim_fails_the_notebook(tmp_path):
     nb = runner.NOTEBOOKS_DIR / runner.FIGURES["fig4"]
     with pytest.raises(runner.pm.PapermillExecutionError, match="claim"):
