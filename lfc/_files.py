@@ -181,11 +181,11 @@ def kept(path: Path, make: Callable[[], Any], after: float, limit: float) -> Any
             except (pickle.PicklingError, TypeError, AttributeError) as err:
                 warnings.warn(f"cannot store {type(made).__name__} ({err}); it will be built "
                               f"again in the next process", RuntimeWarning, stacklevel=4)
-            _prune(path.parent, limit)
+            prune(path.parent, limit)
     return made
 
 
-def _prune(folder: Path, limit: float) -> None:
+def prune(folder: Path, limit: float) -> None:
     """Remove the least recently written files of ``folder`` until it holds at most
     ``limit`` bytes (files of earlier code are never read again)."""
     files = []

@@ -29,13 +29,14 @@ import os
 import pickle
 import types
 import zlib
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from lfc._files import _prune, cache_folder, content_key, read_stored, write_stored
+from lfc._files import cache_folder, content_key, prune, read_stored, write_stored
 
 #: bytes: the most the folder keeps (the oldest files are removed first); a
-#: 20 s run of a two-area grid at 5 ms is about 0.2 MB
+#: 20 s run of a two-area grid at 5 ms is about 0.5 MB, of 120 s 3 MB
 LIMIT = 512 * 2**20
 
 #: the environment variable that turns the store off (``off``)
@@ -93,12 +94,14 @@ class _KeyPickler(pickle.Pickler):
         return NotImplemented
 
 
-def stored(key: str) -> list[Any]:
-    """Every run stored under ``key``, oldest first (none if the store is off)."""
+def stored(key: str) -> Iterator[Any]:
+    """Every run stored under ``key``, oldest first, each read when it is asked
+    for (a damaged file is left out, with a warning)."""
     folder = cache_folder() / "andes-runs"
-    paths = sorted(folder.glob(f"{key}-*.json"), key=_mtime)
-    runs = (read_stored(path, _decode) for path in paths)
-    return [run for run in runs if run is not None]
+    for path in sorted(folder.glob(f"{key}-*.json"), key=_mtime):
+        run = read_stored(path, _decode)
+        if run is not None:
+            yield run
 
 
 def store(key: str, run: Any, commands: bytes) -> None:
@@ -107,7 +110,7 @@ def store(key: str, run: Any, commands: bytes) -> None:
     folder = cache_folder() / "andes-runs"
     name = hashlib.sha256(commands).hexdigest()[:16]
     write_stored(folder / f"{key}-{name}.json", run, _encode)
-    _prune(folder, LIMIT)
+    prune(folder, LIMIT)
 
 
 def _mtime(path: Path) -> float:
