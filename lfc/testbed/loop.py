@@ -178,7 +178,8 @@ class AndesLoop:
         The run is a function of these commands and of its plant, loads, relays
         and times alone: a run whose generator sides return the same commands
         at every sample is this run
-        (:func:`lfc.testbed.grid_plant.simulate_andes_grid_table` shares it).
+        (:func:`lfc.testbed.grid_plant.simulate_andes_grid_table` shares it, and
+        :mod:`lfc.testbed.stored_runs` keeps it on disk).
     """
 
     def __init__(self, plant: AndesPlant, loads: dict, gens: list[GeneratorSide],
