@@ -38,13 +38,14 @@ def assert_same(mine, theirs) -> None:
 
 
 def test_a_stored_run_is_read_back_by_filters_that_return_its_commands_and_run_by_others(
-        design, tmp_path, monkeypatch):
+        design, tmp_path, monkeypatch, capsys):
     """A 0.01 pu load step runs ANDES once: the same call again, and the same call
     with the certified or the coupled filters (silent on it), read the stored run
     back.  Under an
     ACE bias the certified filters act: that call runs, and its run is stored
     beside the unfiltered one, so both read back next time.  Every result read
-    back equals the same call run with the store off, bit for bit; a damaged
+    back equals the same call run with the store off, bit for bit; a table reads
+    them back too, and its progress bar says so; a damaged
     file is run again, with a warning.  Runs counted by ANDES' clock file."""
     monkeypatch.setenv("LFC_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.delenv(SWITCH, raising=False)
@@ -69,6 +70,11 @@ def test_a_stored_run_is_read_back_by_filters_that_return_its_commands_and_run_b
     assert any(len(a.alarms) for a in stored[5].areas)                    # it acted
     files = sorted((tmp_path / "cache" / "andes-runs").glob("*.json"))
     assert len(files) == 3 and len({f.name.split("-")[0] for f in files}) == 2
+
+    lfc.simulate_many(CASE, calls[:4], design=design, duration=2.0, anti_windup=True,
+                      jobs=1, progress=True)
+    assert runs() == 3                              # a table reads them back too, and says so
+    assert "ANDES ran 0, read back 4" in capsys.readouterr().err
 
     monkeypatch.setenv(SWITCH, "off")
     fresh = [run(**kwargs) for kwargs in calls[1:6]]

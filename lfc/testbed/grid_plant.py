@@ -204,24 +204,24 @@ def _setup(params: MultiAreaParams, *, duration: float, attacks, loads, filters,
 
 
 def _run_stored(make: Callable[[], _Setup], key: str | None
-                ) -> tuple[MultiAreaResult, _Shared | None]:
-    """The result of the setup ``make()`` builds, and its run if it is shareable
-    (else None): a run stored under ``key`` (:mod:`lfc.testbed.stored_runs`) that
-    its generator sides replay, or run on ANDES and stored (``key`` None: run,
-    not stored)."""
+                ) -> tuple[MultiAreaResult, _Shared | None, bool]:
+    """The result of the setup ``make()`` builds, its run if it is shareable
+    (else None), and whether ANDES ran: a run stored under ``key``
+    (:mod:`lfc.testbed.stored_runs`) that its generator sides replay, or run on
+    ANDES and stored (``key`` None: run, not stored)."""
     setup = make()
     if not setup.shareable:
-        return _run(setup)[0], None
+        return _run(setup)[0], None, True
     if key is None:
-        return _run(setup)
+        return (*_run(setup), True)
     for run in stored_runs.stored(key):
         result = _replay(setup, run)
         if result is not None:
-            return result, run
+            return result, run, False
         setup = make()                  # its generator sides have moved on: fresh ones
     result, run = _run(setup)
     stored_runs.store(key, run, run.commands.tobytes())
-    return result, run
+    return result, run, True
 
 
 def _run(setup: _Setup) -> tuple[MultiAreaResult, _Shared]:
@@ -392,7 +392,8 @@ def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
     the scenario runs.  While a shared run is under way, a process that would
     otherwise wait runs one of the scenarios that wait on it, one per shared run
     (more would spend the CPU time sharing saves: measured on chapter 09's
-    Kundur load step, where a second one ran the filter that would have shared)."""
+    Kundur load step, where a second one ran the filter that would have shared).
+    The progress bar counts the scenarios ANDES ran and those read back."""
     from concurrent.futures import ProcessPoolExecutor
 
     from tqdm.auto import tqdm
@@ -413,6 +414,12 @@ def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
     speculated: set[bytes] = set()       # groups one of whose others started early
     todo = list(range(len(calls)))
     bar = tqdm(total=len(calls), unit="run", desc="simulate", disable=not progress)
+    ran = [0, 0]                         # scenarios ANDES ran, scenarios read back
+
+    def count(andes: bool) -> None:
+        ran[0 if andes else 1] += 1
+        bar.set_postfix_str(f"ANDES ran {ran[0]}, read back {ran[1]}", refresh=False)
+        bar.update()
 
     def replay_ready() -> None:
         """Every waiting scenario whose leader has finished: its result from the
@@ -423,7 +430,7 @@ def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
             if result is not None:
                 out[i] = result
                 todo.remove(i)
-                bar.update()
+                count(andes=False)
 
     def next_run() -> int | None:
         """The next scenario to run: one that waits on no run, else (rather than
@@ -441,14 +448,14 @@ def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
         todo.remove(i)
         return i
 
-    def finished(i: int, result: MultiAreaResult, run: _Shared | None) -> None:
+    def finished(i: int, result: MultiAreaResult, run: _Shared | None, andes: bool) -> None:
         out[i] = result
         if keys[i] is not None and run is not None:
             shared[keys[i]] = run
         elif keys[i] is not None:        # nothing to share: the others of its group run
             for k in [k for k in todo if keys[k] == keys[i]]:
                 keys[k] = None
-        bar.update()
+        count(andes)
 
     if jobs == 1 or len(calls) <= 1:
         while todo:
@@ -491,9 +498,9 @@ def _bound(params: MultiAreaParams, call: dict) -> dict:
 
 
 def _run_call(params: MultiAreaParams, call: dict, keep: bool
-              ) -> tuple[MultiAreaResult, _Shared | None]:
+              ) -> tuple[MultiAreaResult, _Shared | None, bool]:
     """Run a table's scenario (in a worker process); what it leaves to share if
-    ``keep`` and it is shareable."""
-    result, run = _run_stored(lambda: _setup_call(params, call),
-                              stored_runs.run_key(_bound(params, call)))
-    return result, (run if keep else None)
+    ``keep`` and it is shareable; whether ANDES ran."""
+    result, run, andes = _run_stored(lambda: _setup_call(params, call),
+                                     stored_runs.run_key(_bound(params, call)))
+    return result, (run if keep else None), andes
