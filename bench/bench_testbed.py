@@ -27,9 +27,15 @@ with the real-time factor of each and the loop's cost relative to ANDES alone;
   filters) on both grids, as one ``lfc.simulate_many`` table in one process
   (scenarios whose filters never act share one ANDES run) against one
   ``lfc.simulate`` per scenario: wall time, ANDES' CPU seconds, the ANDES runs
-  each made, and the ratio.
+  each made, and the ratio;
+* ``stored``: the same table read back from the runs stored on disk by an
+  earlier call (:mod:`lfc.testbed.stored_runs`, in a temporary cache folder)
+  against running it: wall time, ANDES' CPU seconds, the ANDES runs, the ratio.
 
-Run: python bench/bench_testbed.py [microgrid | grids | shared]   (all by default)
+Every part but ``stored`` runs with the store off (``LFC_ANDES_RUNS=off``): a
+repeated call would read its run back.
+
+Run: python bench/bench_testbed.py [microgrid | grids | shared | stored]   (all by default)
 """
 
 from __future__ import annotations
@@ -45,6 +51,7 @@ import lfc
 from lfc.testbed import (GridCase, MicrogridCase, build_grid, build_system, grid_design,
                          prepare_andes)
 from lfc.testbed.loop import CLOCK_ENV, init_tds
+from lfc.testbed.stored_runs import SWITCH
 
 DURATION = 20.0  # s simulated
 STEP = 0.005     # s, ANDES step
@@ -151,18 +158,29 @@ def grids() -> None:
                 case, design=params, duration=DURATION, loads=load, filters=certified))})
 
 
-def shared() -> None:
-    load = {0: lfc.Step(0.1, 1.0)}
+def chapter09_table(case: GridCase):
+    """Chapter 09's load step (0.1 pu in area 0 at 1 s) with its four defences as
+    the keyword arguments of one ``lfc.simulate`` each (``defences``) and the
+    ones they share (``common``)."""
     relays = lfc.RelaySettings()
+    params = grid_design(case)
+    defences = [{}, *({a: lfc.SafetyFilter(area, relays, alpha=alpha)
+                       for a, area in enumerate(params.areas)} for alpha in (3.0, 20.0)),
+                {a: "certified" for a in range(case.n_areas)}]
+    common = {"design": params, "duration": DURATION, "loads": {0: lfc.Step(0.1, 1.0)},
+              "relays": relays}
+    return defences, common
+
+
+RUNS_HEADER = f"{'':<8}{'run':<34}{'wall (s)':>9}{'ANDES (s)':>10}{'runs':>6}{'ratio':>8}"
+
+
+def shared() -> None:
     print(f"shared: chapter 09's load step, {DURATION:g} s, four defences, one process, "
           f"median of {REPEAT}")
-    print(f"{'':<8}{'run':<34}{'wall (s)':>9}{'ANDES (s)':>10}{'runs':>6}{'ratio':>8}")
+    print(RUNS_HEADER)
     for case in (GridCase.kundur(), GridCase.ieee39()):
-        params = grid_design(case)
-        defences = [{}, *({a: lfc.SafetyFilter(area, relays, alpha=alpha)
-                           for a, area in enumerate(params.areas)} for alpha in (3.0, 20.0)),
-                    {a: "certified" for a in range(case.n_areas)}]
-        common = {"design": params, "duration": DURATION, "loads": load, "relays": relays}
+        defences, common = chapter09_table(case)
         one = loop_runs(lambda: [lfc.simulate(case, filters=f, **common) for f in defences])
         table = loop_runs(lambda: lfc.simulate_many(case, [{"filters": f} for f in defences],
                                                     jobs=1, progress=False, **common))
@@ -172,12 +190,38 @@ def shared() -> None:
                   f"{one[0] / wall:>8.2f}")
 
 
+def stored() -> None:
+    print(f"stored: chapter 09's load step, {DURATION:g} s, four defences, one table in one "
+          f"process, run against read back from the stored runs, median of {REPEAT}")
+    print(RUNS_HEADER)
+    for case in (GridCase.kundur(), GridCase.ieee39()):
+        defences, common = chapter09_table(case)       # the fit read before the folder moves
+
+        def table():
+            return lfc.simulate_many(case, [{"filters": f} for f in defences], jobs=1,
+                                     progress=False, **common)
+        ran = loop_runs(table)                         # the store off (main)
+        with tempfile.TemporaryDirectory() as folder:
+            os.environ["LFC_CACHE_DIR"], os.environ[SWITCH] = folder, "on"
+            try:
+                table()                                # stores its runs
+                back = loop_runs(table)
+            finally:
+                del os.environ["LFC_CACHE_DIR"]
+                os.environ[SWITCH] = "off"
+        for name, (wall, andes, runs) in (("ANDES runs (store off)", ran),
+                                          ("read back from the store", back)):
+            print(f"{case.name:<8}{name:<34}{wall:>9.2f}{andes:>10.2f}{runs:>6}"
+                  f"{ran[0] / wall:>8.2f}")
+
+
 def main() -> None:
-    parts = {"microgrid": microgrid, "grids": grids, "shared": shared}
+    parts = {"microgrid": microgrid, "grids": grids, "shared": shared, "stored": stored}
     chosen = sys.argv[1:] or list(parts)
     unknown = [p for p in chosen if p not in parts]
     if unknown:
         raise SystemExit(f"unknown part(s) {unknown}; choose among {list(parts)}")
+    os.environ[SWITCH] = "off"      # every ANDES loop runs (stored() turns it on itself)
     prepare_andes()
     for name in chosen:
         parts[name]()
