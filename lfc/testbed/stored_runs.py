@@ -22,18 +22,17 @@ turns the store off (every call runs ANDES).  The files are pickles: keep
 
 from __future__ import annotations
 
-import base64
 import hashlib
 import io
 import os
 import pickle
 import types
-import zlib
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from lfc._files import cache_folder, content_key, prune, read_stored, write_stored
+from lfc._files import (cache_folder, content_key, pickled, prune, read_stored, unpickled,
+                        write_stored)
 
 #: bytes: the most the folder keeps (the oldest files are removed first); a
 #: 20 s run of a two-area grid at 5 ms is about 0.5 MB, of 120 s 3 MB
@@ -99,7 +98,7 @@ def stored(key: str) -> Iterator[Any]:
     for (a damaged file is left out, with a warning)."""
     folder = cache_folder() / "andes-runs"
     for path in sorted(folder.glob(f"{key}-*.json"), key=_mtime):
-        run = read_stored(path, _decode)
+        run = read_stored(path, unpickled)
         if run is not None:
             yield run
 
@@ -109,7 +108,7 @@ def store(key: str, run: Any, commands: bytes) -> None:
     command it applied): a run with the same key and commands is the same run."""
     folder = cache_folder() / "andes-runs"
     name = hashlib.sha256(commands).hexdigest()[:16]
-    write_stored(folder / f"{key}-{name}.json", run, _encode)
+    write_stored(folder / f"{key}-{name}.json", run, pickled)
     prune(folder, LIMIT)
 
 
@@ -118,16 +117,3 @@ def _mtime(path: Path) -> float:
         return path.stat().st_mtime
     except OSError:                 # another process removed it meanwhile
         return 0.0
-
-
-def _encode(run: Any) -> dict:
-    data = zlib.compress(pickle.dumps(run, protocol=5), 6)
-    return {"run": base64.b64encode(data).decode("ascii")}
-
-
-def _decode(payload: dict) -> Any:
-    try:
-        return pickle.loads(zlib.decompress(base64.b64decode(payload["run"])))
-    except (pickle.UnpicklingError, zlib.error, EOFError, AttributeError,
-            ImportError) as err:
-        raise ValueError(f"cannot read the run: {err}") from err
