@@ -13,7 +13,7 @@ import pytest
 import lfc
 from lfc.testbed import GridCase, case_design, grid_design
 from lfc.testbed.loop import CLOCK_ENV
-from lfc.testbed.stored_runs import SWITCH, run_key
+from lfc.testbed.stored_runs import SWITCH, scenario_keys
 
 CASE = GridCase.kundur()
 
@@ -91,15 +91,47 @@ def test_a_stored_run_is_read_back_by_filters_that_return_its_commands_and_run_b
     assert_same(again, stored[0])
 
 
+def test_a_run_stopped_at_its_trip_is_read_back_up_to_the_trip(design, tmp_path, monkeypatch):
+    """With ``stop_on_trip`` a run ends at its first trip (a 2 pu step on area 0's
+    command trips it at 1.37 s): stored so, a second call reads it back, equal bit
+    for bit to running it with the store off; filters that stop the trip run (their
+    commands differ before it); the same attack without ``stop_on_trip`` is another
+    key and runs to its end."""
+    monkeypatch.setenv("LFC_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.delenv(SWITCH, raising=False)
+    clock = tmp_path / "clock"
+    monkeypatch.setenv(CLOCK_ENV, str(clock))
+
+    def run(**kwargs):
+        return lfc.simulate(CASE, design=design, duration=3.0, anti_windup=True,
+                            attacks={0: {"pc": lfc.Step(2.0, 0.5)}}, **kwargs)
+
+    def runs() -> int:
+        return len(clock.read_text().split()) if clock.exists() else 0
+
+    first = run(stop_on_trip=True)
+    assert first.tripped and float(first.trace.t.iat[-1]) < 2.0 and runs() == 1
+    again = run(stop_on_trip=True)
+    assert runs() == 1
+    certified = run(stop_on_trip=True, filters={0: "certified", 1: "certified"})
+    assert runs() == 2 and not certified.tripped
+    whole = run()
+    assert runs() == 3 and float(whole.trace.t.iat[-1]) == pytest.approx(3.0)
+    monkeypatch.setenv(SWITCH, "off")
+    assert_same(again, run(stop_on_trip=True))
+    assert runs() == 4
+
+
 def test_the_key_leaves_out_the_filters_and_is_the_same_in_a_fresh_interpreter():
-    """A call's key is its arguments but ``filters`` (another filter: the same
-    key), computed the same in a fresh Python; a signal whose code the key does
-    not cover (a function or signal class of the caller's own) gives no key:
-    such a call runs, and is not stored."""
+    """A call's stored key is its arguments but ``filters`` (another filter: the
+    same key), computed the same in a fresh Python; a signal whose code the key
+    does not cover (a function or signal class of the caller's own) gives no
+    stored key: such a call runs, and is not stored, though it may still share a
+    run within one table where it pickles; a call over a network has neither."""
     source = textwrap.dedent("""
         import lfc
         from lfc.testbed import GridCase, case_design
-        from lfc.testbed.stored_runs import run_key
+        from lfc.testbed.stored_runs import scenario_keys
         CASE = GridCase.kundur()
         CALL = {"params": case_design(CASE), "duration": 2.0, "case": CASE,
                 "loads": {1: lfc.Step(-0.01, 0.5)},
@@ -109,31 +141,35 @@ def test_the_key_leaves_out_the_filters_and_is_the_same_in_a_fresh_interpreter()
     here: dict = {}
     exec(source, here)
     call = here["CALL"]
-    key = run_key(call)
-    assert len(key) == 64
-    assert run_key({**call, "filters": {0: "certified"}}) == key
-    assert run_key({**call, "seed": 4}) != key
-    fresh = subprocess.run([sys.executable, "-c", source + "print(run_key(CALL))"],
+    share, key = scenario_keys(call)
+    assert len(key) == 64 and isinstance(share, bytes)
+    assert scenario_keys({**call, "filters": {0: "certified"}}) == (share, key)
+    assert scenario_keys({**call, "seed": 4})[1] != key
+    fresh = subprocess.run([sys.executable, "-c", source + "print(scenario_keys(CALL)[1])"],
                            capture_output=True, text=True, check=True)
     assert fresh.stdout.strip() == key
 
     def own(t):
         return 0.0 * t
 
-    assert run_key({**call, "loads": {1: own}}) is None
-    assert run_key({**call, "loads": {1: lambda t: 0.0 * t}}) is None
-    assert run_key({**call, "loads": {1: MyStep(-0.01, 0.5)}}) is None
-    assert run_key({**call, "params": case_design(CASE)}) == key
+    assert scenario_keys({**call, "loads": {1: own}}) == (None, None)      # does not pickle
+    assert scenario_keys({**call, "loads": {1: lambda t: 0.0 * t}}) == (None, None)
+    mine = scenario_keys({**call, "loads": {1: MyStep(-0.01, 0.5)}})
+    assert mine[0] is not None and mine[1] is None       # shares in a table, never stored
+    assert scenario_keys({**call, "network": object()}) == (None, None)
+    assert scenario_keys({**call, "params": case_design(CASE)})[1] == key
 
 
 def test_the_switch_is_on_or_off_and_anything_else_is_refused(monkeypatch):
-    """``LFC_ANDES_RUNS=off`` gives no key (every call runs); ``on`` or unset, a
-    key; a typo is refused, naming the variable, rather than read as on."""
+    """``LFC_ANDES_RUNS=off`` gives no stored key (every call runs; a table still
+    shares); ``on`` or unset, a key; a typo is refused, naming the variable,
+    rather than read as on."""
     call = {"params": case_design(CASE), "duration": 1.0}
     monkeypatch.setenv(SWITCH, "off")
-    assert run_key(call) is None
+    share, key = scenario_keys(call)
+    assert share is not None and key is None
     monkeypatch.setenv(SWITCH, " ON ")
-    assert run_key(call) is not None
+    assert scenario_keys(call)[1] is not None
     monkeypatch.setenv(SWITCH, "of")
     with pytest.raises(ValueError, match="LFC_ANDES_RUNS must be 'on' or 'off'.*'of'"):
-        run_key(call)
+        scenario_keys(call)

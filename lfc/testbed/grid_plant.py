@@ -41,7 +41,6 @@ Sn_k / Σ Sn``.  The relays of each area read its meter bus.
 from __future__ import annotations
 
 import inspect
-import pickle
 import struct
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -110,7 +109,7 @@ def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
         If ANDES does not converge (with the time and ANDES' reason).
     """
     call = locals()                         # the arguments, with their defaults
-    return _run_stored(lambda: _setup(**call), stored_runs.run_key(call))[0]
+    return _run_stored(lambda: _setup(**call), stored_runs.scenario_keys(call)[1])[0]
 
 
 @dataclass
@@ -252,9 +251,9 @@ def _replay(setup: _Setup, run: _Shared) -> MultiAreaResult | None:
     """``setup``'s result without running ANDES, if it is ``run``: its generator
     sides read ``run``'s control samples and return the same commands, bit for
     bit, at every one (then ANDES would integrate the same run: the plant, its
-    loads, relays and times are the same, :func:`_share_key`); None at the first
-    command that differs (a filter that acts), or for a setup that is not
-    shareable."""
+    loads, relays and times are the same,
+    :func:`~lfc.testbed.stored_runs.scenario_keys`); None at the first command
+    that differs (a filter that acts), or for a setup that is not shareable."""
     if not setup.shareable or len(run.read) != len(setup.tc) and not setup.stop_on_trip:
         return None
     sides = GeneratorSides(setup.gens)
@@ -268,20 +267,6 @@ def _replay(setup: _Setup, run: _Shared) -> MultiAreaResult | None:
 def _same_float(a: float, b: float) -> bool:
     """``a`` and ``b`` are the same float, bit for bit (0.0 is not -0.0)."""
     return struct.pack("<d", a) == struct.pack("<d", b)
-
-
-def _share_key(call: dict) -> bytes | None:
-    """Scenarios of one table with equal keys differ in their ``filters`` alone: the
-    plant, its loads, relays, times, attacks and noise are the same (equal
-    pickles); None for one that shares with none (a network, or arguments that
-    do not pickle)."""
-    rest = {k: v for k, v in sorted(call.items()) if k != "filters"}
-    if rest.get("network") is not None:
-        return None
-    try:
-        return pickle.dumps(rest, protocol=5)
-    except (pickle.PicklingError, TypeError, AttributeError):
-        return None
 
 
 class GridPlant:
@@ -404,7 +389,9 @@ def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
                                                            for s in scenarios):
         raise ValueError(f"scenarios must be a list of dicts, got {scenarios!r}")
     calls = [{**common, **s} for s in scenarios]
-    keys = [_share_key(kw) for kw in calls]
+    # each scenario's key to share a run in this table, and to read one back from disk
+    keys, store_keys = map(list, zip(*(stored_runs.scenario_keys(_bound(params, kw))
+                                       for kw in calls)))
     leader = {}                          # a group's key -> the scenario that runs for it
     for i in sorted(range(len(calls)), key=lambda i: (bool(calls[i].get("filters")), i)):
         if keys[i] is not None:
@@ -462,7 +449,7 @@ def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
             replay_ready()
             if todo:
                 i = next_run()
-                finished(i, *_run_call(params, calls[i], keys[i] is not None))
+                finished(i, *_run_call(params, calls[i], store_keys[i], keys[i] is not None))
     else:
         from concurrent.futures import FIRST_COMPLETED, wait
 
@@ -475,7 +462,8 @@ def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
                     i = next_run()
                     if i is None:
                         break
-                    running[pool.submit(_run_call, params, calls[i], keys[i] is not None)] = i
+                    running[pool.submit(_run_call, params, calls[i], store_keys[i],
+                                         keys[i] is not None)] = i
                 done, _ = wait(running, timeout=POLL, return_when=FIRST_COMPLETED)
                 for future in done:
                     finished(running.pop(future), *future.result())
@@ -497,10 +485,10 @@ def _bound(params: MultiAreaParams, call: dict) -> dict:
     return bound.arguments
 
 
-def _run_call(params: MultiAreaParams, call: dict, keep: bool
+def _run_call(params: MultiAreaParams, call: dict, key: str | None, keep: bool
               ) -> tuple[MultiAreaResult, _Shared | None, bool]:
-    """Run a table's scenario (in a worker process); what it leaves to share if
-    ``keep`` and it is shareable; whether ANDES ran."""
-    result, run, andes = _run_stored(lambda: _setup_call(params, call),
-                                     stored_runs.run_key(_bound(params, call)))
+    """Run a table's scenario (in a worker process), reading back a run stored
+    under ``key``; what it leaves to share if ``keep`` and it is shareable;
+    whether ANDES ran."""
+    result, run, andes = _run_stored(lambda: _setup_call(params, call), key)
     return result, (run if keep else None), andes

@@ -4,7 +4,7 @@ A grid run on ANDES is a function of its plant-side inputs (the case, loads,
 relays, times) and of the commands its generator sides return at every control
 sample (:attr:`lfc.testbed.loop.AndesLoop.samples`).  A finished run is stored
 under a key of every argument of its :func:`~lfc.testbed.grid_plant.simulate_andes_grid`
-call but its ``filters`` (:func:`run_key`); a later call with the same key
+call but its ``filters`` (:func:`scenario_keys`); a later call with the same key
 replays each stored run's samples through its own generator sides, and where
 they return the same commands, bit for bit, at every sample, its result is
 that run with its own generator sides' records: equal to running it, without
@@ -61,35 +61,50 @@ def enabled() -> bool:
     return value != "off"
 
 
-def run_key(call: dict[str, Any]) -> str | None:
-    """The key under which a call's runs are stored: its arguments but
-    ``filters``, pickled, with :func:`lfc._files.content_key`; None when the store
-    is off, or for arguments it cannot key: a function or class from outside the
-    package and numpy (a notebook's own signal: its code is not in the key, and
-    an edited one would find the old run), or anything that does not pickle."""
-    if not enabled():
-        return None
-    rest = {k: v for k, v in sorted(call.items()) if k != "filters"}
+def scenario_keys(call: dict[str, Any]) -> tuple[bytes | None, str | None]:
+    """A call's two keys, from one pickle of its arguments but ``filters``.
+
+    Returns
+    -------
+    share : bytes or None
+        The pickle: calls of one process with equal ones differ in their filters
+        alone, and share a run (:func:`~lfc.testbed.grid_plant.simulate_andes_grid_table`).
+        None for a call that shares with none: one over a ``network`` (its link
+        has a state of its own), or one whose arguments do not pickle.
+    store : str or None
+        The key its runs are stored under: the pickle with
+        :func:`lfc._files.content_key`.  None where ``share`` is, when the store
+        is off (:func:`enabled`), or when the pickle names a function or class
+        from outside the package, numpy and pandas (a notebook's own signal: its
+        code is not in the key, and an edited one would find the old run).
+    """
+    on = enabled()                      # a typo in the switch is refused first
+    if call.get("network") is not None:
+        return None, None
     buffer = io.BytesIO()
+    pickler = _KeyPickler(buffer)
     try:
-        _KeyPickler(buffer).dump(rest)
+        pickler.dump({k: v for k, v in sorted(call.items()) if k != "filters"})
     except (pickle.PicklingError, TypeError, AttributeError):
-        return None
-    return content_key("andes-run", buffer.getvalue())
+        return None, None
+    share = buffer.getvalue()
+    covered = on and not pickler.outside
+    return share, (content_key("andes-run", share) if covered else None)
 
 
 class _KeyPickler(pickle.Pickler):
-    """A pickler that refuses functions and classes from outside ``_TRUSTED``."""
+    """A pickler that notes (in ``outside``) whether it named a function or class
+    from outside ``_TRUSTED``."""
 
     def __init__(self, file: io.BytesIO) -> None:
         super().__init__(file, protocol=5)
+        self.outside = False
 
     def reducer_override(self, obj: object) -> object:
         if isinstance(obj, (type, types.FunctionType, types.BuiltinFunctionType,
                             types.MethodType)):
             module = getattr(obj, "__module__", None) or ""
-            if module.split(".")[0] not in _TRUSTED:
-                raise pickle.PicklingError(f"{obj!r} is from {module or 'nowhere'}")
+            self.outside |= module.split(".")[0] not in _TRUSTED
         return NotImplemented
 
 
