@@ -199,7 +199,8 @@ def test_behind_soft_and_stiff_ties_the_defaults_build_and_ride_the_battery():
     about 1e-9) whose inverse was not invariant in floating point, so the
     defaults did not build.  With ``Q``'s smallest eigenvalue floored
     (``Q_FLOORS``, the first floor that gives an invariant ellipsoid: 1e-6 and
-    1e-5) both build (``shaped_terminal`` checks the invariance) and ride the battery at one
+    1e-5 on Intel; on an AMD EPYC none does at T = 50 pu, and the solver's ``Q``
+    moved inside its inequality does: the next test) both build (``shaped_terminal`` checks the invariance) and ride the battery at one
     instant (anti-windup): 0 trips, 0 ``outside`` (the full battery, 80 runs
     each, measured 0 / 0 once).  The contract builds there too."""
     from lfc.filters.contract import contract_design
@@ -209,6 +210,31 @@ def test_behind_soft_and_stiff_ties_the_defaults_build_and_ride_the_battery():
         runs, tripped, outside = battery(grid, "coupled", instants=(3.37,), anti_windup=(True,))
         assert runs == 20 and (tripped, outside) == (0, 0), T
         assert contract_design(grid, RELAYS).half_width.min() > 0.1
+
+
+def test_an_ellipsoid_the_solver_left_just_outside_invariance_is_moved_inside():
+    """Found on an AMD EPYC (2026-11-29): behind T = 50 pu the solver's ``Q`` met
+    ``A Q + Q A' <= 0`` only to its tolerance (about 5e-7 too high) at every floor,
+    where Intel's BLAS kernels gave one that passed, so the defaults did not build
+    there.  ``_made_invariant`` moves such a ``Q`` inside: given one whose
+    inequality is off by 1e-6 (a Lyapunov solution pushed out along its top
+    eigenvector), the result makes ``A Q + Q A'`` negative definite and keeps
+    every output's reach within its room."""
+    from lfc.filters.coupled import _made_invariant, output_rows
+    from scipy.linalg import solve_continuous_lyapunov
+    A, _, _, _ = reduced_model(MultiAreaParams.two_area(T=50.0))
+    n = len(A)
+    C = output_rows(2, n)
+    Q = solve_continuous_lyapunov(A, -np.eye(n))            # A Q + Q A' = -I
+    v = np.eye(n)[0]
+    # A bad + bad A' = -I + (1 + 1e-6) v v': its largest eigenvalue is 1e-6
+    bad = Q + solve_continuous_lyapunov(A, (1.0 + 1e-6) * np.outer(v, v))
+    assert np.max(np.linalg.eigvalsh(A @ bad + bad @ A.T)) == pytest.approx(1e-6, rel=1e-3)
+    room = 1.01 * np.sqrt(np.einsum("ij,jk,ik->i", C, bad, C))
+    good = _made_invariant(A, C, bad, room)
+    assert np.max(np.linalg.eigvalsh(A @ good + good @ A.T)) < 0
+    assert np.all(np.einsum("ij,jk,ik->i", C, good, C) <= room ** 2 * (1 + 1e-12))
+    assert np.min(np.linalg.eigvalsh(good)) > 0
 
 
 def test_the_shaped_terminal_set_builds_where_the_lyapunov_one_leaves_no_room():
