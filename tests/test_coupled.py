@@ -568,7 +568,9 @@ def test_finding_on_andes_ieee39_the_coupled_filters_leave_their_certificate():
     assert all(int(a.alarms.outside.sum()) > 100 for a in r.areas)
 
 
-@pytest.mark.long(80)
+# Not marked long (it takes about 190 s of CPU): started first, it waited 159 s, idle,
+# for the IEEE 39-bus fit the chapter 09 test computes on the other worker (measured
+# with a per-test CPU record of the suite); in file order the fit is done by then.
 def test_on_andes_ieee39_the_red_teams_winner_trips_the_coupled_filters_only_beyond_the_range():
     """Measured on ANDES (the coupled certificate is the fitted model's, not
     ANDES'): the red team's coordinated search (a square wave on both areas'

@@ -94,6 +94,11 @@ def test_multi_area_notebook_shows_its_figures_and_its_claims_hold(tmp_path):
 # reproduce runs both.  The other α was a quarter of these tests' ANDES runs (~90 s
 # of CPU each), and its only claim is that AGC restores the load step with it.
 ONE_ALPHA = [3.0]
+# ... and in one process (jobs = 1): pytest-xdist keeps every core busy already, and a
+# second process would only run ahead a scenario that then shares the first one's run
+# (the load step: the filters never act), about 110 s of ANDES' CPU on the IEEE 39-bus
+# system spent for nothing here (lfc.testbed.grid_plant.simulate_andes_grid_table).
+ONE_PROCESS = 1
 
 
 @pytest.mark.long(220)
@@ -102,7 +107,8 @@ def test_multi_area_notebook_on_the_kundur_testbed(tmp_path):
     every attack trips without filters, the certified filters stop them all;
     that they flag ``outside`` there (the plant is not their model) is a
     documented deviation, which fails the run if it stops occurring."""
-    run_chapter("multiarea", tmp_path, "testbed", paper_alphas=ONE_ALPHA)
+    run_chapter("multiarea", tmp_path, "testbed", paper_alphas=ONE_ALPHA,
+                jobs=ONE_PROCESS)
     claims = json.loads((tmp_path / "res" / "claims.json").read_text())
     deviations = json.loads((tmp_path / "res" / "deviations.json").read_text())
     assert len(claims) == 12
@@ -135,7 +141,8 @@ def test_multi_area_notebook_on_the_ieee39_testbed(tmp_path):
     sinusoids (up to 1.7 ``load_bound``: commands beyond where the model
     describes ANDES).  Assumption (a) does not hold (ANDES is not the model), so
     the result is measured, not proven."""
-    run_chapter("multiarea", tmp_path, "ieee39", paper_alphas=ONE_ALPHA)
+    run_chapter("multiarea", tmp_path, "ieee39", paper_alphas=ONE_ALPHA,
+                jobs=ONE_PROCESS)
     claims = json.loads((tmp_path / "res" / "claims.json").read_text())
     assert len(claims) == 12 and all(claims.values())
     assert json.loads((tmp_path / "res" / "deviations.json").read_text()) == {}
