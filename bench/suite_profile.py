@@ -11,7 +11,9 @@ Run from the repository's root, then summarize::
 
 The records go to ``$LFC_SUITE_PROFILE`` (default ``build/suite-profile``), one
 JSON line per test in ``tests-<worker>.jsonl``; a test whose wall time exceeds
-its CPU time by much waited (on a lock another worker holds, for example).
+its CPU time by much waited (on a lock another worker holds, for example).  A
+test that points ``LFC_ANDES_CLOCK`` at a file of its own (to count its runs)
+shows no ANDES seconds here: its runs report there.
 """
 
 from __future__ import annotations
