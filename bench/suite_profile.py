@@ -28,6 +28,9 @@ from pathlib import Path
 
 import pytest
 
+from lfc.repro.runner import andes_seconds
+from lfc.testbed.loop import CLOCK_ENV
+
 OUT = Path(os.environ.get("LFC_SUITE_PROFILE", "build/suite-profile"))
 WORKER = os.environ.get("PYTEST_XDIST_WORKER", "main")
 CLOCK = OUT / f"clock-{WORKER}"
@@ -36,11 +39,7 @@ CLOCK = OUT / f"clock-{WORKER}"
 def pytest_configure(config) -> None:
     """Every ANDES run of this worker, its kernels and pools reports to its clock."""
     OUT.mkdir(parents=True, exist_ok=True)
-    os.environ["LFC_ANDES_CLOCK"] = str(CLOCK.resolve())
-
-
-def _andes_seconds() -> float:
-    return sum(map(float, CLOCK.read_text().split())) if CLOCK.exists() else 0.0
+    os.environ[CLOCK_ENV] = str(CLOCK.resolve())
 
 
 def _cpu(who: int) -> float:
@@ -51,12 +50,12 @@ def _cpu(who: int) -> float:
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_protocol(item, nextitem):
     own, children = _cpu(resource.RUSAGE_SELF), _cpu(resource.RUSAGE_CHILDREN)
-    start, andes = time.time(), _andes_seconds()
+    start, andes = time.time(), andes_seconds(CLOCK)
     yield
     record = {"id": item.nodeid, "worker": WORKER, "start": start,
               "wall": time.time() - start, "cpu": _cpu(resource.RUSAGE_SELF) - own,
               "children": _cpu(resource.RUSAGE_CHILDREN) - children,
-              "andes": _andes_seconds() - andes}
+              "andes": andes_seconds(CLOCK) - andes}
     with open(OUT / f"tests-{WORKER}.jsonl", "a") as f:
         f.write(json.dumps(record) + "\n")
 
