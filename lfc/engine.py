@@ -39,7 +39,7 @@ from lfc.filters.coupled import METHOD_ID as COUPLED
 from lfc.filters.coupled import CoupledFilter
 from lfc.filters.coupled import N_R as N_R_COUPLED
 from lfc.filters.coupled import decide as decide_coupled
-from lfc.filters.coupled import grid_estimate
+from lfc.filters.coupled import grid_estimate, rows_scratch
 from lfc.filters.dispatch import decide
 from lfc.model import LFCParams
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams, as_grid, discretize_grid
@@ -104,10 +104,11 @@ def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise0: flo
     differs from the incoming one in the direction the increment would widen
     (conditional integration): it cannot wind up behind a held command.
     The coupled certificate (``method`` ``COUPLED``, :mod:`lfc.filters.coupled`)
-    reads the whole grid instead: ``grid`` is ``(area, x, u, p)``, this area's
-    index, the grid's state, every area's latest command and every area's load
-    (one argument: a call with more than 30 is packed by Python in a way numba
-    cannot inline).
+    reads the whole grid instead: ``grid`` is ``(area, x, u, p, ym, xe, ks,
+    sums)``, this area's index, the grid's state, every area's latest command and
+    every area's load, then the grid Kalman filter's arrays (:func:`_run`) and
+    the filter's scratch (one argument: a call with more than 30 is packed by
+    Python in a way numba cannot inline).
     ``est`` >= 0 selects the Kalman filter ``(ka, kb, kc, kg)`` with state
     ``kstate`` (prior, then posterior; 2 x N_KF); ``method`` < 0 runs without a
     filter.
@@ -130,7 +131,7 @@ def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise0: flo
     wref = _signal(WREF, kinds, params, offsets, st, sv, t, j)
     nan = math.nan
     if method == COUPLED:
-        area, grid_x, grid_u, grid_p, ym, xe, ks = grid
+        area, grid_x, grid_u, grid_p, ym, xe, ks, sums = grid
         if est >= 0:       # the grid's Kalman filter (state ks, area 0's), stepped by area 0
             if area == 0:
                 grid_p = grid_estimate(fd, ka, kb, kc, kg, ks, ym[:kc.shape[0]],
@@ -141,7 +142,7 @@ def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise0: flo
             for r in range(5):
                 x_hat[r] = xe[N_AREA_STATES * area + r]
         u, flags, h0, h1, m0, m1, q0, q1, d0, d1 = decide_coupled(fd, grid_x, grid_u, grid_p,
-                                                                  area, u_ref, mem)
+                                                                  area, u_ref, mem, sums)
         p_hat = grid_p[area]
     elif method >= 0:
         u, flags, h0, h1, m0, m1, q0, q1, d0, d1 = decide(method, fd, x_hat, u_ref, p_hat, mem)
@@ -223,7 +224,7 @@ def _run(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarray,
          trace_trips: np.ndarray, ends: np.ndarray, x: np.ndarray, xn: np.ndarray,
          u: np.ndarray, pl: np.ndarray, x_hat: np.ndarray, mem: np.ndarray,
          gstate: np.ndarray, kstate: np.ndarray, start: np.ndarray, due: np.ndarray,
-         ym: np.ndarray, xe: np.ndarray) -> None:
+         ym: np.ndarray, xe: np.ndarray, sums: np.ndarray) -> None:
     """Advance every scenario of one grid from equilibrium for ``n_steps`` plant steps.
 
     The grid has ``n_a = inc.shape[0]`` areas and ``inc.shape[1]`` tie-lines
@@ -241,7 +242,8 @@ def _run(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarray,
     are scratch space: the kernel allocates nothing (``ym``, 6 n_a: the grid's
     measurements ``dw_meas, rocof_meas`` of each area and each export, for a
     coupled filter's grid Kalman filter, then its innovations; ``xe``, n_s: the
-    estimate of the full state).
+    estimate of the full state; ``sums``: a coupled filter's scratch,
+    :func:`lfc.filters.coupled.rows_scratch` entries).
 
     One area of five states (the single-area model) takes a path that keeps the
     state in registers for a control period; it computes the same sums in the
@@ -319,7 +321,7 @@ def _run(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarray,
                     noise[q_i, j, 1] if q_i >= 0 else 0.0, kinds_a, params_a, offsets_a, st,
                     sv, k_freq[a], e_i, ka_a, kb_a, kc_a, kg_a, ks_a, ff == 1, method, fd,
                     mem_a, gs_a, x_hat, ctrl_a, tie + ace, k_tie[a], aw,
-                    (a, x, u, pl, ym, xe, ks_0))
+                    (a, x, u, pl, ym, xe, ks_0, sums))
                 u[a] = ua
                 met[a, 4] += (flags & ACTIVE) != 0
                 met[a, 5] += (flags & ALARM_BITS) != 0
@@ -547,7 +549,7 @@ def _run_lanes(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarr
                     offsets[i, 0], st, sv, k_freq, e_i, ka_i, kb_i, kc_i, kg_i, kstate[l],
                     index[i, 0, 3] == 1, method, fd, mem[l], gstate[l], x_hat, ctrl,
                     0.0 + ace, k_tie, index[i, 0, 4] == 1,
-                    (0, xs, scratch, scratch, scratch, scratch, kstate[l]))
+                    (0, xs, scratch, scratch, scratch, scratch, kstate[l], scratch))
                 z[Z_U * L + l] = ua
                 met = metrics[i, 0]
                 met[4] += (flags & ACTIVE) != 0
@@ -905,7 +907,10 @@ class Scenarios:
                  np.zeros(n_a), np.zeros(n_a), np.zeros(N_AREA_STATES),
                  np.zeros((n_a, MEMORY)), np.zeros((n_a, 1)),
                  np.zeros((n_a, 2, ka.shape[1])), np.zeros((n_a, 3)), np.zeros((n_a, 3)),
-                 np.zeros(6 * n_a), np.zeros(n_s))
+                 np.zeros(6 * n_a), np.zeros(n_s),
+                 np.zeros(max([rows_scratch(fdata[foff[f]:foff[f + 1]])
+                               for f in range(len(methods)) if methods[f] == COUPLED],
+                              default=0)))
             metrics[rest], ends[rest] = m_rest, e_rest
         final = metrics[:, :, METRICS.index("final_abs_dw_meas")]
         bad = np.flatnonzero(~np.all(np.isfinite(final), axis=1))
@@ -1083,6 +1088,7 @@ class GeneratorSide:
         self.anti_windup = check_flag("anti_windup", anti_windup)
         self.method = scc.method_id if scc is not None else -1
         self.data = scc.data if scc is not None else np.zeros(0)
+        self.sums = np.zeros(rows_scratch(self.data) if self.method == COUPLED else 0)
         self.kstate, self.gstate = np.zeros((2, N_KF)), np.zeros(1)
         self.memory = np.zeros(MEMORY)
         self.x_hat = np.zeros(5)
@@ -1128,11 +1134,13 @@ class GeneratorSide:
                                    self.x_hat, self.ctrl, tie, self.k_tie_period,
                                    self.anti_windup,
                                    (0, self.x_hat, self.memory[:0], self.memory[:0],
-                                    self.memory[:0], self.memory[:0], self.kstate)
+                                    self.memory[:0], self.memory[:0], self.kstate,
+                                    self.memory[:0])
                                    if grid is None else
                                    (int(grid[0]), *(np.ascontiguousarray(v, float)
                                                     for v in grid[1:4]),
                                     *(grid[4:] if len(grid) == 7 else
-                                      (self.memory[:0], self.memory[:0], self.kstate))))
+                                      (self.memory[:0], self.memory[:0], self.kstate)),
+                                    self.sums))
         self.n_done = j + 1
         return u
