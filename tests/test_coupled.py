@@ -8,15 +8,20 @@ trip 23 of 160 runs) is rerun with it."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
+import math
 
+import numba
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import lfc
 from lfc import MultiAreaParams
 from lfc.filters.base import INVALID, OUTSIDE
-from lfc.filters.coupled import CoupledFilter, CoupledOptions, reduced_model
+from lfc.filters.coupled import CoupledFilter, CoupledOptions, reduced_model, row_intervals
 from lfc.simulate_multiarea import simulate_grid_linear
 from test_coupled_baseline import INSTANTS, STEP, attacks, tally
 
@@ -470,6 +475,66 @@ def test_a_call_never_raises_and_says_why():
         filt.filter(x, u, p, 2, 0.0, mem)
     with pytest.raises(ValueError, match="recheck_bound"):
         CoupledOptions(load_bound=0.0)
+
+
+def intervals_row_by_row(rows: np.ndarray, n_s: int, x: np.ndarray, u: np.ndarray,
+                         p: np.ndarray, k: int) -> tuple:
+    """``lfc.filters.coupled.row_intervals`` written out in Python, one
+    row of ``rows`` (bound new, bound held, the state's, the commands' and the
+    loads' gains) after another: the specification the compiled pass must equal."""
+    n_a, inf = len(u), math.inf
+    lo_f, hi_f, lo_r, hi_r, lo_h, hi_h = -inf, inf, -inf, inf, -inf, inf
+    for r, row in enumerate(rows.tolist()):
+        s = 0.0
+        for c in range(n_s):
+            s += row[2 + c] * float(x[c])
+        for j in range(n_a):
+            s += row[2 + n_s + j] * float(u[j]) + row[2 + n_s + n_a + j] * float(p[j])
+        h = row[2 + n_s + k]
+        s -= h * float(u[k])
+        bn, bh = row[0], row[1]
+        if h != 0.0:
+            a1, a2, c1, c2 = (-bn - s) / h, (bn - s) / h, (-bh - s) / h, (bh - s) / h
+            lo_n, hi_n, lo_hh, hi_hh = min(a1, a2), max(a1, a2), min(c1, c2), max(c1, c2)
+        else:
+            lo_n, hi_n = (-inf, inf) if abs(s) <= bn else (inf, -inf)
+            lo_hh, hi_hh = (-inf, inf) if abs(s) <= bh else (inf, -inf)
+        if r % 2 == 0:
+            lo_f, hi_f = max(lo_f, lo_n), min(hi_f, hi_n)
+        else:
+            lo_r, hi_r = max(lo_r, lo_n), min(hi_r, hi_n)
+        lo_h, hi_h = max(lo_h, lo_hh), min(hi_h, hi_hh)
+    return lo_f, hi_f, lo_r, hi_r, lo_h, hi_h
+
+
+@functools.lru_cache(maxsize=None)
+def certificate(name: str) -> tuple:
+    """``(grid, its coupled certificate at the defaults)`` for a preset's name."""
+    grid = {"two-area": MultiAreaParams.two_area, "three-area": lambda: THREE}[name]()
+    return grid, CoupledFilter(grid, RELAYS).cert
+
+
+@numba.njit
+def _columns(fd, x, u, p, k, sums):
+    return row_intervals(fd, x, u, p, k, sums)
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), scale=st.floats(-6.0, 0.5), grid=st.sampled_from(
+    ["two-area", "three-area"]))
+def test_summing_the_rows_column_by_column_equals_row_by_row_bit_for_bit(seed, scale, grid):
+    """The filter sums all its rows at once, one column after another (SIMD lanes);
+    its six intervals equal, bit for bit, those of one row after another (states
+    from 1e-6 to 3 pu, commands to about 1 pu, loads to 0.15 pu, every area)."""
+    params, cert = certificate(grid)
+    rng = np.random.default_rng(seed)
+    x = rng.normal(size=params.n_states) * 10.0 ** scale
+    u, p = rng.normal(size=params.n_areas) * 0.3, rng.normal(size=params.n_areas) * 0.05
+    sums = np.full(cert.n_rows, np.nan)           # scratch: whatever it held is overwritten
+    for k in range(params.n_areas):
+        got = np.array(_columns(cert.data, x, u, p, k, sums))
+        want = np.array(intervals_row_by_row(cert.rows, params.n_states, x, u, p, k))
+        assert got.tobytes() == want.tobytes(), (k, got, want)
 
 
 @pytest.mark.parametrize("kind", ["coupled", "contract"])

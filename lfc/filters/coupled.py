@@ -583,7 +583,7 @@ class CoupledSet:
                    0 if cov is None else len(cov), 0)
         self.rows, self.n_rows = rows, n_rows
         # the rows column by column (row r's column c at HEAD + c n_rows + r): decide
-        # sums every row at once, one column after another (_intervals)
+        # sums every row at once, one column after another (row_intervals)
         body = [head, rows.T.ravel(), dw_u, dw_p, (K.T @ Eh @ R).ravel(),
                 (-K.T @ Eh @ qu).ravel(), (-K.T @ Eh @ ql).ravel()]
         head[LIFT] = sum(len(b) for b in body)
@@ -805,29 +805,20 @@ def _valid(x: np.ndarray, u: np.ndarray, p: np.ndarray, u_ref: float) -> bool:
 
 
 @inline
-def _intervals(fd: np.ndarray, x: np.ndarray, u: np.ndarray, p: np.ndarray, k: int,
-               sums: np.ndarray) -> tuple:
-    """Area ``k``'s certified intervals for its command with the others at ``u``:
-    ``(lo_f, hi_f, lo_r, hi_r, lo_held, hi_held)`` (pu; empty where ``lo > hi``),
-    the first four for a new command (frequency and ROCOF rows apart, the
-    equilibrium and ellipsoid in both), the last pair the held level.  ``sums``
-    (at least n_rows) is scratch: each row's output, summed for all rows at once
-    one column after another, so that LLVM runs the rows in SIMD lanes; each
-    row's sum takes its terms in the same order as one row at a time would
-    (the state's, then each area's command and load), so it is the same bit for
-    bit (measured in the engine on a 2-core AMD EPYC: 16.7 against 23.6 µs per
-    call on the two-area preset, 186 against 268 µs on a ring of 6 areas, than
-    row after row)."""
+def row_intervals(fd: np.ndarray, x: np.ndarray, u: np.ndarray, p: np.ndarray, k: int,
+                  sums: np.ndarray) -> tuple:
+    """The rows' part of :func:`_intervals`: ``(lo_f, hi_f, lo_r, hi_r, lo_held,
+    hi_held)`` over the frequency rows (even), the ROCOF rows (odd), and all rows
+    at the held level.  ``sums`` (at least n_rows) is scratch: each row's output,
+    summed for all rows at once one column after another (the rows are stored
+    column by column), so that LLVM runs the rows in SIMD lanes; each row's sum
+    takes its terms in the same order as one row at a time would (the state's,
+    then each area's command and load), so the intervals are the same bit for bit
+    (``tests/test_coupled.py``; measured in the engine on a 2-core AMD EPYC: 16.7
+    against 23.6 µs per call on the two-area preset, 186 against 268 µs on a ring
+    of 6 areas, than row after row; ``bench/bench_coupled.py --rows``)."""
     inf = np.inf
-    n_s, n_a, n_r, n_rows = int(fd[N_S]), int(fd[N_A]), int(fd[N_R]), int(fd[N_ROWS])
-    lo_f, hi_f, lo_r, hi_r, lo_h, hi_h = -inf, inf, -inf, inf, -inf, inf
-    new_ok, held_ok = True, True
-    for a in range(n_a):          # the current outputs: room for the first interval
-        dw, rc = abs(x[N_AREA_STATES * a + DW]), abs(x[N_AREA_STATES * a + ROCOF])
-        new_ok = new_ok and dw <= fd[Y0_F_NEW] and rc <= fd[Y0_R_NEW]
-        held_ok = held_ok and dw <= fd[Y0_F_HELD] and rc <= fd[Y0_R_HELD]
-    width = 2 + n_s + 2 * n_a
-    u_k = u[k]
+    n_s, n_a, n_rows = int(fd[N_S]), int(fd[N_A]), int(fd[N_ROWS])
     col = HEAD + 2 * n_rows           # the rows' columns: bound new, bound held, then these
     for r in range(n_rows):
         sums[r] = 0.0
@@ -840,9 +831,10 @@ def _intervals(fd: np.ndarray, x: np.ndarray, u: np.ndarray, p: np.ndarray, k: i
         ou, op = col + (n_s + j) * n_rows, col + (n_s + n_a + j) * n_rows
         for r in range(n_rows):
             sums[r] += fd[ou + r] * uj + fd[op + r] * pj
-    hk = col + (n_s + k) * n_rows     # area k's command's column
+    u_k, hk = u[k], col + (n_s + k) * n_rows     # area k's command, its column
     for r in range(n_rows):
         sums[r] -= fd[hk + r] * u_k   # the rest of the output, without area k's command
+    lo_f, hi_f, lo_r, hi_r, lo_h, hi_h = -inf, inf, -inf, inf, -inf, inf
     for parity in range(2):           # the frequency rows (even), then ROCOF's (odd)
         lo, hi = -inf, inf
         for r in range(parity, n_rows, 2):
@@ -860,6 +852,26 @@ def _intervals(fd: np.ndarray, x: np.ndarray, u: np.ndarray, p: np.ndarray, k: i
             lo_f, hi_f = lo, hi
         else:
             lo_r, hi_r = lo, hi
+    return lo_f, hi_f, lo_r, hi_r, lo_h, hi_h
+
+
+@inline
+def _intervals(fd: np.ndarray, x: np.ndarray, u: np.ndarray, p: np.ndarray, k: int,
+               sums: np.ndarray) -> tuple:
+    """Area ``k``'s certified intervals for its command with the others at ``u``:
+    ``(lo_f, hi_f, lo_r, hi_r, lo_held, hi_held)`` (pu; empty where ``lo > hi``),
+    the first four for a new command (frequency and ROCOF rows apart, the
+    equilibrium and ellipsoid in both), the last pair the held level; ``sums``
+    scratch (:func:`row_intervals`)."""
+    inf = np.inf
+    n_s, n_a, n_r, n_rows = int(fd[N_S]), int(fd[N_A]), int(fd[N_R]), int(fd[N_ROWS])
+    new_ok, held_ok = True, True
+    for a in range(n_a):          # the current outputs: room for the first interval
+        dw, rc = abs(x[N_AREA_STATES * a + DW]), abs(x[N_AREA_STATES * a + ROCOF])
+        new_ok = new_ok and dw <= fd[Y0_F_NEW] and rc <= fd[Y0_R_NEW]
+        held_ok = held_ok and dw <= fd[Y0_F_HELD] and rc <= fd[Y0_R_HELD]
+    lo_f, hi_f, lo_r, hi_r, lo_h, hi_h = row_intervals(fd, x, u, p, k, sums)
+    width, u_k = 2 + n_s + 2 * n_a, u[k]
     o = HEAD + n_rows * width
     w, c_k = 0.0, fd[o + k]          # the equilibrium frequency, every area's
     for j in range(n_a):
