@@ -908,9 +908,8 @@ class Scenarios:
                  np.zeros((n_a, MEMORY)), np.zeros((n_a, 1)),
                  np.zeros((n_a, 2, ka.shape[1])), np.zeros((n_a, 3)), np.zeros((n_a, 3)),
                  np.zeros(6 * n_a), np.zeros(n_s),
-                 np.zeros(max([rows_scratch(fdata[foff[f]:foff[f + 1]])
-                               for f in range(len(methods)) if methods[f] == COUPLED],
-                              default=0)))
+                 np.zeros(max((rows_scratch(f.data) for f in self._filters.items
+                               if f.method_id == COUPLED), default=0)))
             metrics[rest], ends[rest] = m_rest, e_rest
         final = metrics[:, :, METRICS.index("final_abs_dw_meas")]
         bad = np.flatnonzero(~np.all(np.isfinite(final), axis=1))

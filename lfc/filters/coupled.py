@@ -814,9 +814,9 @@ def row_intervals(fd: np.ndarray, x: np.ndarray, u: np.ndarray, p: np.ndarray, k
     column by column), so that LLVM runs the rows in SIMD lanes; each row's sum
     takes its terms in the same order as one row at a time would (the state's,
     then each area's command and load), so the intervals are the same bit for bit
-    (``tests/test_coupled.py``; measured in the engine on a 2-core AMD EPYC: 16.7
-    against 23.6 µs per call on the two-area preset, 186 against 268 µs on a ring
-    of 6 areas, than row after row; ``bench/bench_coupled.py --rows``)."""
+    (``tests/test_coupled.py``).  Measured against one row after another with
+    ``bench/bench_coupled.py --rows`` on a 2-core AMD EPYC: 12.6 against 19.1 µs
+    per call on the two-area preset, 110 against 212 µs on a ring of 6 areas."""
     inf = np.inf
     n_s, n_a, n_rows = int(fd[N_S]), int(fd[N_A]), int(fd[N_ROWS])
     col = HEAD + 2 * n_rows           # the rows' columns: bound new, bound held, then these
