@@ -63,18 +63,25 @@ def _held(handle) -> Iterator[None]:
 @functools.lru_cache(maxsize=None)
 def code_digest(*packages: str) -> str:
     """SHA-256 of the package version and the core's source (``lfc/*.py``,
-    ``lfc/filters/*.py``) plus ``lfc/<package>/*.py`` for each of ``packages``
-    (e.g. ``"testbed"``; ``"*"``: every source file of the package): what stored
-    results depend on besides their inputs."""
+    ``lfc/filters/*.py``) plus ``lfc/<package>/*.py`` and the data committed in
+    its subfolders (``lfc/testbed/fitted/*.json``) for each of ``packages`` (e.g.
+    ``"testbed"``; ``"*"``: every source and data file of the package): what
+    stored results depend on besides their inputs."""
     from lfc import __version__
     root = Path(__file__).resolve().parent
     digest = hashlib.sha256(__version__.encode())
-    paths = (sorted(root.rglob("*.py")) if "*" in packages else
-             [p for folder in ("", "filters", *packages)
-              for p in sorted((root / folder).glob("*.py"))])
-    for path in paths:
+    for path in digested_files(*packages):
         digest.update(path.relative_to(root).as_posix().encode() + path.read_bytes())
     return digest.hexdigest()
+
+
+def digested_files(*packages: str) -> list[Path]:
+    """The files :func:`code_digest` hashes for ``packages``, in its order."""
+    root = Path(__file__).resolve().parent
+    if "*" in packages:
+        return sorted(p for p in root.rglob("*") if p.suffix in (".py", ".json"))
+    return [p for folder in ("", "filters", *packages)
+            for pattern in ("*.py", "*/*.json") for p in sorted((root / folder).glob(pattern))]
 
 
 # -- stored results: a JSON payload and its SHA-256, named by a key of their inputs -----

@@ -40,7 +40,9 @@ def test_builds_power_flow_converges_and_starts_at_nominal():
 
 
 def test_the_fit_is_cached_on_disk_checked_and_refit_when_damaged(fit, tmp_path, monkeypatch):
+    """The cache of a computed fit (a case without a committed fit: none here)."""
     monkeypatch.setenv("LFC_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(fitting, "FITTED_DIR", tmp_path / "no committed fits")
     path = fitting._cache_path(CASE)
     assert path.parent == tmp_path and read_stored(path, fitting.decode_report, fitting.check_report) is None
     write_stored(path, fit, fitting.encode_report)

@@ -1,7 +1,8 @@
 """Command line: ``python -m lfc reproduce``, ``sweep`` (notebooks over a grid),
 ``batch`` (a scenario table through the batched simulator), ``book`` (the executed
-notebooks as HTML) and ``readme`` (copy the generated tables of the last reproduce
-into the README and the appendices in ``docs/``)."""
+notebooks as HTML), ``readme`` (copy the generated tables of the last reproduce
+into the README and the appendices in ``docs/``) and ``fit`` (the committed ANDES fits,
+computed again on this machine and compared)."""
 
 from __future__ import annotations
 
@@ -161,6 +162,10 @@ def _parser() -> argparse.ArgumentParser:
                     help="the plant at the wall clock (default: lockstep, one control period "
                          "per exchanged command)")
     wr.add_argument("--pcap", type=Path, help="write the last run's traffic here")
+    ft = sub.add_parser("fit", help="fit the committed design models to ANDES again on this "
+                        "machine and compare them with lfc/testbed/fitted/ (about 5 min)")
+    ft.add_argument("--write", action="store_true",
+                    help="write the fits computed here as the committed ones")
     rd = sub.add_parser("readme", help="copy figures/<name>.md into the <!-- name:start --> "
                         "sections of the README and docs/*.md, and the last full reproduce's "
                         "timing (build/reproduce/timing*.md; reproduce never edits them)")
@@ -262,6 +267,29 @@ def _readme(check: bool) -> int:
 INTERRUPTED = 130   # exit code after Ctrl-C (128 + SIGINT)
 
 
+def _fit(write: bool) -> int:
+    """``python -m lfc fit``: each committed fit computed again (ANDES), its
+    numbers beside the committed ones with their relative difference; with
+    ``write``, the computed fits become the committed ones."""
+    from lfc.testbed.fit import committed_path, read_committed, write_committed
+    from lfc.testbed.grid_fit import committed_fits, fit_numbers
+
+    for c in committed_fits():
+        name = committed_path(c.case, c.kind).name
+        print(f"{name}: fitting on ANDES ...", flush=True)
+        computed = c.compute(c.case)
+        committed = read_committed(c.case, c.kind, c.decode, lambda r: c.check(c.case, r))
+        old = fit_numbers(committed) if committed is not None else {}
+        rows = [f"  {k:<24} {old[k] if k in old else float('nan'):>22.15g} {v:>22.15g} "
+                f"{abs(v - old[k]) / max(abs(old[k]), 1e-300) if k in old else float('nan'):>9.2g}"
+                for k, v in fit_numbers(computed).items()]
+        print(f"  {'':<24} {'committed':>22} {'computed here':>22} {'rel. diff':>9}")
+        print("\n".join(rows))
+        if write:
+            print(f"  written: {write_committed(c.case, c.kind, computed, c.encode)}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; return the exit code (2: a usage or input error,
     printed as one line on stderr; 130: interrupted)."""
@@ -317,6 +345,8 @@ def main(argv: list[str] | None = None) -> int:
             return _batch(args)
         if args.command == "readme":
             return _readme(args.check)
+        if args.command == "fit":
+            return _fit(args.write)
         if args.command == "wire":
             return _wire(args)
         if args.command == "plot-sweep":

@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any, Callable, NamedTuple
 
 import numpy as np
 from scipy.integrate import cumulative_trapezoid
@@ -30,8 +31,9 @@ from scipy.integrate import cumulative_trapezoid
 from lfc._format import number
 from lfc.multiarea import MultiAreaParams
 from lfc.signals import Step
-from lfc.testbed.fit import (OUTPUTS, FitReport, cached_fit, check_report, decode_report,
-                             encode_report, fit_params)
+from lfc.testbed.case import MicrogridCase
+from lfc.testbed.fit import (FITTED, OUTPUTS, FitReport, cached_fit, check_report, decode_report,
+                             encode_report, fit_design_model, fit_params)
 from lfc.testbed.grid import GridCase, case_design
 
 FIT_STEP = 0.02      # pu of the area base (36 MW in Kundur's), small enough to stay linear
@@ -222,3 +224,37 @@ def _check(case: GridCase, fit: GridFit) -> None:
 @lru_cache(maxsize=4)
 def _fitted(case: GridCase) -> GridFit:
     return cached_fit(case, "grid-fit", fit_grid, _encode, _decode, _check)
+
+
+class Committed(NamedTuple):
+    """A fit committed with the package (:mod:`lfc.testbed.fit`): its case, its
+    kind (the file name's prefix) and how it is computed, stored and checked."""
+
+    case: Any
+    kind: str
+    compute: Callable[[Any], Any]
+    encode: Callable[[Any], dict]
+    decode: Callable[[dict], Any]
+    check: Callable[[Any, Any], None]
+
+
+def committed_fits() -> tuple[Committed, ...]:
+    """The fits committed with the package: the microgrid's and the two grids'."""
+    return (Committed(MicrogridCase(), "testbed-fit", fit_design_model, encode_report,
+                      decode_report, lambda case, r: check_report(r)),
+            *(Committed(case, "grid-fit", fit_grid, _encode, _decode, _check)
+              for case in (GridCase.kundur(), GridCase.ieee39())))
+
+
+def fit_numbers(fit: FitReport | GridFit) -> dict[str, float]:
+    """A fit's numbers by name: each fitted parameter (per area for a grid), the
+    errors, and a grid's tie-line coefficient, its error and its command range."""
+    if isinstance(fit, FitReport):
+        return {**{n: float(getattr(fit.params, n)) for n in FITTED},
+                **{f"error {k}": float(v) for k, v in fit.error.items()}}
+    numbers = {}
+    for a, report in enumerate(fit.areas):
+        numbers.update({f"area {a} {n}": float(getattr(report.params, n)) for n in GRID_FITTED})
+        numbers.update({f"area {a} error {k}": float(v) for k, v in report.error.items()})
+    return {**numbers, "T": fit.T, "tie_error": fit.tie_error,
+            "command_range": fit.command_range}
