@@ -282,18 +282,34 @@ def test_safe_set_comes_from_relay_settings():
     np.testing.assert_allclose(f.limits, [0.02, 0.03])
 
 
-@pytest.mark.parametrize("ulps", [-8, -1, 0, 1, 8])
+@pytest.mark.parametrize("ulps", [-8, -1, 0, 1, 4, 8, 9, 12])
 def test_a_command_within_a_few_ulps_of_its_bound_is_not_clipped(ulps):
     """The decision at a bound does not flip on the last bits of the bound: a
-    command 1–8 ulp beyond it is kept and not flagged; 64 ulp beyond is clipped."""
+    command within ``BOUND_ULPS`` (8) ulp beyond the bound computed for it is kept
+    and not flagged, one further is clipped to that bound; 64 ulp beyond is clipped.
+
+    The bound moves with the command (the incoming reading predicts with it): 0 or
+    1 ulp here, differently under two OpenBLAS kernels, so a command 8 ulp beyond
+    another command's bound was kept under the default kernel and clipped under
+    ``OPENBLAS_CORETYPE=Sandybridge`` (9 ulp beyond its own).  So each call is
+    judged against its own bound, and up to 4 ulp beyond the first is always kept."""
+    from lfc.filters.paper import BOUND_ULPS, EPS
     u_big, info = EXACT.filter(STEADY_X, STEADY_U + 0.2)
     bound = info.details["bound"][0]
     assert info.active and u_big == bound
     u_ref = bound + ulps * np.spacing(bound)
     u, info = EXACT.filter(STEADY_X, u_ref)
-    assert u == u_ref and not info.active
+    own = info.details["bound"][0]
+    assert abs(own - bound) <= 2 * np.spacing(bound)
+    within = u_ref <= own or abs(u_ref - own) <= BOUND_ULPS * EPS * abs(own)
+    assert within or ulps > 4
+    assert within == (ulps <= 4) or 4 < ulps < 12
+    if within:
+        assert u == u_ref and not info.active
+    else:
+        assert info.active and u == own
     u, info = EXACT.filter(STEADY_X, bound + 64 * np.spacing(bound))
-    assert info.active and u == bound
+    assert info.active and u == info.details["bound"][0]
 
 
 @given(flags=st.integers(0, 2 ** 15 - 1))
