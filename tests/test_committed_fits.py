@@ -53,9 +53,11 @@ def test_the_committed_fit_is_what_the_fit_computes_here(name):
 
 
 def test_every_blas_kernel_reads_the_same_committed_fit_and_computes_nothing(monkeypatch):
-    """The point of committing the fits: under another OpenBLAS kernel (whose own
-    fit differs, module docstring of :mod:`lfc.testbed.fit`) the design models are
-    the committed ones, bit for bit, and no fit is computed."""
+    """The point of committing the fits: with ``OPENBLAS_CORETYPE`` naming another
+    kernel (which keys the cache of computed fits, since each kernel's own fit
+    differs: module docstring of :mod:`lfc.testbed.fit`) the design models are the
+    committed ones, bit for bit, and no fit is computed.  That the runs on them then
+    agree across kernels was measured in subprocesses (``docs/reproducing.md``)."""
     def refuse(case):
         raise AssertionError("a committed fit was computed again")
 
