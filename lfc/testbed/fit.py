@@ -16,7 +16,7 @@ another BLAS kernel differs in its last bits: runs under two kernels, as
 ``reproduce --compare-blas`` makes, keep their own), and holding a SHA-256 of its contents (a damaged
 file is recomputed with a ``RuntimeWarning`` that names it).
 
-The fits of the cases the chapters use (:data:`lfc.testbed.grid_fit.COMMITTED`) are
+The fits of the cases the chapters use (:func:`lfc.testbed.grid_fit.committed_fits`) are
 committed with the package (``lfc/testbed/fitted/``, written by ``python -m lfc fit
 --write``) and read before any cache: every machine and every BLAS kernel then
 simulates the same design models.  Computed on each, they differ beyond their last
