@@ -24,7 +24,7 @@ SPREAD = 1e-2
 
 
 def _read(c):
-    return fitting.read_committed(c.case, c.kind, c.decode, lambda r: c.check(c.case, r))
+    return fitting.read_committed(c.case, c.kind)
 
 
 #: s, each fit computed on ANDES (measured on an AMD EPYC, an empty store)
@@ -41,7 +41,7 @@ def test_the_committed_fit_is_what_the_fit_computes_here(name):
     c = COMMITTED[name]
     committed = _read(c)
     assert committed is not None, f"{name}: no committed fit for the case as it is now"
-    computed = c.compute(c.case)
+    computed = c.kind.compute(c.case)
     old, new = fit_numbers(committed), fit_numbers(computed)
     assert set(old) == set(new)
     for key in old:
@@ -65,8 +65,7 @@ def test_every_blas_kernel_reads_the_same_committed_fit_and_computes_nothing(mon
         values = []
         for kernel in ("", "Sandybridge"):
             monkeypatch.setenv("OPENBLAS_CORETYPE", kernel)
-            values.append(fitting.cached_fit(c.case, c.kind, refuse, c.encode, c.decode,
-                                             c.check))
+            values.append(fitting.cached_fit(c.case, c.kind._replace(compute=refuse)))
         assert values[0] == values[1] and values[0] is not None
 
 
@@ -88,7 +87,7 @@ def test_a_damaged_committed_fit_warns_and_another_case_is_fitted(monkeypatch, t
     # another case (or another ANDES version) has no committed fit: fitted, no warning
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        assert fitting.read_committed(MicrogridCase(droop=0.04), "testbed-fit") is None
+        assert fitting.read_committed(MicrogridCase(droop=0.04), fitting.MICROGRID_FIT) is None
 
 
 def test_the_committed_fits_are_part_of_the_code_digest():
@@ -117,7 +116,7 @@ def test_python_m_lfc_fit_compares_and_write_replaces(monkeypatch, tmp_path, cap
     shutil.copy(fitting.committed_path(c.case, c.kind), tmp_path)
     monkeypatch.setattr(fitting, "FITTED_DIR", tmp_path)
     monkeypatch.setattr(grid_fit, "committed_fits",
-                        lambda: (c._replace(compute=lambda case: moved),))
+                        lambda: (c._replace(kind=c.kind._replace(compute=lambda case: moved)),))
     assert cli.main(["fit"]) == 0
     row = next(line for line in capsys.readouterr().out.splitlines()
                if line.split()[:1] == ["M"])

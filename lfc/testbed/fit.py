@@ -39,9 +39,9 @@ import math
 import os
 import warnings
 from dataclasses import asdict, dataclass, replace
-from functools import lru_cache
+from functools import lru_cache, partial
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, NamedTuple
 
 import control as ct
 import numpy as np
@@ -179,7 +179,7 @@ def fit_report(case: MicrogridCase | None = None) -> FitReport:
 
 @lru_cache(maxsize=4)
 def _fitted(case: MicrogridCase) -> FitReport:
-    return cached_fit(case, "testbed-fit", fit_design_model)
+    return cached_fit(case, MICROGRID_FIT)
 
 
 
@@ -215,29 +215,58 @@ def check_report(report: FitReport) -> None:
                              f"{value!r}")
 
 
-def cached_fit(case: object, kind: str, fit: Callable[[Any], Any],
-               encode: Callable[[Any], dict] = encode_report,
-               decode: Callable[[dict], Any] = decode_report,
-               check: Callable[[Any, Any], None] = lambda case, r: check_report(r)) -> Any:
-    """``fit(case)``: the committed fit of ``case`` (:func:`read_committed`) if
-    there is one, else read from its cache file (:func:`_cache_path`), or
+class FitKind(NamedTuple):
+    """One kind of fit: how it is computed, stored and checked (the microgrid's,
+    :data:`MICROGRID_FIT`, and the grids', :data:`lfc.testbed.grid_fit.GRID_FIT`).
+
+    Attributes
+    ----------
+    name : str
+        The prefix of its files' names (cache and committed).
+    compute : callable
+        ``compute(case)``: the fit, run on ANDES.
+    encode, decode : callable
+        The fit as JSON data and back, exactly.
+    check : callable
+        ``check(case, fit)`` raises ``ValueError`` unless the fit is sane for ``case``.
+    """
+
+    name: str
+    compute: Callable[[Any], Any]
+    encode: Callable[[Any], dict]
+    decode: Callable[[dict], Any]
+    check: Callable[[Any, Any], None]
+
+
+def _check_microgrid(case: MicrogridCase, report: FitReport) -> None:
+    check_report(report)
+
+
+#: The microgrid's fit (:func:`fit_design_model`).
+MICROGRID_FIT = FitKind("testbed-fit", fit_design_model, encode_report, decode_report,
+                        _check_microgrid)
+
+
+def cached_fit(case: object, kind: FitKind) -> Any:
+    """``kind.compute(case)``: the committed fit of ``case`` (:func:`read_committed`)
+    if there is one, else read from its cache file (:func:`_cache_path`), or
     computed and written there when the file is absent, damaged (its checksum)
-    or not physically sane (``check(case, report)`` raises ``ValueError``)."""
-    committed = read_committed(case, kind, decode, lambda report: check(case, report))
+    or not physically sane (``kind.check(case, fit)`` raises ``ValueError``)."""
+    committed = read_committed(case, kind)
     if committed is not None:
         return committed
-    return cached(_cache_path(case, kind), lambda: fit(case), encode, decode,
-                  lambda report: check(case, report))
+    return cached(_cache_path(case, kind.name), lambda: kind.compute(case), kind.encode,
+                  kind.decode, partial(kind.check, case))
 
 
 #: Where the committed fits are (module docstring): one JSON file per kind and case.
 FITTED_DIR = Path(__file__).resolve().parent / "fitted"
 
 
-def committed_path(case: object, kind: str) -> Path:
-    """The committed fit file of ``case`` (``<kind>-<case name>.json``; a case
-    without a name, the microgrid, is ``microgrid``)."""
-    return FITTED_DIR / f"{kind}-{getattr(case, 'name', 'microgrid')}.json"
+def committed_path(case: object, kind: FitKind) -> Path:
+    """The committed fit file of ``case`` (``<kind's name>-<case name>.json``; a
+    case without a name, the microgrid, is ``microgrid``)."""
+    return FITTED_DIR / f"{kind.name}-{getattr(case, 'name', 'microgrid')}.json"
 
 
 def _stamp(case: object) -> dict:
@@ -247,12 +276,11 @@ def _stamp(case: object) -> dict:
     return {"case": repr(case), "andes": andes.__version__}
 
 
-def read_committed(case: object, kind: str, decode: Callable[[dict], Any] = decode_report,
-                   check: Callable[[Any], None] = check_report) -> Any:
+def read_committed(case: object, kind: FitKind) -> Any:
     """The committed fit of ``case`` (:func:`write_committed`), or None if there
     is none, or it was made for another case or ANDES version (then the fit is
-    computed), or it is damaged (its SHA-256) or not sane (``check`` raises
-    ``ValueError``), the last two with a ``RuntimeWarning`` naming the file."""
+    computed), or it is damaged (its SHA-256) or not sane (``kind.check``
+    raises ``ValueError``), the last two with a ``RuntimeWarning`` naming the file."""
     path = committed_path(case, kind)
     if not path.exists():
         return None
@@ -263,8 +291,8 @@ def read_committed(case: object, kind: str, decode: Callable[[dict], Any] = deco
         text = json.dumps(stored["fit"], sort_keys=True)
         if hashlib.sha256(text.encode()).hexdigest() != stored["sha256"]:
             raise ValueError("checksum mismatch")
-        value = decode(stored["fit"])
-        check(value)
+        value = kind.decode(stored["fit"])
+        kind.check(case, value)
         return value
     except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
         warnings.warn(f"damaged committed fit {path} ({err}); computing the fit instead "
@@ -273,11 +301,10 @@ def read_committed(case: object, kind: str, decode: Callable[[dict], Any] = deco
         return None
 
 
-def write_committed(case: object, kind: str, value: Any,
-                    encode: Callable[[Any], dict] = encode_report) -> Path:
+def write_committed(case: object, kind: FitKind, value: Any) -> Path:
     """Write ``value``, the fit of ``case``, as its committed fit (readable JSON:
     the case, the ANDES version, the fit and the fit's SHA-256); its path."""
-    data = encode(value)
+    data = kind.encode(value)
     text = json.dumps(data, sort_keys=True)
     stored = {**_stamp(case), "made_by": "python -m lfc fit --write", "fit": data,
               "sha256": hashlib.sha256(text.encode()).hexdigest()}

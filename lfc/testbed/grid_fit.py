@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Any, Callable, NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from scipy.integrate import cumulative_trapezoid
@@ -32,8 +32,8 @@ from lfc._format import number
 from lfc.multiarea import MultiAreaParams
 from lfc.signals import Step
 from lfc.testbed.case import MicrogridCase
-from lfc.testbed.fit import (FITTED, OUTPUTS, FitReport, cached_fit, check_report, decode_report,
-                             encode_report, fit_design_model, fit_params)
+from lfc.testbed.fit import (FITTED, MICROGRID_FIT, OUTPUTS, FitKind, FitReport, cached_fit,
+                             check_report, decode_report, encode_report, fit_params)
 from lfc.testbed.grid import GridCase, case_design
 
 FIT_STEP = 0.02      # pu of the area base (36 MW in Kundur's), small enough to stay linear
@@ -221,29 +221,26 @@ def _check(case: GridCase, fit: GridFit) -> None:
                          f"rungs run, got {fit.command_range!r} and {len(fit.validation)} rungs")
 
 
+#: The grids' fit (:func:`fit_grid`).
+GRID_FIT = FitKind("grid-fit", fit_grid, _encode, _decode, _check)
+
+
 @lru_cache(maxsize=4)
 def _fitted(case: GridCase) -> GridFit:
-    return cached_fit(case, "grid-fit", fit_grid, _encode, _decode, _check)
+    return cached_fit(case, GRID_FIT)
 
 
 class Committed(NamedTuple):
-    """A fit committed with the package (:mod:`lfc.testbed.fit`): its case, its
-    kind (the file name's prefix) and how it is computed, stored and checked."""
+    """A fit committed with the package (:mod:`lfc.testbed.fit`): its case and kind."""
 
     case: Any
-    kind: str
-    compute: Callable[[Any], Any]
-    encode: Callable[[Any], dict]
-    decode: Callable[[dict], Any]
-    check: Callable[[Any, Any], None]
+    kind: FitKind
 
 
 def committed_fits() -> tuple[Committed, ...]:
     """The fits committed with the package: the microgrid's and the two grids'."""
-    return (Committed(MicrogridCase(), "testbed-fit", fit_design_model, encode_report,
-                      decode_report, lambda case, r: check_report(r)),
-            *(Committed(case, "grid-fit", fit_grid, _encode, _decode, _check)
-              for case in (GridCase.kundur(), GridCase.ieee39())))
+    return (Committed(MicrogridCase(), MICROGRID_FIT),
+            *(Committed(case, GRID_FIT) for case in (GridCase.kundur(), GridCase.ieee39())))
 
 
 def fit_numbers(fit: FitReport | GridFit) -> dict[str, float]:
