@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lfc._jit import inline, kernel
+from lfc._jit import choose, inline, kernel
 from lfc._validate import ParameterTypeError, check_flag, check_index, check_seed
 from lfc.estimation import (KalmanFilter, check_noise_std, kf_correct, kf_predict,
                             measurement_std)
@@ -417,14 +417,33 @@ N_Z = 21
 
 @inline
 def _lane_steps(k_from: int, k_to: int, dt: float, A: np.ndarray, Bu: np.ndarray,
-                Bl: np.ndarray, z: np.ndarray, limits: np.ndarray, delays: np.ndarray,
-                stop_on_trip: bool) -> None:
-    """Plant steps ``k_from`` to ``k_to`` of the ``LANES`` scenarios in ``z``: the
-    single-area path of :func:`_run` (the plant update and :func:`_watch` without
-    relay noise) written without branches, so that LLVM advances the lanes in
-    SIMD registers.  Each lane computes the same sums in the same order as that
-    path, so its numbers are the same bit for bit; a lane whose ``Z_ALIVE`` is 0
-    (stopped at a trip, or padding) keeps its values."""
+                Bl: np.ndarray, z: np.ndarray, w: np.ndarray, limits: np.ndarray,
+                delays: np.ndarray, stop_on_trip: bool) -> None:
+    """Plant steps ``k_from`` to ``k_to`` of the ``LANES`` scenarios in ``z``
+    (:func:`_lane_step`), two at a time: ``z`` to ``w`` and back (``w`` is scratch of
+    ``z``'s size); an odd count ends with the last step's rows copied back to ``z``."""
+    for k in range(k_from, k_to - 1, 2):
+        _lane_step(k, dt, A, Bu, Bl, z, w, limits, delays, stop_on_trip)
+        _lane_step(k + 1, dt, A, Bu, Bl, w, z, limits, delays, stop_on_trip)
+    if (k_to - k_from) % 2 == 1:
+        _lane_step(k_to - 1, dt, A, Bu, Bl, z, w, limits, delays, stop_on_trip)
+        for r in range(z.shape[0]):
+            z[r] = w[r]
+
+
+@inline
+def _lane_step(k: int, dt: float, A: np.ndarray, Bu: np.ndarray, Bl: np.ndarray,
+               z: np.ndarray, w: np.ndarray, limits: np.ndarray, delays: np.ndarray,
+               stop_on_trip: bool) -> None:
+    """Plant step ``k`` of the ``LANES`` scenarios, read from ``z``, every row
+    written to ``w``: the single-area path of :func:`_run` (the plant update and
+    :func:`_watch` without relay noise) written without branches
+    (:func:`lfc._jit.choose`, every operand evaluated), so that LLVM advances the
+    lanes in SIMD registers.  Each lane computes the same sums in the same order
+    as that path, so its numbers are the same bit for bit; a lane whose
+    ``Z_ALIVE`` is 0 (stopped at a trip, or padding) keeps its values.  Writing to
+    another buffer than the one read keeps LLVM from turning the kept values into
+    masked stores (:mod:`lfc._jit`)."""
     L = LANES
     lim0, lim1, lim2 = limits[0], limits[1], limits[2]
     e0, e1, e2 = delays[0] - TIME_TOL, delays[1] - TIME_TOL, delays[2] - TIME_TOL
@@ -436,50 +455,52 @@ def _lane_steps(k_from: int, k_to: int, dt: float, A: np.ndarray, Bu: np.ndarray
     b0, b1, b2, b3, b4 = Bu[0, 0], Bu[1, 0], Bu[2, 0], Bu[3, 0], Bu[4, 0]
     l0, l1, l2, l3, l4 = Bl[0, 0], Bl[1, 0], Bl[2, 0], Bl[3, 0], Bl[4, 0]
     nan = math.nan
-    for k in range(k_from, k_to):
-        t, tn, done = k * dt, (k + 1) * dt, float(k + 1)
-        for l in range(L):
-            x0, x1, x2 = z[Z_X * L + l], z[(Z_X + 1) * L + l], z[(Z_X + 2) * L + l]
-            x3, x4 = z[(Z_X + 3) * L + l], z[(Z_X + 4) * L + l]
-            ua = z[Z_U * L + l]
-            p0 = z[Z_LOAD * L + l] if z[Z_ON * L + l] <= t < z[Z_OFF * L + l] else 0.0
-            u0, u1, u2, u3, u4 = b0 * ua, b1 * ua, b2 * ua, b3 * ua, b4 * ua
-            n0 = a00 * x0 + a01 * x1 + a02 * x2 + a03 * x3 + a04 * x4 + u0 + l0 * p0
-            n1 = a10 * x0 + a11 * x1 + a12 * x2 + a13 * x3 + a14 * x4 + u1 + l1 * p0
-            n2 = a20 * x0 + a21 * x1 + a22 * x2 + a23 * x3 + a24 * x4 + u2 + l2 * p0
-            n3 = a30 * x0 + a31 * x1 + a32 * x2 + a33 * x3 + a34 * x4 + u3 + l3 * p0
-            n4 = a40 * x0 + a41 * x1 + a42 * x2 + a43 * x3 + a44 * x4 + u4 + l4 * p0
-            # the relays (relay_sample): a timer starts when beyond, trips after its delay
-            s0, s1, s2 = z[Z_START * L + l], z[(Z_START + 1) * L + l], z[(Z_START + 2) * L + l]
-            d0, d1, d2 = z[Z_DUE * L + l], z[(Z_DUE + 1) * L + l], z[(Z_DUE + 2) * L + l]
-            s0 = (s0 if s0 == s0 else tn) if n3 > lim0 else nan
-            s1 = (s1 if s1 == s1 else tn) if n3 < lim1 else nan
-            s2 = (s2 if s2 == s2 else tn) if abs(n4) > lim2 else nan
-            now0, now1, now2 = tn - s0 >= e0, tn - s1 >= e1, tn - s2 >= e2
-            trip0, trip1, trip2 = now0 and d0 == 0.0, now1 and d1 == 0.0, now2 and d2 == 0.0
-            trip = trip0 or trip1 or trip2
-            go = z[Z_ALIVE * L + l] != 0.0
-            first = go and trip and z[Z_FIRST_T * L + l] != z[Z_FIRST_T * L + l]
-            stop = go and trip and stop_on_trip
-            z[Z_X * L + l] = n0 if go else x0
-            z[(Z_X + 1) * L + l] = n1 if go else x1
-            z[(Z_X + 2) * L + l] = n2 if go else x2
-            z[(Z_X + 3) * L + l] = n3 if go else x3
-            z[(Z_X + 4) * L + l] = n4 if go else x4
-            z[Z_START * L + l] = s0 if go else z[Z_START * L + l]
-            z[(Z_START + 1) * L + l] = s1 if go else z[(Z_START + 1) * L + l]
-            z[(Z_START + 2) * L + l] = s2 if go else z[(Z_START + 2) * L + l]
-            z[Z_DUE * L + l] = (1.0 if now0 else 0.0) if go else d0
-            z[(Z_DUE + 1) * L + l] = (1.0 if now1 else 0.0) if go else d1
-            z[(Z_DUE + 2) * L + l] = (1.0 if now2 else 0.0) if go else d2
-            peak_dw, peak_rc = z[Z_PEAK_DW * L + l], z[Z_PEAK_RC * L + l]
-            z[Z_PEAK_DW * L + l] = max(peak_dw, abs(n3)) if go else peak_dw
-            z[Z_PEAK_RC * L + l] = max(peak_rc, abs(n4)) if go else peak_rc
-            z[Z_FIRST_T * L + l] = tn if first else z[Z_FIRST_T * L + l]
-            z[Z_FIRST_R * L + l] = ((0.0 if trip0 else (1.0 if trip1 else 2.0)) if first
-                                    else z[Z_FIRST_R * L + l])
-            z[Z_END * L + l] = done if stop else z[Z_END * L + l]
-            z[Z_ALIVE * L + l] = 0.0 if stop else z[Z_ALIVE * L + l]
+    t, tn, done = k * dt, (k + 1) * dt, float(k + 1)
+    for l in range(L):
+        x0, x1, x2 = z[Z_X * L + l], z[(Z_X + 1) * L + l], z[(Z_X + 2) * L + l]
+        x3, x4 = z[(Z_X + 3) * L + l], z[(Z_X + 4) * L + l]
+        ua, load = z[Z_U * L + l], z[Z_LOAD * L + l]
+        on, off = z[Z_ON * L + l], z[Z_OFF * L + l]
+        p0 = choose((on <= t) & (t < off), load, 0.0)
+        u0, u1, u2, u3, u4 = b0 * ua, b1 * ua, b2 * ua, b3 * ua, b4 * ua
+        n0 = a00 * x0 + a01 * x1 + a02 * x2 + a03 * x3 + a04 * x4 + u0 + l0 * p0
+        n1 = a10 * x0 + a11 * x1 + a12 * x2 + a13 * x3 + a14 * x4 + u1 + l1 * p0
+        n2 = a20 * x0 + a21 * x1 + a22 * x2 + a23 * x3 + a24 * x4 + u2 + l2 * p0
+        n3 = a30 * x0 + a31 * x1 + a32 * x2 + a33 * x3 + a34 * x4 + u3 + l3 * p0
+        n4 = a40 * x0 + a41 * x1 + a42 * x2 + a43 * x3 + a44 * x4 + u4 + l4 * p0
+        # the relays (relay_sample): a timer starts when beyond, trips after its delay
+        s0, s1, s2 = z[Z_START * L + l], z[(Z_START + 1) * L + l], z[(Z_START + 2) * L + l]
+        d0, d1, d2 = z[Z_DUE * L + l], z[(Z_DUE + 1) * L + l], z[(Z_DUE + 2) * L + l]
+        r0 = choose(n3 > lim0, choose(s0 == s0, s0, tn), nan)
+        r1 = choose(n3 < lim1, choose(s1 == s1, s1, tn), nan)
+        r2 = choose(abs(n4) > lim2, choose(s2 == s2, s2, tn), nan)
+        now0, now1, now2 = tn - r0 >= e0, tn - r1 >= e1, tn - r2 >= e2
+        trip0, trip1, trip2 = now0 & (d0 == 0.0), now1 & (d1 == 0.0), now2 & (d2 == 0.0)
+        trip = trip0 | trip1 | trip2
+        alive, first_t = z[Z_ALIVE * L + l], z[Z_FIRST_T * L + l]
+        go = alive != 0.0
+        first = go & trip & (first_t != first_t)
+        stop = go & trip & stop_on_trip
+        w[Z_X * L + l] = choose(go, n0, x0)
+        w[(Z_X + 1) * L + l] = choose(go, n1, x1)
+        w[(Z_X + 2) * L + l] = choose(go, n2, x2)
+        w[(Z_X + 3) * L + l] = choose(go, n3, x3)
+        w[(Z_X + 4) * L + l] = choose(go, n4, x4)
+        w[Z_START * L + l] = choose(go, r0, s0)
+        w[(Z_START + 1) * L + l] = choose(go, r1, s1)
+        w[(Z_START + 2) * L + l] = choose(go, r2, s2)
+        w[Z_DUE * L + l] = choose(go, choose(now0, 1.0, 0.0), d0)
+        w[(Z_DUE + 1) * L + l] = choose(go, choose(now1, 1.0, 0.0), d1)
+        w[(Z_DUE + 2) * L + l] = choose(go, choose(now2, 1.0, 0.0), d2)
+        peak_dw, peak_rc = z[Z_PEAK_DW * L + l], z[Z_PEAK_RC * L + l]
+        w[Z_PEAK_DW * L + l] = choose(go, max(peak_dw, abs(n3)), peak_dw)
+        w[Z_PEAK_RC * L + l] = choose(go, max(peak_rc, abs(n4)), peak_rc)
+        w[Z_FIRST_T * L + l] = choose(first, tn, first_t)
+        w[Z_FIRST_R * L + l] = choose(first, choose(trip0, 0.0, choose(trip1, 1.0, 2.0)),
+                                      z[Z_FIRST_R * L + l])
+        w[Z_END * L + l] = choose(stop, done, z[Z_END * L + l])
+        w[Z_ALIVE * L + l] = choose(stop, 0.0, alive)
+        w[Z_U * L + l], w[Z_LOAD * L + l], w[Z_ON * L + l], w[Z_OFF * L + l] = ua, load, on, off
 
 
 @kernel
@@ -490,7 +511,8 @@ def _run_lanes(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarr
                ka: np.ndarray, kb: np.ndarray, kc: np.ndarray, kg: np.ndarray,
                kdim: np.ndarray, methods: np.ndarray, fdata: np.ndarray, foff: np.ndarray,
                limits: np.ndarray, delays: np.ndarray, stop_on_trip: bool,
-               metrics: np.ndarray, ends: np.ndarray, z: np.ndarray, xs: np.ndarray,
+               metrics: np.ndarray, ends: np.ndarray, z: np.ndarray, w: np.ndarray,
+               xs: np.ndarray,
                x_hat: np.ndarray, mem: np.ndarray, gstate: np.ndarray, kstate: np.ndarray,
                start: np.ndarray, due: np.ndarray, ctrl: np.ndarray, scratch: np.ndarray
                ) -> None:
@@ -501,7 +523,8 @@ def _run_lanes(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarr
     one lane after another), then :func:`_lane_steps` advances all lanes.
     The metrics and ``ends`` equal :func:`_run`'s bit for bit (``tests/test_lanes.py``).
     ``z`` (N_Z LANES,), ``mem`` (LANES, MEMORY), ``gstate`` (LANES, 1),
-    ``kstate`` (LANES, 2, N_KF) are the lanes' state, the rest scratch."""
+    ``kstate`` (LANES, 2, N_KF) are the lanes' state, ``w`` (N_Z LANES,) the second
+    buffer of :func:`_lane_steps`, the rest scratch."""
     L = LANES
     n_ctrl = -(-n_steps // ratio)
     empty = x_hat[:0]
@@ -559,7 +582,7 @@ def _run_lanes(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarr
                 met[7] += mod
             if not alive:
                 break
-            _lane_steps(k0, min(k0 + ratio, n_steps), dt, A, Bu, Bl, z, limits, delays,
+            _lane_steps(k0, min(k0 + ratio, n_steps), dt, A, Bu, Bl, z, w, limits, delays,
                         stop_on_trip)
         for l in range(L):
             i = blocks[b, l]
@@ -891,7 +914,7 @@ class Scenarios:
                        k_freq[0] * self.period, k_tie[0] * self.period, plant_of, blocks,
                        index, kinds, params, offsets, st, sv, noise, ka, kb, kc, kg, kdim,
                        methods, fdata, foff, limits, delays, stop_on_trip, metrics, ends,
-                       np.zeros(N_Z * LANES), np.zeros(N_AREA_STATES),
+                       np.zeros(N_Z * LANES), np.zeros(N_Z * LANES), np.zeros(N_AREA_STATES),
                        np.zeros(N_AREA_STATES), np.zeros((LANES, MEMORY)),
                        np.zeros((LANES, 1)), np.zeros((LANES, 2, ka.shape[1])),
                        np.zeros(3), np.zeros(3), np.zeros((0, N_CTRL)), np.zeros(1))
