@@ -1,5 +1,13 @@
 import os
 
+# One BLAS thread in every process of the suite (pytest-xdist's workers, the notebook
+# kernels and pools they start), set before anything loads numpy: the suite runs one
+# worker per core, and OpenBLAS' default of a thread per core in each process left the
+# cores oversubscribed, its idle threads spinning (``lfc.repro.runner.ONE_BLAS_THREAD``:
+# half the CPU time).  A value set in the environment is kept.
+for _name, _value in {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}.items():
+    os.environ.setdefault(_name, _value)
+
 from hypothesis import HealthCheck, settings
 
 # Property tests are derandomized by default, so the suite's verdict is reproducible
