@@ -569,6 +569,39 @@ def test_each_chapter_reads_as_a_chapter(c):
     assert any("simulate" in cell for cell in code), c.name
 
 
+def test_a_kernel_runs_one_blas_thread_unless_the_environment_names_more(monkeypatch,
+                                                                        tmp_path):
+    """Runs go one per core: each kernel gets one BLAS thread
+    (``runner.ONE_BLAS_THREAD``), not OpenBLAS' default of one per core, whose idle
+    threads spun on the cores the other runs needed; a count set in the
+    environment is kept, and ``execute``'s own variables still arrive."""
+    import nbformat
+
+    nb = nbformat.v4.new_notebook()
+    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3",
+                                 "language": "python"}
+    nb.cells = [nbformat.v4.new_code_cell("out = ''", metadata={"tags": ["parameters"]}),
+                nbformat.v4.new_code_cell(
+                    "import json, os\n"
+                    "json.dump({k: os.environ.get(k) for k in ('OPENBLAS_NUM_THREADS',"
+                    " 'OMP_NUM_THREADS', 'LFC_PROBE')}, open(out, 'w'))")]
+    path = tmp_path / "probe.ipynb"
+    nbformat.write(nb, path)
+    seen = []
+    for value in (None, "2"):
+        if value is None:
+            monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+        else:
+            monkeypatch.setenv("OPENBLAS_NUM_THREADS", value)
+        monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+        out = tmp_path / f"env-{value}.json"
+        runner.execute(path, tmp_path / f"run-{value}.ipynb", {"out": str(out)},
+                       env={"LFC_PROBE": "yes"})
+        seen.append(json.loads(out.read_text()))
+    assert seen == [{"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "LFC_PROBE": "yes"},
+                    {"OPENBLAS_NUM_THREADS": "2", "OMP_NUM_THREADS": "1", "LFC_PROBE": "yes"}]
+
+
 def test_a_kernel_is_shut_down_without_an_interrupt(monkeypatch):
     """jupyter_client interrupts (SIGINT) before every shutdown; a SIGINT landing while
     the idle kernel handles a message printed "KeyboardInterrupt caught in kernel"
