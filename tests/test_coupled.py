@@ -633,6 +633,29 @@ def test_finding_on_andes_ieee39_the_coupled_filters_leave_their_certificate():
     assert all(int(a.alarms.outside.sum()) > 100 for a in r.areas)
 
 
+def test_on_andes_ieee39_a_load_budget_for_the_fits_mismatch_leaves_no_outside():
+    """Measured (not proven: ANDES is not the fitted model) — how much of the
+    certificate's load budget the fit's mismatch eats.  The held re-check absorbs
+    ``load_bound - recheck_bound`` of load variation since a vector's certification;
+    on ANDES the fitted model's mismatch acts as load the model does not see.  With
+    the budget at 0.11 pu (``load_bound=0.12``: the 0.05 pu step and 0.06 pu more)
+    and a 12 s horizon, the same run as the finding above (chapter 09's coordinated
+    sinusoid and a -0.05 pu step in area 1) flags no ``outside`` and trips nothing,
+    and the price on the model is nil here: a legitimate 0.05 pu step holds no
+    area's AGC (``held_after_step`` 0 s; the default's 1.26 s).  The other runs
+    measured once (``docs/coupled-certificate.md``, "What the fit's mismatch eats")
+    chose the budget; this one pins it."""
+    from lfc.testbed import GridCase, grid_design
+    case = GridCase.ieee39()
+    filt = CoupledFilter(grid_design(case), RELAYS, load_bound=0.12, horizon=12.0)
+    assert filt.held_after_step(0.05) == 0.0
+    r = lfc.simulate(case, duration=20.0, anti_windup=True,
+                     attacks={a: {"pc": lfc.Sinusoid(0.6, 0.5, start=1.0)} for a in range(2)},
+                     loads={1: lfc.Step(-STEP, start=3.37)}, filters={0: filt, 1: filt})
+    assert not r.tripped
+    assert [int(a.alarms.outside.sum()) for a in r.areas] == [0, 0]
+
+
 # Not marked long (it takes about 190 s of CPU): started first, it waited 159 s, idle,
 # for the IEEE 39-bus fit the chapter 09 test computes on the other worker (measured
 # with a per-test CPU record of the suite); in file order the fit is done by then.
