@@ -574,7 +574,8 @@ def test_a_kernel_runs_one_blas_thread_unless_the_environment_names_more(monkeyp
     """Runs go one per core: each kernel gets one BLAS thread
     (``runner.ONE_BLAS_THREAD``), not OpenBLAS' default of one per core, whose idle
     threads spun on the cores the other runs needed; a count set in the
-    environment is kept, and ``execute``'s own variables still arrive."""
+    environment is kept, ``execute``'s own variables still arrive, and
+    ``papermill --engine lfc`` starts its kernel the same way."""
     import nbformat
 
     nb = nbformat.v4.new_notebook()
@@ -600,6 +601,14 @@ def test_a_kernel_runs_one_blas_thread_unless_the_environment_names_more(monkeyp
         seen.append(json.loads(out.read_text()))
     assert seen == [{"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "LFC_PROBE": "yes"},
                     {"OPENBLAS_NUM_THREADS": "2", "OMP_NUM_THREADS": "1", "LFC_PROBE": "yes"}]
+    # papermill --engine lfc: the same kernel manager, so the same thread count
+    import papermill as pm
+
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS")
+    out = tmp_path / "env-engine.json"
+    pm.execute_notebook(str(path), str(tmp_path / "run-engine.ipynb"), {"out": str(out)},
+                        engine_name="lfc", progress_bar=False)
+    assert json.loads(out.read_text())["OPENBLAS_NUM_THREADS"] == "1"
 
 
 def test_a_kernel_is_shut_down_without_an_interrupt(monkeypatch):

@@ -127,6 +127,17 @@ def _kernel_children() -> list[int]:
     return found
 
 
+#: The BLAS threads of every kernel :class:`IPCKernelManager` starts (``reproduce``,
+#: ``sweep``, ``papermill --engine lfc``), unless the environment names them: one.
+#: Runs go one per core, and OpenBLAS' default, a thread per core in each process,
+#: oversubscribes the cores; its idle threads spin.  Measured on the suite (two
+#: processes on 2 cores, ``tests/conftest.py`` sets the same): the load bound's tests
+#: 1 min 52 s and 214 s of CPU with the default, 1 min 4 s and 106 s with one.  It
+#: also keeps a run's last bits independent of the machine's number of cores (a
+#: threaded product sums in another order: the IEEE 39-bus fit differs).
+ONE_BLAS_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+
+
 class IPCKernelManager(KernelManager):
     """A kernel that talks over local IPC sockets, not TCP: nothing leaves the
     machine, and the kernel has no reason to warn about unencrypted TCP.
@@ -154,13 +165,14 @@ class IPCKernelManager(KernelManager):
         if not self.shutting_down:
             await super()._async_interrupt_kernel()
 
-    extra_env: dict[str, str] = {}      # added to the kernel's environment (execute's env)
+    #: added to the kernel's environment (execute's env), besides :data:`ONE_BLAS_THREAD`
+    #: where the environment does not name a thread count
+    extra_env: dict[str, str] = {}
 
     async def _async_launch_kernel(self, kernel_cmd: list[str], **kw) -> None:
         with _LIVE_LOCK:                 # before the launch: stop_kernels waits for it
             _LIVE.add(self)
-        if self.extra_env:
-            kw["env"] = {**(kw.get("env") or os.environ), **self.extra_env}
+        kw["env"] = {**ONE_BLAS_THREAD, **(kw.get("env") or os.environ), **self.extra_env}
         await super()._async_launch_kernel(kernel_cmd, **kw)
 
     async def _async_cleanup_resources(self, restart: bool = False) -> None:
@@ -171,25 +183,14 @@ class IPCKernelManager(KernelManager):
             shutil.rmtree(self._socket_dir, ignore_errors=True)
 
 
-#: The BLAS threads of every kernel a run starts, unless the environment names them:
-#: one.  Runs go one per core, and OpenBLAS' default, a thread per core in each
-#: process, oversubscribes the cores; its idle threads spin.  Measured on the suite
-#: (two processes on 2 cores, ``tests/conftest.py`` sets the same): the load bound's
-#: tests 1 min 52 s and 214 s of CPU with the default, 1 min 4 s and 106 s with one.
-#: It also keeps a run's last bits independent of the machine's number of cores (a
-#: threaded product sums in another order: the IEEE 39-bus fit differs).
-ONE_BLAS_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
-
-
 def execute(notebook: Path, output: Path, parameters: dict,
             env: dict[str, str] | None = None) -> None:
     """Run ``notebook`` with papermill into ``output`` (the notebook's folder as
     cwd; figures inline, the kernel over IPC; ``env``: variables added to the
-    kernel's environment, besides :data:`ONE_BLAS_THREAD`)."""
+    kernel's environment)."""
     output.parent.mkdir(parents=True, exist_ok=True)
-    threads = {k: os.environ.get(k, v) for k, v in ONE_BLAS_THREAD.items()}
-    manager = type("RunKernelManager", (IPCKernelManager,),
-                   {"extra_env": {**threads, **(env or {})}})
+    manager = IPCKernelManager if not env else type(
+        "RunKernelManager", (IPCKernelManager,), {"extra_env": dict(env)})
     pm.execute_notebook(str(notebook), str(output), parameters=parameters,
                         cwd=str(notebook.parent), kernel_name="python3",
                         kernel_manager_class=manager, progress_bar=False,
