@@ -623,7 +623,9 @@ def test_finding_on_andes_ieee39_the_coupled_filters_leave_their_certificate():
     range), trip nothing but flag ``outside`` at hundreds of samples (267 and 265
     when measured; 341 and 334 without the range) — ANDES' trajectory leaves what
     the fitted model certified; the contracts, which read no state, never flag it
-    (``tests/test_contract.py``)."""
+    (``tests/test_contract.py``).  The default budget the held re-check absorbs
+    (0.05 pu) is the step's whole; a budget that also covers the mismatch flags
+    nothing (the next test)."""
     from lfc.testbed import GridCase
     r = lfc.simulate(GridCase.ieee39(), duration=20.0, anti_windup=True,
                      attacks={a: {"pc": lfc.Sinusoid(0.6, 0.5, start=1.0)} for a in range(2)},
