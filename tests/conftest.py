@@ -4,8 +4,10 @@ import os
 # kernels and pools they start), set before anything loads numpy: the suite runs one
 # worker per core, and OpenBLAS' default of a thread per core in each process left the
 # cores oversubscribed, its idle threads spinning (``lfc.repro.runner.ONE_BLAS_THREAD``:
-# half the CPU time).  A value set in the environment is kept.
-for _name, _value in {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}.items():
+# half the CPU time).  A value set in the environment is kept.  Written here, not
+# imported (importing lfc loads numpy); tests/test_notebooks.py checks the two agree.
+BLAS_THREADS = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+for _name, _value in BLAS_THREADS.items():
     os.environ.setdefault(_name, _value)
 
 from hypothesis import HealthCheck, settings

@@ -577,7 +577,9 @@ def test_a_kernel_runs_one_blas_thread_unless_the_environment_names_more(monkeyp
     environment is kept, ``execute``'s own variables still arrive, and
     ``papermill --engine lfc`` starts its kernel the same way."""
     import nbformat
+    from conftest import BLAS_THREADS
 
+    assert BLAS_THREADS == runner.ONE_BLAS_THREAD      # the suite's own processes likewise
     nb = nbformat.v4.new_notebook()
     nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3",
                                  "language": "python"}
