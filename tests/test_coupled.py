@@ -645,8 +645,9 @@ def test_on_andes_ieee39_a_load_budget_for_the_fits_mismatch_leaves_no_outside()
     sinusoid and a -0.05 pu step in area 1) flags no ``outside`` and trips nothing,
     and the price on the model is nil here: a legitimate 0.05 pu step holds no
     area's AGC (``held_after_step`` 0 s; the default's 1.26 s).  The other runs
-    measured once (``docs/coupled-certificate.md``, "What the fit's mismatch eats")
-    chose the budget; this one pins it."""
+    that chose the budget, and those that checked it after, are printed by
+    ``python bench/survey_grid_certificates.py --mismatch-budget``
+    (``docs/coupled-certificate.md``, "What the fit's mismatch eats"); this one pins it."""
     from lfc.testbed import GridCase, grid_design
     case = GridCase.ieee39()
     filt = CoupledFilter(grid_design(case), RELAYS, load_bound=0.12, horizon=12.0)
