@@ -10,11 +10,11 @@ Prints, from one run:
 * with ``--chain10``: both certificates on a chain of 10 areas (the three-area
   preset's areas in turn, T = 2 pu): design time, box and rate or terminal set,
   the contract's full battery and the coupled certificate's at one instant;
-* with ``--chains``: the coupled certificate on chains of 5 and 6 areas (the
-  three-area preset's areas in turn, T = 2 pu; the shaped terminal set, which
-  ``tests/test_coupled.py`` checks on a chain of 4): its terminal set and a ±0.05 pu
-  step at 3.37 s in every area during every attack (anti-windup): runs, with a
-  trip, with an ``outside`` flag;
+* with ``--chains``: the coupled certificate on chains of 5 and 6 areas and a ring
+  of 10 (the three-area preset's areas in turn, T = 2 pu; ``tests/test_coupled.py``
+  checks a chain and a ring of 4): its build time, its terminal set and a ±0.05 pu
+  step (on the ring, -0.05 pu) at 3.37 s in every area during every attack
+  (anti-windup): runs, with a trip, with an ``outside`` flag;
 * how tight theorem D's bound is: the most any command sequence within the
   contracts moves each output at 30 s (the linear program of
   ``tests/test_contract.py``), as a share of the bound's part for the commands,
@@ -154,17 +154,19 @@ def chain10() -> None:
 
 def chains() -> None:
     from lfc.filters.coupled import CoupledFilter
-    print("\n| coupled certificate | built in | terminal set | runs | with a trip | "
-          "with an outside flag | time |")
+    print("\n| coupled certificate | built in (a design stored on disk is read back) | "
+          "terminal set | runs | with a trip | with an outside flag | time |")
     print("|---|---|---|---|---|---|---|")
-    for n in (5, 6):
+    for name, grid, signs in (("chain of 5", ring(5, chain=True), (1, -1)),
+                              ("chain of 6", ring(6, chain=True), (1, -1)),
+                              ("ring of 10", ring(10), (-1,))):
         t0 = time.perf_counter()
-        filt = CoupledFilter(ring(n, chain=True), RELAYS)
+        filt = CoupledFilter(grid, RELAYS)
         built = time.perf_counter() - t0
         t0 = time.perf_counter()
-        runs, tripped, outside = battery(ring(n, chain=True), filt, instants=(3.37,),
+        runs, tripped, outside = battery(grid, filt, instants=(3.37,), signs=signs,
                                          anti_windup=(True,))
-        print(f"| chain of {n} | {built:.0f} s | {filt.cert.terminal} | {runs} | {tripped} | "
+        print(f"| {name} | {built:.0f} s | {filt.cert.terminal} | {runs} | {tripped} | "
               f"{outside} | {time.perf_counter() - t0:.0f} s |", flush=True)
 
 
@@ -486,8 +488,8 @@ def main() -> None:
     parser.add_argument("--andes", action="store_true",
                         help="also the red team's winners replayed on ANDES (about 20 min)")
     parser.add_argument("--chains", action="store_true",
-                        help="also the coupled certificate on chains of 5 and 6 areas "
-                             "(about 5 min)")
+                        help="also the coupled certificate on chains of 5 and 6 areas and a "
+                             "ring of 10 (about 10 min)")
     parser.add_argument("--chain10", action="store_true",
                         help="also both certificates on a chain of 10 areas (about 25 min)")
     parser.add_argument("--restoration", action="store_true",
