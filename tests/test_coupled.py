@@ -209,7 +209,8 @@ def test_behind_soft_and_stiff_ties_the_defaults_build_and_ride_the_battery():
     1e-5 on Intel; on an AMD EPYC none does at T = 50 pu, and the solver's ``Q``
     moved inside its inequality does: the next test) both build (``shaped_terminal`` checks the invariance) and ride the battery at one
     instant (anti-windup): 0 trips, 0 ``outside`` (the full battery, 80 runs
-    each, measured 0 / 0 once).  The contract builds there too."""
+    each, 0 / 0: ``python bench/survey_grid_certificates.py --chains``).  The
+    contract builds there too."""
     from lfc.filters.contract import contract_design
     for T in (1.0, 50.0):
         grid = MultiAreaParams.two_area(T=T)
