@@ -97,7 +97,6 @@ Run: python bench/survey_grid_certificates.py [--andes] [--chains] [--chain10] [
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import itertools
 import logging
 import sys
@@ -112,7 +111,8 @@ from lfc.experiments.redteam import MULTI_FAMILIES, coordinated_attacks, coordin
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from test_contract import RELAYS, combined_worst_case, worst_commands  # noqa: E402  (the tests', not copies)
-from test_coupled import LIGHT, THREE, battery, ieee39, kundur, restored_after, ring  # noqa: E402
+from test_coupled import (LIGHT, LIGHT_AGC_GAINS, THREE, agc_alone_on_light,  # noqa: E402
+                          battery, ieee39, kundur, restored_after, ring)
 from test_coupled_baseline import runs_of  # noqa: E402
 from test_coupled_estimate import (NOISE, every_period, on_the_estimate,  # noqa: E402
                                    trips_before_outside)
@@ -383,19 +383,14 @@ def restoration() -> None:
             print(f"| {name} | {label} | {held} | "
                   f"{', '.join('≥ 90' if t >= 90.0 else f'{t:.1f}' for t in times)} s |",
                   flush=True)
-    light = lfc.MultiAreaParams.two_area(LIGHT)
-    default = light.areas[0].k_i / (light.areas[0].D + 1.0 / light.areas[0].droop)
     print("\n| two lightly damped areas, no filter, no attack: AGC gain k_agc (1/s) | "
           "restored after a -0.05 pu step in area 1 | after -0.1 pu | tripped |")
     print("|---|---|---|---|")
-    for k in (0.05, default, 0.1, 0.15, 0.2, 0.3):
-        grid = dataclasses.replace(light, k_agc=(k, k))
-        runs = [simulate_grid_linear(grid, duration=121.0, anti_windup=True,
-                                     loads={1: lfc.Step(-size, start=1.0)}) for size in (0.05, 0.1)]
-        times = [restored_after(r.trace, 2, 1.0) for r in runs]
-        print(f"| {k:.3g}{' (default)' if k == default else ''} | "
-              + " | ".join("≥ 120" if t >= 120.0 else f"{t:.1f} s" for t in times)
-              + f" | {any(r.tripped for r in runs)} |", flush=True)
+    for k in LIGHT_AGC_GAINS:
+        runs = [agc_alone_on_light(k, size) for size in (0.05, 0.1)]
+        print(f"| {k:.3g}{' (default)' if k == LIGHT_AGC_GAINS[1] else ''} | "
+              + " | ".join("≥ 120" if t >= 120.0 else f"{t:.1f} s" for t, _ in runs)
+              + f" | {any(tripped for _, tripped in runs)} |", flush=True)
 
 
 #: (horizon s, load_bound pu) of the mismatch budget's table; the default first
@@ -414,8 +409,8 @@ def mismatch_budget() -> None:
     step = {1: lfc.Step(-0.05, start=3.37)}
     coordinated = {a: {"pc": lfc.Sinusoid(0.6, 0.5, start=1.0)} for a in range(2)}
 
-    def on_andes(filters, attacks, loads=None, **more) -> str:
-        r = lfc.simulate(case, duration=20.0, anti_windup=True, filters=filters,
+    def on_andes(filters, attacks, loads=None, plant=case, **more) -> str:
+        r = lfc.simulate(plant, duration=20.0, anti_windup=True, filters=filters,
                          attacks=attacks, loads=loads, stop_on_trip=True, **more)
         return f"{r.tripped}, {[int(a.alarms.outside.sum()) for a in r.areas]}"
 
@@ -476,11 +471,9 @@ def mismatch_budget() -> None:
     kundur_case = GridCase.kundur()
     kundur_filt = CoupledFilter(grid_design(kundur_case), RELAYS, control_period=0.01,
                                 load_bound=load_bound, horizon=horizon)
-    r = lfc.simulate(kundur_case, duration=20.0, anti_windup=True,
-                     filters={0: kundur_filt, 1: kundur_filt}, attacks=coordinated, loads=step)
+    verdict = on_andes({0: kundur_filt, 1: kundur_filt}, coordinated, step, plant=kundur_case)
     print(f"| ANDES Kundur | coupled (AGC held {kundur_filt.held_after_step(0.05):.1f} s after "
-          f"a 0.05 pu step) | coordinated + step | {r.tripped}, "
-          f"{[int(a.alarms.outside.sum()) for a in r.areas]} |", flush=True)
+          f"a 0.05 pu step) | coordinated + step | {verdict} |", flush=True)
     for size in (0.05, budget):
         runs, tripped, outside = battery(fit, filt, step=size, anti_windup=(True,))
         print(f"| fitted IEEE 39-bus model | coupled | the battery, {size:g} pu steps | "
