@@ -1,8 +1,13 @@
 """The ways this package compiles a function with numba, and how it caches them.
 
-``jit``: compiled once, cached on disk (``__pycache__``), no GIL.  ``inline``:
-the same, and inlined into its compiled callers — for the small functions the
-engine calls every step, where a call's overhead would cost more than the work.
+``jit``: compiled once, cached on disk (``__pycache__``), no GIL; a compiled
+caller links its machine code.  ``inline``: the same, and inlined into its
+compiled callers at numba's level — for the small functions the engine calls
+every step, where a call's overhead would cost more than the work.  Inlining
+at numba's level types and compiles the callee again inside every caller, so a
+large function called once per control period (a filter's decision,
+:func:`lfc.filters.dispatch.decide`) is ``jit``: inlined there, every filter was
+compiled into both of the engine's loops (bench/records/compile.md).
 ``kernel``: the engine's loop, compiled without numba's reference counting
 (``_nrt=False``): it allocates nothing (its caller passes every array, including
 its scratch space), so it needs none, and counting references on every array the

@@ -935,7 +935,7 @@ def grid_estimate(fd: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray,
     return ks[1, n_r:n_r + n_a]
 
 
-@inline
+@jit
 def decide(fd: np.ndarray, x: np.ndarray, u: np.ndarray, p: np.ndarray, k: int,
            u_ref: float, mem: np.ndarray, sums: np.ndarray) -> tuple:
     """Area ``k``'s call (module docstring): the grid's state ``x`` (every area's
@@ -943,7 +943,8 @@ def decide(fd: np.ndarray, x: np.ndarray, u: np.ndarray, p: np.ndarray, k: int,
     (``u[k]`` is area ``k``'s, held) and load ``p`` (pu), the incoming command
     ``u_ref``; ``mem[0]`` the command area ``k`` holds; ``sums`` scratch of
     :func:`rows_scratch` entries.  Returns what
-    :func:`lfc.filters.dispatch.decide` does, for area ``k``'s outputs."""
+    :func:`lfc.filters.dispatch.decide` does, for area ``k``'s outputs; compiled,
+    as that one is, as a function of its own that the engine's loops link."""
     if not _valid(x, u, p, u_ref):
         return hold_invalid(mem, u_ref)
     lo_f, hi_f, lo_r, hi_r, lo_h, hi_h = _intervals(fd, x, u, p, k, sums)

@@ -14,7 +14,7 @@ import weakref
 import numba as nb
 import numpy as np
 
-from lfc._jit import inline, jit
+from lfc._jit import jit
 from lfc.filters.certified import CertifiedFilter
 from lfc.filters.certified import decide as decide_certified
 from lfc.filters.contract import ContractFilter
@@ -60,13 +60,17 @@ def _decide_python(fd: np.ndarray, x: np.ndarray, u_ref: float, p: float,
     return u, flags, h0, h1, g0, g1, y0, y1, d0, d1
 
 
-@inline
+@jit
 def decide(method: int, fd: np.ndarray, x: np.ndarray, u_ref: float, p: float,
            mem: np.ndarray) -> tuple:
     """One call of filter ``method`` with data ``fd`` at state ``x`` (5,), incoming
     command ``u_ref`` and assumed load ``p`` (pu); ``mem`` is the scenario's
     memory.  Returns ``(u, flags, h_freq, h_rocof, margin_freq, margin_rocof,
-    y_freq, y_rocof, detail0, detail1)``."""
+    y_freq, y_rocof, detail0, detail1)``.
+
+    Compiled as a function of its own, not inlined: the engine's two loops call
+    it once per control period, and link its machine code instead of compiling
+    every filter into each of them (``lfc._jit``)."""
     if method == PAPER:
         return decide_paper(fd, x, u_ref, p, mem)
     if method == CERTIFIED:
