@@ -237,3 +237,25 @@ def _computing(path: Path) -> Iterator[None]:
         return
     with handle, _held(handle):
         yield
+
+
+# -- how long long phases took, for the next run's progress estimates ----------------------
+def record_seconds(phase: str, seconds: float) -> None:
+    """Keep how long ``phase`` (``"compile"``, ``"andes-codegen"``, ...) took, in
+    ``$LFC_CACHE_DIR/timings.json`` (best effort: an unwritable folder keeps nothing)."""
+    path = cache_folder() / "timings.json"
+    with contextlib.suppress(OSError, ValueError):
+        with _computing(path):
+            times = json.loads(path.read_text()) if path.exists() else {}
+            times[phase] = round(float(seconds), 1)
+            write_atomic(path, json.dumps(times, sort_keys=True))
+
+
+def recorded_seconds(phase: str) -> float | None:
+    """How long ``phase`` took the last time it was recorded (s); None if never (or
+    the file is damaged)."""
+    try:
+        value = json.loads((cache_folder() / "timings.json").read_text()).get(phase)
+        return float(value) if value is not None else None
+    except (OSError, ValueError, TypeError, AttributeError):
+        return None

@@ -1,33 +1,81 @@
 """Compiling the engine's two loops into numba's on-disk cache, in parallel.
 
 The engine's loops — :func:`lfc.engine._run`, the scalar reference, and
-:func:`lfc.engine._run_lanes` — take about 50 s each to compile (measured on
-the 2-core machine of ``bench/README.md``), once per change of the compiled
-sources; then every process loads them from the cache (:mod:`lfc._jit`) in a
-fraction of a second.  But a process that starts while the cache is cold
-compiles its own copy: parallel work started on a cold cache (the test suite's
-workers, ``reproduce``'s kernels) compiled the same loops once per process
-(measured: 10 tests of the suite took 60–170 s each that take under 1 s warm).
-:func:`compile_kernels` compiles each loop once, in its own process, before
-such work starts.
+:func:`lfc.engine._run_lanes` — are compiled once per change of the compiled
+sources (about a minute of CPU on 2 cores: ``bench/records/compile.md``); then every
+process loads them from the cache (:mod:`lfc._jit`) in a fraction of a second.  But
+a process that starts while the cache is cold compiles its own copy: parallel work
+started on a cold cache (the test suite's workers, ``reproduce``'s kernels) would
+compile the same loops once per process.  :func:`compile_kernels` compiles each loop
+once, in its own process, before such work starts; :func:`start_compiling` does it in
+the background while the caller goes on (the test suite collects meanwhile).
+
+How long the last compilation took is kept in ``$LFC_CACHE_DIR/timings.json``
+(:func:`lfc._files.recorded_seconds`): the progress line's estimate.
 """
 
 from __future__ import annotations
 
-from concurrent.futures import ProcessPoolExecutor
+import sys
+import time
+from collections.abc import Callable
+from concurrent.futures import Future, ProcessPoolExecutor
 from multiprocessing import get_context
 
 LOOPS = ("scalar", "lanes")
+#: s: the estimate before any compilation was recorded (bench/records/compile.md)
+FIRST_ESTIMATE = 60.0
 
 
-def compile_kernels() -> None:
-    """Compile both loops, each in a fresh process, both at once; nothing when
-    both are in the cache already (a rerun of ``reproduce`` pays no start-up)."""
+class Compiling:
+    """Both loops compiling in the background; :meth:`result` waits for them (and
+    raises what a compilation raised)."""
+
+    def __init__(self, pool: ProcessPoolExecutor | None, futures: list[Future],
+                 started: float) -> None:
+        self._pool, self._futures, self._started = pool, futures, started
+
+    def result(self) -> None:
+        if self._pool is None:
+            return
+        try:
+            for future in self._futures:
+                future.result()
+        finally:
+            self._pool.shutdown()
+            self._pool = None
+        from lfc._files import record_seconds
+        record_seconds("compile", time.monotonic() - self._started)
+
+
+def _cached() -> bool:
     from lfc import engine
-    if all(_in_cache(loop) for loop in (engine._run, engine._run_lanes)):
-        return
-    with ProcessPoolExecutor(len(LOOPS), mp_context=get_context("spawn")) as pool:
-        list(pool.map(compile_loop, LOOPS))
+    return all(_in_cache(loop) for loop in (engine._run, engine._run_lanes))
+
+
+def start_compiling(say: Callable[[str], None] | None = None) -> Compiling:
+    """Start compiling both loops, each in a fresh process, both at once, and return
+    at once; nothing when both are in the cache already.  ``say`` (default: a line on
+    stderr) hears what starts, with the estimate."""
+    if _cached():
+        return Compiling(None, [], 0.0)
+    from lfc._files import recorded_seconds
+    estimate = recorded_seconds("compile") or FIRST_ESTIMATE
+    (say or _stderr)(f"compiling the engine's 2 loops into numba's cache, once per change "
+                     f"of the compiled code (about {estimate:.0f} s)")
+    pool = ProcessPoolExecutor(len(LOOPS), mp_context=get_context("spawn"))
+    return Compiling(pool, [pool.submit(compile_loop, loop) for loop in LOOPS],
+                     time.monotonic())
+
+
+def compile_kernels(say: Callable[[str], None] | None = None) -> None:
+    """Compile both loops (:func:`start_compiling`) and wait for them; nothing when
+    both are in the cache already (a rerun of ``reproduce`` pays no start-up)."""
+    start_compiling(say).result()
+
+
+def _stderr(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
 
 
 def _in_cache(dispatcher) -> bool:

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import probe
 import pytest
 
 from lfc import batch
@@ -99,21 +100,21 @@ def test_ctrl_c_on_batch_stops_its_workers_and_leaves_only_complete_chunks(tmp_p
     """(SIGTERM too: the forked workers inherit its handler and must still die
     when the pool terminates them; they hung the batch once.)"""
     rng = np.random.default_rng(0)
-    n = 20000
+    n, size = 4000, 100       # 40 chunks of 100 rows: about 0.3 s each on one core
     pd.DataFrame({"waveform": "sinusoid", "channel": "pc", "amplitude": rng.uniform(0, 2, n),
                   "freq_hz": rng.uniform(0.1, 2, n), "start": 1.0, "alpha": 20.0,
                   "Ts": 0.25}).to_csv(tmp_path / "table.csv", index=False)
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "lfc", "batch", str(tmp_path / "table.csv"), "--duration",
-           "30", "--out", str(out), "--chunk-size", "400"]
+           "30", "--out", str(out), "--chunk-size", str(size)]
     chunks = out / "chunks"
     elapsed = interrupt(cmd, lambda: len(list(chunks.glob("chunk_*.csv"))) >= 1, str(tmp_path),
                         sig=sig)
     assert elapsed < STOP_WITHIN
     kept = sorted(chunks.glob("chunk_*.csv"))
-    assert 1 <= len(kept) < n // 400 and not (out / "results.csv").exists()
+    assert 1 <= len(kept) < n // size and not (out / "results.csv").exists()
     for path in kept:                       # every file left is whole, none partial
-        assert batch._read_chunk(path, 400) is not None
+        assert batch._read_chunk(path, size) is not None
     done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
     assert len(pd.read_csv(out / "results.csv")) == n
@@ -193,7 +194,7 @@ def test_an_interrupted_or_damaged_executed_notebook_is_not_complete(tmp_path, t
 def test_two_concurrent_sweeps_on_one_folder_both_finish_with_complete_results(tmp_path):
     """Issue "Hardened": each run folder is locked while a notebook fills it; the
     second sweep waits, finds the run finished and reuses it."""
-    cmd = [sys.executable, "-m", "lfc", "sweep", "notebooks/02_fig4_rocof_attack.ipynb",
+    cmd = [sys.executable, "-m", "lfc", "sweep", str(probe.NOTEBOOK),
            "-p", "alpha", "3", "20", "--jobs", "1", "--out", str(tmp_path / "sweep")]
     procs = [subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                               text=True) for _ in range(2)]
@@ -204,7 +205,7 @@ def test_two_concurrent_sweeps_on_one_folder_both_finish_with_complete_results(t
     assert sorted(set(table.alpha)) == [3, 20]
     for run in ("alpha=3", "alpha=20"):
         folder = tmp_path / "sweep" / run
-        assert book.complete(folder / "02_fig4_rocof_attack.ipynb")
+        assert book.complete(folder / probe.NOTEBOOK.name)
         json.loads((folder / "metrics.json").read_text())
         assert not list(folder.glob("*.tmp"))
 

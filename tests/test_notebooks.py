@@ -1,4 +1,7 @@
-"""Every notebook through papermill with short parameters; reproduce and sweep."""
+"""Every notebook through papermill with short parameters (the exhaustive tier: each
+chapter's claims are checked through the API by tests/test_chapters.py, and every
+chapter is executed by ``reproduce``); reproduce, sweep and the caches on the probe
+chapter (tests/probe.py)."""
 
 import ast
 import json
@@ -7,6 +10,7 @@ import subprocess
 from pathlib import Path
 
 import pandas as pd
+import probe
 import pytest
 
 from lfc.experiments import scenarios
@@ -63,6 +67,7 @@ def output_problems(notebook: Path, tmp_path: Path) -> list[str]:
     return found
 
 
+@pytest.mark.exhaustive
 @pytest.mark.parametrize("name, plant", RUNS)
 def test_notebook_runs_shows_and_writes_its_figures_and_metrics(name, plant, tmp_path):
     c = chapter(name)
@@ -76,6 +81,7 @@ def test_notebook_runs_shows_and_writes_its_figures_and_metrics(name, plant, tmp
     assert json.loads((tmp_path / "res" / "claims.json").read_text())
 
 
+@pytest.mark.exhaustive
 def test_multi_area_notebook_shows_its_figures_and_its_claims_hold(tmp_path):
     """Notebook 09 with its short parameters and its claims checked (the claims
     run the full load step and attacks; only the red team is shortened)."""
@@ -102,6 +108,7 @@ ONE_ALPHA = [3.0]
 ONE_PROCESS = 1
 
 
+@pytest.mark.exhaustive
 @pytest.mark.long(220)
 def test_multi_area_notebook_on_the_kundur_testbed(tmp_path):
     """Notebook 09 on ANDES with its claims checked: AGC restores the schedule,
@@ -130,6 +137,7 @@ def test_multi_area_notebook_on_the_kundur_testbed(tmp_path):
     assert all("on the fitted design model itself" in why for why in deviations.values())
 
 
+@pytest.mark.exhaustive
 @pytest.mark.long(410)
 def test_multi_area_notebook_on_the_ieee39_testbed(tmp_path):
     """Notebook 09 on ANDES' IEEE 39-bus system, claims checked: AGC restores the
@@ -156,6 +164,7 @@ def test_multi_area_notebook_on_the_ieee39_testbed(tmp_path):
         assert not any(r["tripped"] or r["outside"] for r in runs)
 
 
+@pytest.mark.exhaustive
 def test_attack_surface_notebook_writes_maps_tables_and_claims(tmp_path):
     run_chapter("surface", tmp_path)
     surface = pd.read_csv(tmp_path / "res" / "surface.csv")
@@ -182,6 +191,7 @@ def tracked_changes() -> str:
     return out.stdout
 
 
+@pytest.mark.exhaustive
 @pytest.mark.long(85)
 def test_red_team_notebook_writes_results_figures_and_the_comparison_table(tmp_path):
     before = tracked_changes()
@@ -199,6 +209,7 @@ def test_red_team_notebook_writes_results_figures_and_the_comparison_table(tmp_p
     assert tracked_changes() == before   # the README and every tracked file untouched
 
 
+@pytest.mark.exhaustive
 @pytest.mark.parametrize("name", ["tutorial", "kalman"])
 def test_linear_only_notebooks_refuse_the_testbed(name, tmp_path):
     nb = runner.NOTEBOOKS_DIR / runner.FIGURES[name]
@@ -261,42 +272,47 @@ def test_reproduce_without_its_cache_runs_every_andes_run_too(tmp_path, monkeypa
 
 
 def test_a_broken_claim_fails_the_notebook(tmp_path):
-    nb = runner.NOTEBOOKS_DIR / runner.FIGURES["fig4"]
     with pytest.raises(runner.pm.PapermillExecutionError, match="claim"):
-        runner.execute(nb, tmp_path / nb.name, {"amplitude": 0.1, "duration": 3.0,
-                                                "figures_dir": str(tmp_path),
-                                                "results_dir": str(tmp_path)})
+        runner.execute(probe.NOTEBOOK, tmp_path / "probe.ipynb",
+                       {"amplitude": 0.1, "figures_dir": str(tmp_path),
+                        "results_dir": str(tmp_path)})
 
 
-def test_reproduce_only_fig4(tmp_path, capsys):
-    code = main(["reproduce", "--only", "fig4", "--plant", "linear",
+@pytest.fixture
+def probe_chapter(monkeypatch):
+    """The probe among the chapters (tests/probe.py)."""
+    probe.register(monkeypatch.setattr)
+
+
+def test_reproduce_only_one_chapter(tmp_path, capsys, probe_chapter):
+    code = main(["reproduce", "--only", "probe", "--plant", "linear",
                  "--figures-dir", str(tmp_path / "fig"),
                  "--build-dir", str(tmp_path / "build")])
     out = capsys.readouterr().out
-    assert code == 0 and "(a) attack trips ROCOF without SCC" in out
-    rows = [line for line in out.splitlines() if line.strip().startswith("fig4 ")]
-    assert len(rows) == 6 and all(line.split()[-1] == "yes" for line in rows[:5])
+    assert code == 0 and "the SCC keeps ROCOF inside" in out
+    rows = [line for line in out.splitlines() if line.strip().startswith("probe ")]
+    assert len(rows) == 3 and all(line.split()[-1] == "yes" for line in rows[:2])
     assert "wall on" in out                  # the time of each notebook is reported
-    assert (tmp_path / "fig" / "fig4_rocof_attack.png").exists()
-    assert (tmp_path / "build" / "reproduce" / "fig4" / "02_fig4_rocof_attack.ipynb").exists()
+    assert (tmp_path / "fig" / "probe.png").exists()
+    assert (tmp_path / "build" / "reproduce" / "probe" / "probe.ipynb").exists()
 
 
 def test_reproduce_reads_an_unchanged_run_back_and_reruns_a_changed_or_damaged_one(
-        tmp_path, capsys):
-    args = ["reproduce", "--only", "fig4", "--plant", "linear", "--figures-dir",
+        tmp_path, capsys, probe_chapter):
+    args = ["reproduce", "--only", "probe", "--plant", "linear", "--figures-dir",
             str(tmp_path / "fig"), "--build-dir", str(tmp_path / "build")]
-    figure = tmp_path / "fig" / "fig4_rocof_attack.png"
+    figure = tmp_path / "fig" / "probe.png"
     assert main(args) == 0 and "executed" in capsys.readouterr().out
     first = figure.read_bytes()
     assert main(args) == 0                         # nothing changed: read back, says so
     out = capsys.readouterr().out
     assert "cached (unchanged)" in out and "1 of 1 unchanged since their last run" in out
-    assert "(a) attack trips ROCOF without SCC" in out and figure.read_bytes() == first
+    assert "the SCC keeps ROCOF inside" in out and figure.read_bytes() == first
     figure.write_bytes(b"damaged")                 # a damaged output: run again
     assert main(args) == 0 and "executed" in capsys.readouterr().out
     assert figure.read_bytes() == first            # byte-identical
     assert main(args + ["--no-cache"]) == 0 and "executed" in capsys.readouterr().out
-    record = tmp_path / "build" / "reproduce" / "fig4" / runner.CACHE_FILE
+    record = tmp_path / "build" / "reproduce" / "probe" / runner.CACHE_FILE
     record.write_text(record.read_text().replace('"key": "', '"key": "0'))   # stale
     assert main(args) == 0 and "executed" in capsys.readouterr().out
 
@@ -309,16 +325,17 @@ def test_the_run_key_covers_the_notebook_and_its_parameters(tmp_path):
     assert key != runner.run_key(nb, {"duration": 4.0}) != runner.run_key(other, {"duration": 3.0})
 
 
-def test_quick_writes_its_figures_under_build_never_into_figures(tmp_path):
+def test_quick_writes_its_figures_under_build_never_into_figures(tmp_path, probe_chapter):
     figures = tmp_path / "fig"
-    outcome, = runner.reproduce(["tutorial"], quick=True, figures_dir=figures,
+    outcome, = runner.reproduce(["probe"], quick=True, figures_dir=figures,
                                 build_dir=tmp_path / "build")
     assert outcome.ok and not figures.exists()
-    assert (tmp_path / "build" / "quick" / "figures" / "tutorial_attack.png").exists()
+    assert (tmp_path / "build" / "quick" / "figures" / "probe.png").exists()
     with pytest.raises(ValueError, match="quick runs the linear model only"):
         runner.reproduce(["fig4"], "testbed", quick=True, build_dir=tmp_path / "b")
 
 
+@pytest.mark.exhaustive
 def test_the_tutorials_attack_waveform_is_a_parameter(tmp_path):
     """Chapter 01 takes ``waveform`` ("sinusoid" or "square"): a square wave runs
     (figures and metrics written, the parameter recorded); another name fails
@@ -331,6 +348,7 @@ def test_the_tutorials_attack_waveform_is_a_parameter(tmp_path):
         run_chapter("tutorial", tmp_path / "bad", waveform="sawtooth", check_claims=False)
 
 
+@pytest.mark.exhaustive
 @pytest.mark.parametrize("name, knobs", [
     ("tutorial", {"M": 2.0}), ("tutorial", {"relay_category": "I"}),
     ("tutorial", {"relay_category": "II"}),
@@ -401,15 +419,11 @@ def test_two_processes_that_want_one_stored_result_compute_it_once(tmp_path):
     assert len(list(tmp_path.glob("ran-*"))) == 1
 
 
-def test_sweep_table_and_resume(tmp_path, monkeypatch):
-    nb = runner.NOTEBOOKS_DIR / runner.FIGURES["fig4"]
+def test_sweep_table_and_resume(tmp_path):
     out = tmp_path / "sweep"
     grid = {"alpha": [3.0, 20.0], "duration": [2.0]}
-    monkeypatch.setenv("LFC_CACHE_DIR", str(tmp_path / "cache"))
-    table = runner.sweep(nb, grid, out)
-    scans = {p: p.stat().st_mtime_ns for p in (tmp_path / "cache").glob("fig4-edges-*.json")}
-    assert len(scans) == 2                                               # one per alpha
-    assert len(table) == 8 and set(table.panel) == {"a", "b", "c", "d"}
+    table = runner.sweep(probe.NOTEBOOK, grid, out)
+    assert len(table) == 4 and set(table.panel) == {"a", "b"}
     assert set(table.alpha) == {3.0, 20.0}
     assert {"first_trip_relay", "first_trip_t", "max_abs_rocof_meas"} <= set(table.columns)
     assert (out / "sweep.csv").exists()
@@ -417,7 +431,7 @@ def test_sweep_table_and_resume(tmp_path, monkeypatch):
     # interrupt: one run lost its marker; the rerun repeats only that one
     lost = out / runner.run_id({"alpha": 3.0, "duration": 2.0}) / "done.json"
     lost.unlink()
-    again = runner.sweep(nb, grid, out)
+    again = runner.sweep(probe.NOTEBOOK, grid, out)
     assert again.equals(table)
     for path, mtime in done.items():
         if path != lost:
@@ -427,12 +441,9 @@ def test_sweep_table_and_resume(tmp_path, monkeypatch):
     stale = out / runner.run_id({"alpha": 20.0, "duration": 2.0}) / "done.json"
     stale.write_text(json.dumps({"point": {"alpha": 20.0, "duration": 2.0}, "key": "other"}))
     with pytest.warns(UserWarning, match="stale or damaged .made by another notebook"):
-        assert runner.sweep(nb, grid, out).equals(table)
+        assert runner.sweep(probe.NOTEBOOK, grid, out).equals(table)
     assert json.loads(stale.read_text())["key"] != "other"
-    assert scans == {p: p.stat().st_mtime_ns                        # the rerun read its scan
-                     for p in (tmp_path / "cache").glob("fig4-edges-*.json")}   # back
     # the table plotted: one line per panel, labelled axes with units, the relay dashed
-    from lfc.repro.cli import main
     assert main(["plot-sweep", str(out / "sweep.csv"), "-x", "alpha", "-y",
                  "max_abs_rocof_meas"]) == 0
     assert (out / "sweep_max_abs_rocof_meas_vs_alpha.png").stat().st_size > 10_000
@@ -442,10 +453,26 @@ def test_sweep_table_and_resume(tmp_path, monkeypatch):
     assert ax.get_xlabel() == "Barrier gain α (1/s)"
     assert ax.get_ylabel() == "Peak |ROCOF| measured (pu/s)"
     labels = ax.get_legend_handles_labels()[1]
-    assert labels == ["panel a", "panel b", "panel c", "panel d", "ROCOF relay setting"]
+    assert labels == ["panel a", "panel b", "ROCOF relay setting"]
     with pytest.raises(ValueError, match="y='rocof' is not a column of the sweep table"):
         sweep_figure(table, "alpha", "rocof")
     assert main(["plot-sweep", str(out / "sweep.csv"), "-x", "alhpa", "-y", "alarms"]) == 2
+
+
+@pytest.mark.exhaustive
+def test_a_chapters_sweep_reads_its_cached_scan_back(tmp_path, monkeypatch):
+    """Chapter 02 swept over two α: its edge scan is computed once per α and read
+    back from ``$LFC_CACHE_DIR`` when the sweep runs again."""
+    nb = runner.NOTEBOOKS_DIR / runner.FIGURES["fig4"]
+    grid = {"alpha": [3.0, 20.0], "duration": [2.0]}
+    monkeypatch.setenv("LFC_CACHE_DIR", str(tmp_path / "cache"))
+    table = runner.sweep(nb, grid, tmp_path / "sweep")
+    scans = {p: p.stat().st_mtime_ns for p in (tmp_path / "cache").glob("fig4-edges-*.json")}
+    assert len(scans) == 2 and len(table) == 8                           # one per alpha
+    (tmp_path / "sweep" / runner.run_id({"alpha": 3.0, "duration": 2.0}) / "done.json").unlink()
+    assert runner.sweep(nb, grid, tmp_path / "sweep").equals(table)
+    assert scans == {p: p.stat().st_mtime_ns
+                     for p in (tmp_path / "cache").glob("fig4-edges-*.json")}
 
 
 @pytest.mark.parametrize("args, message", [
@@ -659,6 +686,7 @@ def test_the_claims_verdict_explains_a_documented_deviation_on_the_page(tmp_path
     assert unchecked.columns.tolist() == ["claim", "holds in this run (not checked)", "why not"]
 
 
+@pytest.mark.exhaustive
 @pytest.mark.long(65)
 def test_coupled_certificate_notebook_shows_its_figure_and_its_claims_hold(tmp_path):
     """Chapter 10 with its short parameters: both figures written and shown, and
@@ -670,6 +698,7 @@ def test_coupled_certificate_notebook_shows_its_figure_and_its_claims_hold(tmp_p
     assert len(claims) == 7 and all(claims.values())
 
 
+@pytest.mark.exhaustive
 def test_wire_notebook_shows_its_figures_and_its_claims_hold(tmp_path):
     """Notebook 11 with its short parameters and its claims checked (over Modbus/TCP
     the attack equals the simulation, trips without the filter, not with it; the

@@ -109,7 +109,7 @@ def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
         If ANDES does not converge (with the time and ANDES' reason).
     """
     call = locals()                         # the arguments, with their defaults
-    return _run_stored(lambda: _setup(**call), stored_runs.scenario_keys(call)[1])[0]
+    return _run_stored(lambda: _setup(**call), *stored_runs.scenario_keys(call))[0]
 
 
 @dataclass
@@ -202,12 +202,13 @@ def _setup(params: MultiAreaParams, *, duration: float, attacks, loads, filters,
                   tc, built, settings)
 
 
-def _run_stored(make: Callable[[], _Setup], key: str | None
+def _run_stored(make: Callable[[], _Setup], share: bytes | None, key: str | None
                 ) -> tuple[MultiAreaResult, _Shared | None, bool]:
     """The result of the setup ``make()`` builds, its run if it is shareable
     (else None), and whether ANDES ran: a run stored under ``key``
-    (:mod:`lfc.testbed.stored_runs`) that its generator sides replay, or run on
-    ANDES and stored (``key`` None: run, not stored)."""
+    (:mod:`lfc.testbed.stored_runs`; ``share``: the call's pickle) that its
+    generator sides replay, or run on ANDES and stored (``key`` None: run, not
+    stored)."""
     setup = make()
     if not setup.shareable:
         return _run(setup)[0], None, True
@@ -219,7 +220,7 @@ def _run_stored(make: Callable[[], _Setup], key: str | None
             return result, run, False
         setup = make()                  # its generator sides have moved on: fresh ones
     result, run = _run(setup)
-    stored_runs.store(key, run, run.commands.tobytes())
+    stored_runs.store(key, run, run.commands.tobytes(), share)
     return result, run, True
 
 
@@ -392,6 +393,7 @@ def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
     # each scenario's key to share a run in this table, and to read one back from disk
     keys, store_keys = map(list, zip(*(stored_runs.scenario_keys(_bound(params, kw))
                                        for kw in calls)))
+    shares = list(keys)                  # the calls' pickles (keys[i] is cleared once used)
     leader = {}                          # a group's key -> the scenario that runs for it
     for i in sorted(range(len(calls)), key=lambda i: (bool(calls[i].get("filters")), i)):
         if keys[i] is not None:
@@ -449,7 +451,8 @@ def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
             replay_ready()
             if todo:
                 i = next_run()
-                finished(i, *_run_call(params, calls[i], store_keys[i], keys[i] is not None))
+                finished(i, *_run_call(params, calls[i], shares[i], store_keys[i],
+                                       keys[i] is not None))
     else:
         from concurrent.futures import FIRST_COMPLETED, wait
 
@@ -462,8 +465,8 @@ def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
                     i = next_run()
                     if i is None:
                         break
-                    running[pool.submit(_run_call, params, calls[i], store_keys[i],
-                                         keys[i] is not None)] = i
+                    running[pool.submit(_run_call, params, calls[i], shares[i],
+                                        store_keys[i], keys[i] is not None)] = i
                 done, _ = wait(running, timeout=POLL, return_when=FIRST_COMPLETED)
                 for future in done:
                     finished(running.pop(future), *future.result())
@@ -485,10 +488,10 @@ def _bound(params: MultiAreaParams, call: dict) -> dict:
     return bound.arguments
 
 
-def _run_call(params: MultiAreaParams, call: dict, key: str | None, keep: bool
-              ) -> tuple[MultiAreaResult, _Shared | None, bool]:
+def _run_call(params: MultiAreaParams, call: dict, share: bytes | None, key: str | None,
+              keep: bool) -> tuple[MultiAreaResult, _Shared | None, bool]:
     """Run a table's scenario (in a worker process), reading back a run stored
-    under ``key``; what it leaves to share if ``keep`` and it is shareable;
-    whether ANDES ran."""
-    result, run, andes = _run_stored(lambda: _setup_call(params, call), key)
+    under ``key`` (``share``: its call's pickle); what it leaves to share if
+    ``keep`` and it is shareable; whether ANDES ran."""
+    result, run, andes = _run_stored(lambda: _setup_call(params, call), share, key)
     return result, (run if keep else None), andes

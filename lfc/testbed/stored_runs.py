@@ -4,35 +4,53 @@ A grid run on ANDES is a function of its plant-side inputs (the case, loads,
 relays, times) and of the commands its generator sides return at every control
 sample (:attr:`lfc.testbed.loop.AndesLoop.samples`).  A finished run is stored
 under a key of every argument of its :func:`~lfc.testbed.grid_plant.simulate_andes_grid`
-call but its ``filters`` (:func:`scenario_keys`); a later call with the same key
-replays each stored run's samples through its own generator sides, and where
-they return the same commands, bit for bit, at every sample, its result is
-that run with its own generator sides' records: equal to running it, without
-ANDES.  A call whose filters act differently runs, and its run is stored beside
-the others.
+call but its ``filters`` (:func:`scenario_keys`) and of the code that turns commands
+into the plant's record (:func:`plant_digest`: the ANDES adapter, the grid cases, the
+relays, the load signals, and the versions of ANDES and the numerical packages under
+it).  A later call with the same key replays each stored run's samples through its
+own generator sides, and where they return the same commands, bit for bit, at every
+sample, its result is that run with its own generator sides' records: equal to
+running it, without ANDES.  A call whose filters act differently runs, and its run is
+stored beside the others.  So an edit of a filter, the engine or a notebook never
+makes a stored run stale; an edit of the plant side makes every one.
 
-Where: ``$LFC_CACHE_DIR/andes-runs/`` (:func:`lfc._files.cache_folder`), at most
-``LIMIT`` bytes, the oldest removed first; each file with its SHA-256 (a damaged
-one is run again, with a warning).  The key covers the sources of the package,
-the environment and ``OPENBLAS_CORETYPE`` (:func:`lfc._files.content_key`), so
-a run of other code is never found.  ``LFC_ANDES_RUNS=off`` in the environment
-turns the store off (every call runs ANDES).  The files are pickles: keep
-``$LFC_CACHE_DIR`` a folder only you can write to.
+Two places are searched, in this order:
+
+* ``$LFC_CACHE_DIR/andes-runs/`` (:func:`lfc._files.cache_folder`), this machine's
+  runs, per BLAS kernel (``OPENBLAS_CORETYPE``): at most ``LIMIT`` bytes, the oldest
+  removed first, each file with its SHA-256 (a damaged one is run again, with a
+  warning);
+* the recordings committed with the package (``lfc/testbed/recordings/``, ``RECORDINGS``):
+  the runs the test suite's default tier and the chapters replay, recorded on one
+  machine, read on every machine and kernel (as the committed fits are).  A run
+  is written there, too, when ``$LFC_ANDES_RECORD`` is ``write``
+  (:func:`recording`).  ``tests/test_stored_runs.py`` checks that every recording is
+  of the plant side as it is now; the exhaustive tier, that ANDES given a
+  recording's commands computes its record.
+
+``LFC_ANDES_RUNS=off`` in the environment turns both off (every call runs ANDES);
+``LFC_ANDES_RECORDINGS=off`` the recordings alone.
+The files are pickles: keep ``$LFC_CACHE_DIR`` a folder only you can write to.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import io
+import lzma
 import os
 import pickle
+import sys
 import types
+import warnings
 from collections.abc import Iterator
+from dataclasses import dataclass
+from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from lfc._files import (cache_folder, content_key, pickled, prune, read_stored, unpickled,
-                        write_stored)
+from lfc._files import cache_folder, pickled, prune, read_stored, unpickled, write_stored
 
 #: bytes: the most the folder keeps (the oldest files are removed first); a
 #: 20 s run of a two-area grid at 5 ms is about 0.5 MB, of 120 s 3 MB
@@ -40,10 +58,29 @@ LIMIT = 512 * 2**20
 
 #: the environment variable that turns the store off (``off``)
 SWITCH = "LFC_ANDES_RUNS"
+#: the environment variable that writes every run ANDES computes into ``RECORDINGS``
+RECORD = "LFC_ANDES_RECORD"
+#: the environment variable that leaves the committed recordings unread (``off``)
+READ_RECORDINGS = "LFC_ANDES_RECORDINGS"
+#: the committed recordings
+RECORDINGS = Path(__file__).resolve().parent / "recordings"
+_MAGIC = b"lfc-andes-recording 1\n"
 
 #: the modules whose functions and classes a key may name: their code is covered
 #: by the key (the package's sources, the installed numerical packages)
 _TRUSTED = ("lfc", "numpy", "pandas", "builtins", "copyreg", "collections", "_codecs")
+
+_PACKAGE = Path(__file__).resolve().parents[1]
+#: the package's files whose code turns a run's commands into its record: the ANDES
+#: adapter and its grid cases, ANDES' set-up, the relays and the load signals (and
+#: the compiled helpers they use), and this module (the record's format)
+PLANT_FILES = ("_jit.py", "relays.py", "signals.py", "testbed/andes_setup.py",
+               "testbed/grid.py", "testbed/grid_plant.py", "testbed/loop.py",
+               "testbed/stored_runs.py")
+#: functions of other modules the plant side calls (``module:function``)
+PLANT_FUNCTIONS = ("lfc.engine:sample_signal",)
+#: the installed packages a run depends on
+PLANT_PACKAGES = ("andes", "kvxopt", "numba", "numpy", "scipy", "sympy")
 
 
 def enabled() -> bool:
@@ -61,6 +98,66 @@ def enabled() -> bool:
     return value != "off"
 
 
+def recording() -> bool:
+    """Whether a run ANDES computes is also written to ``RECORDINGS``
+    (``$LFC_ANDES_RECORD`` is ``write``; unset: no).
+
+    Raises
+    ------
+    ValueError
+        For any other value.
+    """
+    value = os.environ.get(RECORD, "").strip().lower()
+    if value not in ("", "write"):
+        raise ValueError(f"{RECORD} must be 'write' (or unset), got {os.environ[RECORD]!r}")
+    return value == "write"
+
+
+def recordings_read() -> bool:
+    """Whether the committed recordings are read (``$LFC_ANDES_RECORDINGS`` unset or
+    ``on``; ``off``: not, as when recording)."""
+    value = os.environ.get(READ_RECORDINGS, "").strip().lower()
+    if value not in ("", "on", "off"):
+        raise ValueError(f"{READ_RECORDINGS} must be 'on' or 'off' (or unset: on), got "
+                         f"{os.environ[READ_RECORDINGS]!r}")
+    return value != "off" and not recording()
+
+
+def plant_digest(root: Path = _PACKAGE) -> str:
+    """SHA-256 of the plant side: the files ``PLANT_FILES`` under ``root`` (the
+    package), the source of ``PLANT_FUNCTIONS``, the versions of ``PLANT_PACKAGES``
+    and Python's."""
+    return _plant_digest(str(root))
+
+
+@functools.lru_cache(maxsize=None)
+def _plant_digest(root: str) -> str:
+    digest = hashlib.sha256(f"python {sys.version_info[:2]}".encode())
+    for name in PLANT_FILES:
+        digest.update(name.encode() + (Path(root) / name).read_bytes())
+    for name in PLANT_FUNCTIONS:
+        module, function = name.split(":")
+        path = Path(root) / (module.split(".", 1)[1].replace(".", "/") + ".py")
+        source = _function_source(path, function)
+        digest.update(name.encode() + source.encode())
+    for package in PLANT_PACKAGES:
+        try:
+            digest.update(f"{package} {metadata.version(package)}".encode())
+        except metadata.PackageNotFoundError:
+            digest.update(f"{package} absent".encode())
+    return digest.hexdigest()
+
+
+def _function_source(path: Path, name: str) -> str:
+    """The source of the top-level function ``name`` in the file ``path``."""
+    import ast
+    text = path.read_text()
+    for node in ast.parse(text).body:
+        if isinstance(node, ast.FunctionDef) and node.name == name:
+            return ast.get_source_segment(text, node) or ""
+    raise ValueError(f"{path} defines no function {name!r} (PLANT_FUNCTIONS)")
+
+
 def scenario_keys(call: dict[str, Any]) -> tuple[bytes | None, str | None]:
     """A call's two keys, from one pickle of its arguments but ``filters``.
 
@@ -69,14 +166,14 @@ def scenario_keys(call: dict[str, Any]) -> tuple[bytes | None, str | None]:
     share : bytes or None
         The pickle: calls of one process with equal ones differ in their filters
         alone, and share a run (:func:`~lfc.testbed.grid_plant.simulate_andes_grid_table`).
-        None for a call that shares with none: one over a ``network`` (its link
-        has a state of its own), or one whose arguments do not pickle.
+        None for a call that shares with none: one over a ``network`` (its link has
+        a state of its own), or one whose arguments do not pickle.
     store : str or None
-        The key its runs are stored under: the pickle with
-        :func:`lfc._files.content_key`.  None where ``share`` is, when the store
-        is off (:func:`enabled`), or when the pickle names a function or class
-        from outside the package, numpy and pandas (a notebook's own signal: its
-        code is not in the key, and an edited one would find the old run).
+        The key its runs are stored under: the pickle with :func:`plant_digest`.
+        None where ``share`` is, when the store is off (:func:`enabled`), or when the
+        pickle names a function or class from outside the package, numpy and pandas
+        (a notebook's own signal: its code is not in the key, and an edited one would
+        find the old run).
     """
     on = enabled()                      # a typo in the switch is refused first
     if call.get("network") is not None:
@@ -89,7 +186,11 @@ def scenario_keys(call: dict[str, Any]) -> tuple[bytes | None, str | None]:
         return None, None
     share = buffer.getvalue()
     covered = on and not pickler.outside
-    return share, (content_key("andes-run", share) if covered else None)
+    return share, (_key(share) if covered else None)
+
+
+def _key(share: bytes) -> str:
+    return hashlib.sha256(b"andes-run" + share + plant_digest().encode()).hexdigest()
 
 
 class _KeyPickler(pickle.Pickler):
@@ -108,23 +209,90 @@ class _KeyPickler(pickle.Pickler):
         return NotImplemented
 
 
+def _machine_folder() -> Path:
+    """This machine's store, per BLAS kernel (one kernel's runs differ from
+    another's in the last bits)."""
+    kernel = os.environ.get("OPENBLAS_CORETYPE", "").strip() or "default"
+    return cache_folder() / "andes-runs" / kernel
+
+
 def stored(key: str) -> Iterator[Any]:
-    """Every run stored under ``key``, oldest first, each read when it is asked
-    for (a damaged file is left out, with a warning)."""
-    folder = cache_folder() / "andes-runs"
-    for path in sorted(folder.glob(f"{key}-*.json"), key=_mtime):
+    """Every run stored under ``key``, this machine's oldest first, then the
+    recordings', each read when it is asked for (a damaged file is left out, with
+    a warning); none while recording (every run is computed, to be recorded)."""
+    if recording():
+        return
+    for path in sorted(_machine_folder().glob(f"{key}-*.json"), key=_mtime):
         run = read_stored(path, unpickled)
         if run is not None:
             yield run
+    if not recordings_read():
+        return
+    for path in sorted(RECORDINGS.glob(f"{key}-*.run")):
+        try:
+            yield read_recording(path).run
+        except (OSError, ValueError, lzma.LZMAError, pickle.UnpicklingError, EOFError,
+                AttributeError, ImportError) as err:
+            warnings.warn(f"{err}; running ANDES instead", RuntimeWarning, stacklevel=2)
 
 
-def store(key: str, run: Any, commands: bytes) -> None:
+def store(key: str, run: Any, commands: bytes, share: bytes) -> None:
     """Keep ``run`` under ``key``, named by its ``commands`` (the bytes of every
-    command it applied): a run with the same key and commands is the same run."""
-    folder = cache_folder() / "andes-runs"
-    name = hashlib.sha256(commands).hexdigest()[:16]
-    write_stored(folder / f"{key}-{name}.json", run, pickled)
+    command it applied): a run with the same key and commands is the same run.
+    With ``$LFC_ANDES_RECORD=write``, also as a recording (``share``: the call's
+    pickle, kept in it)."""
+    name = f"{key}-{hashlib.sha256(commands).hexdigest()[:16]}"
+    folder = _machine_folder()
+    write_stored(folder / f"{name}.json", run, pickled)
     prune(folder, LIMIT)
+    if recording():
+        write_recording(RECORDINGS / f"{name}.run", Recording(plant_digest(), share, run))
+
+
+@dataclass(frozen=True)
+class Recording:
+    """A committed run: the plant side's digest it was recorded with, the call's
+    pickle (its arguments but its filters) and the run (``grid_plant._Shared``)."""
+
+    plant: str
+    call: bytes
+    run: Any
+
+
+def write_recording(path: Path, rec: Recording) -> None:
+    """Write ``rec`` to ``path``: a header, the SHA-256 of the rest, then the
+    pickle compressed with LZMA (about half the size of the raw trace)."""
+    from lfc._files import replace_atomic
+    body = lzma.compress(pickle.dumps(rec, protocol=5), preset=9)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    replace_atomic(path, lambda tmp: tmp.write_bytes(
+        _MAGIC + hashlib.sha256(body).hexdigest().encode() + b"\n" + body))
+
+
+def read_recording(path: Path) -> Recording:
+    """The recording at ``path``.
+
+    Raises
+    ------
+    ValueError
+        If the file is not a recording or is damaged (its SHA-256): a committed
+        file is never read back wrong.
+    """
+    data = path.read_bytes()
+    head, _, rest = data.partition(b"\n")
+    digest, _, body = rest.partition(b"\n")
+    if head + b"\n" != _MAGIC or hashlib.sha256(body).hexdigest().encode() != digest:
+        raise ValueError(f"damaged recording {path} (its header or SHA-256); write it "
+                         f"again: LFC_ANDES_RECORD=write (docs/testbed.md)")
+    rec = pickle.loads(lzma.decompress(body))   # checked: the committed bytes
+    if not isinstance(rec, Recording):
+        raise ValueError(f"{path} holds no recording")
+    return rec
+
+
+def recordings() -> list[Path]:
+    """The committed recordings."""
+    return sorted(RECORDINGS.glob("*.run"))
 
 
 def _mtime(path: Path) -> float:
