@@ -15,6 +15,7 @@ machines (linear: at most 8e-9 relative where the value is not round-off; ANDES:
 Record (only before a restructuring, with the code it protects)::
 
     python tests/regression_set.py            # writes tests/data/grid_regression.npz
+    python tests/regression_set.py NAME ...   # adds or replaces those cases only
 
 The scenarios call the public API.  Where the API is renamed, the calls here
 are rewritten to the new names; the recorded values stay.
@@ -256,7 +257,16 @@ def testbed_cases() -> dict[str, Callable[[], dict]]:
                                attacks={0: {"pc": Sinusoid(3.0, 0.5, start=0.5)}},
                                filters={0: "paper", 1: "paper"}))
 
-    return {"testbed_microgrid": microgrid, "testbed_kundur": kundur}
+    def ieee39() -> dict:
+        from lfc import Sinusoid, Step, simulate
+        from lfc.testbed import GridCase, grid_design
+        case = GridCase.ieee39()
+        return _multi(simulate(case, design=grid_design(case), duration=2.0,
+                               attacks={1: {"pc": Sinusoid(0.6, 0.5, start=0.5)}},
+                               loads={0: Step(-0.05, start=1.0)},
+                               filters={0: "certified", 1: "certified"}))
+
+    return {"testbed_microgrid": microgrid, "testbed_kundur": kundur, "testbed_ieee39": ieee39}
 
 
 def all_cases() -> dict[str, Callable[[], dict]]:
@@ -264,28 +274,19 @@ def all_cases() -> dict[str, Callable[[], dict]]:
 
 
 def machine() -> str:
-    """What decides the last bits of a run: the CPU numba compiles for (name and
-    features) and the versions of numpy, scipy, numba and ANDES."""
-    import hashlib
-    from importlib.metadata import PackageNotFoundError, version
-
-    import llvmlite.binding as llvm
-
-    def installed(name: str) -> str:
-        try:
-            return version(name)
-        except PackageNotFoundError:
-            return "-"
-
-    features = hashlib.sha1(llvm.get_host_cpu_features().flatten().encode()).hexdigest()[:12]
-    libs = " ".join(f"{n}={installed(n)}" for n in ("numpy", "scipy", "numba", "andes"))
-    return f"{llvm.get_host_cpu_name()} {features} {libs}"
+    """What decides the last bits of a run (:func:`lfc.testbed.stored_runs.machine`)."""
+    from lfc.testbed.stored_runs import machine as this_machine
+    return this_machine()
 
 
-def recorded_machine() -> str:
-    """:func:`machine` where the record was made."""
+def recorded_machine(name: str | None = None) -> str:
+    """:func:`machine` where the record (of case ``name``, if recorded later than the
+    rest, with a machine of its own) was made."""
     with np.load(DATA, allow_pickle=False) as data:
-        return str(data[MACHINE_KEY]) if MACHINE_KEY in data.files else "unknown"
+        for key in (f"{MACHINE_KEY}/{name}", MACHINE_KEY):
+            if key in data.files:
+                return str(data[key])
+    return "unknown"
 
 
 def tolerances(name: str, same_machine: bool) -> tuple[float, float]:
@@ -325,7 +326,7 @@ def load() -> dict[str, dict[str, np.ndarray]]:
     with np.load(DATA, allow_pickle=False) as data:
         out: dict[str, dict[str, np.ndarray]] = {}
         for key in data.files:
-            if key == MACHINE_KEY:
+            if key.startswith(MACHINE_KEY):
                 continue
             case, _, rest = key.partition("/")
             out.setdefault(case, {})[rest] = data[key]
@@ -333,15 +334,23 @@ def load() -> dict[str, dict[str, np.ndarray]]:
 
 
 def record(names: list[str] | None = None) -> None:
+    """Record every case (or, given ``names``, those cases, added to the record with
+    this machine as theirs: ``recorded_machine(name)``)."""
     cases = all_cases()
     arrays = {}
+    if names:
+        with np.load(DATA, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files if k.partition("/")[0] not in names}
+        arrays.update({f"{MACHINE_KEY}/{n}": np.array(machine()) for n in names})
+    else:
+        arrays[MACHINE_KEY] = np.array(machine())
     for name, make in cases.items():
         if names and name not in names:
             continue
         print(f"recording {name}", flush=True)
         arrays.update({f"{name}/{k}": v for k, v in make().items()})
     DATA.parent.mkdir(exist_ok=True)
-    np.savez_compressed(DATA, **arrays, **{MACHINE_KEY: np.array(machine())})
+    np.savez_compressed(DATA, **arrays)
     print(f"wrote {DATA} ({DATA.stat().st_size / 1e6:.1f} MB, {len(arrays)} arrays)")
 
 

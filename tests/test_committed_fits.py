@@ -31,6 +31,46 @@ def _read(c):
 FIT_SECONDS = {"grid-fit-ieee39": 182, "grid-fit-kundur": 71, "testbed-fit-microgrid": 15}
 
 
+@pytest.mark.parametrize("name", sorted(COMMITTED))
+def test_the_committed_fit_was_made_from_the_code_as_it_is(name):
+    """Each committed fit records a digest of what it was computed from besides its
+    case (:func:`lfc.testbed.fit.fit_inputs`: the plant side, ANDES and the packages
+    under it, the fitting code, the design models and the generator side of the
+    experiments): equal to today's, or the file may be stale.  ``python -m lfc fit``
+    then fits again and compares, ``--write`` replaces it (the exhaustive tier fits
+    each again: the next test)."""
+    c = COMMITTED[name]
+    assert fitting.committed_inputs(c.case, c.kind) == fitting.fit_inputs(), (
+        f"{name}: the committed fit was made from other code or packages; run python -m lfc "
+        f"fit (compare) and python -m lfc fit --write (replace)")
+
+
+def test_the_inputs_digest_covers_the_fitting_code_and_the_plant(tmp_path):
+    """An edit of any of ``FIT_FILES``, of a function of ``FIT_FUNCTIONS`` or of the
+    plant side changes :func:`lfc.testbed.fit.fit_inputs`; one of a filter does not."""
+    from lfc.testbed import stored_runs
+    package = tmp_path / "lfc"
+    shutil.copytree(stored_runs._PACKAGE, package,
+                    ignore=shutil.ignore_patterns("__pycache__", "*.run"))
+    before = fitting.fit_inputs(package)
+    assert before == fitting.fit_inputs()
+    for name in (*fitting.FIT_FILES, "testbed/loop.py"):
+        path = package / name
+        text = path.read_text()
+        path.write_text(text + "\nEDITED = 1\n")
+        assert fitting.fit_inputs(package) != before, name
+        path.write_text(text)
+    engine = package / "engine.py"
+    text = engine.read_text()
+    engine.write_text(text.replace("gstate[0] += increment", "gstate[0] -= increment", 1))
+    assert fitting.fit_inputs(package) != before
+    engine.write_text(text)
+    certified = package / "filters" / "certified.py"
+    certified.write_text(certified.read_text() + "\nEDITED = 1\n")
+    assert fitting.fit_inputs(package) == before
+
+
+@pytest.mark.exhaustive
 @pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.long(FIT_SECONDS[n]))
                                   for n in sorted(COMMITTED)])
 def test_the_committed_fit_is_what_the_fit_computes_here(name):

@@ -37,6 +37,7 @@ def assert_same(mine, theirs) -> None:
     assert mine.settings == theirs.settings
 
 
+@pytest.mark.long(13)
 def test_a_stored_run_is_read_back_by_filters_that_return_its_commands_and_run_by_others(
         design, tmp_path, monkeypatch, capsys):
     """A 0.01 pu load step runs ANDES once: the same call again, and the same call
@@ -68,7 +69,7 @@ def test_a_stored_run_is_read_back_by_filters_that_return_its_commands_and_run_b
     assert runs() == 3                              # the step once, the bias twice
     assert all(a.alarms.empty for r in stored[2:4] for a in r.areas)      # silent
     assert any(len(a.alarms) for a in stored[5].areas)                    # it acted
-    files = sorted((tmp_path / "cache" / "andes-runs").glob("*.json"))
+    files = sorted((tmp_path / "cache" / "andes-runs").rglob("*.json"))
     assert len(files) == 3 and len({f.name.split("-")[0] for f in files}) == 2
 
     lfc.simulate_many(CASE, calls[:4], design=design, duration=2.0, anti_windup=True,
@@ -173,3 +174,153 @@ def test_the_switch_is_on_or_off_and_anything_else_is_refused(monkeypatch):
     monkeypatch.setenv(SWITCH, "of")
     with pytest.raises(ValueError, match="LFC_ANDES_RUNS must be 'on' or 'off'.*'of'"):
         scenario_keys(call)
+
+
+@pytest.mark.parametrize("kind", ["grid", "microgrid"])
+def test_the_key_covers_the_plant_side_and_nothing_else(tmp_path, kind):
+    """An edit of the code of any file, function or class of the plant side
+    (``PLANT_CODE``) changes the key of every stored run of that kind of plant; an edit
+    of a comment or a docstring there, or of a filter, the engine's loops, the rest of
+    the plant's module or a notebook does not (the replay checks the generator side,
+    command by command)."""
+    import ast
+    import shutil
+
+    from lfc.testbed import stored_runs
+    package = tmp_path / "lfc"
+    shutil.copytree(stored_runs._PACKAGE, package,
+                    ignore=shutil.ignore_patterns("__pycache__", "*.run"))
+
+    def digest() -> str:
+        return stored_runs.plant_digest(package, kind)
+
+    before = digest()
+    assert before == stored_runs.plant_digest(kind=kind)
+    for name in stored_runs.PLANT_CODE[kind]:
+        module, _, definition = name.partition(":")
+        path = package / (module.split(".", 1)[1].replace(".", "/") + ".py"
+                          if definition else module)
+        text = path.read_text()
+        path.write_text(text + "\n# a comment\n")
+        assert digest() == before, name                           # not code
+        if definition:                  # a statement added to the definition's body
+            node = next(n for n in ast.parse(text).body if getattr(n, "name", "") == definition)
+            lines = text.splitlines(keepends=True)
+            indent = " " * (node.body[-1].col_offset)
+            lines.insert(node.end_lineno, f"{indent}EDITED = 1\n")
+            path.write_text("".join(lines))
+        else:
+            path.write_text(text + "\nEDITED = 1\n")
+        assert digest() != before, name
+        path.write_text(text)
+    engine = package / "engine.py"
+    text = engine.read_text()
+    engine.write_text(text.replace('    """Evaluate an attack or load signal at times',
+                                   '    """Evaluate an attack or a load signal at times'))
+    assert digest() == before                                     # a docstring: not code
+    engine.write_text(text + "\nEDITED = 1\n")                    # elsewhere in the engine
+    for name in ("filters/certified.py", "filters/coupled.py", "simulate_multiarea.py",
+                 "testbed/grid_plant.py", "testbed/plant.py"):    # (their other code)
+        path = package / name
+        path.write_text(path.read_text() + "\nEDITED = 1\n")
+    assert digest() == before
+
+
+def test_every_committed_recording_is_of_the_plant_side_as_it_is(tmp_path, monkeypatch):
+    """The recordings (``lfc/testbed/recordings``) read back (their SHA-256), each of
+    the plant side as it is now: an edit of the plant side makes them stale, and they
+    are recorded again (docs/testbed.md).  A damaged one is refused, naming the file,
+    and the run it stood for runs on ANDES instead."""
+    import shutil
+    import warnings
+
+    from lfc.testbed import stored_runs
+    paths = stored_runs.recordings()
+    assert paths, "no committed recordings"
+    stale = [p.name for p in paths if (rec := stored_runs.read_recording(p)).plant
+             != stored_runs.plant_digest(kind=rec.kind)]
+    assert not stale, (f"{len(stale)} recordings of an earlier plant side: record them again "
+                       f"(docs/testbed.md, 'Recordings')")
+    damaged = tmp_path / paths[0].name
+    shutil.copy(paths[0], damaged)
+    data = bytearray(damaged.read_bytes())
+    data[-10] ^= 1
+    damaged.write_bytes(bytes(data))
+    with pytest.raises(ValueError, match=f"damaged recording {damaged}"):
+        stored_runs.read_recording(damaged)
+    key = paths[0].name.rsplit("-", 1)[0]
+    monkeypatch.setenv("LFC_CACHE_DIR", str(tmp_path / "cache"))   # no machine store
+    monkeypatch.delenv("LFC_ANDES_RECORDINGS")                       # the recordings read
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        stored_runs.RECORDINGS, kept = tmp_path, stored_runs.RECORDINGS
+        try:
+            assert list(stored_runs.stored(key)) == []
+        finally:
+            stored_runs.RECORDINGS = kept
+    assert any("damaged recording" in str(w.message) for w in caught)
+
+
+def checked_recordings() -> list:
+    """The recordings the exhaustive tier runs again: every one of 20 s or less (the
+    tests'), and of each case's longer ones (chapter 09's) the shortest."""
+    from lfc.testbed import stored_runs
+    headers = {p: stored_runs.recording_header(p) for p in stored_runs.recordings()}
+    longer: dict = {}
+    for p, h in sorted(headers.items(), key=lambda ph: (ph[1]["duration"], ph[0].name)):
+        if h["duration"] > 20.0:
+            longer.setdefault(h["case"], p)
+    return [p for p, h in headers.items() if h["duration"] <= 20.0 or p in longer.values()]
+
+
+@pytest.mark.exhaustive
+@pytest.mark.parametrize("path", checked_recordings(), ids=lambda p: p.name[:12])
+def test_andes_given_a_recordings_commands_computes_its_record(path):
+    """ANDES, fed the commands a recording holds at its control samples (no generator
+    side computes them), integrates the recorded run: every logged value within 1e-9
+    (relative) on the machine that recorded it, ``CROSS_MACHINE``'s ANDES tolerance
+    elsewhere (tests/regression_set.py)."""
+    import numpy as np
+    import regression_set as rs
+
+    from lfc.testbed import grid_plant, plant, stored_runs
+    rec = stored_runs.read_recording(path)
+    run = (grid_plant if rec.kind == "grid" else plant).rerun(rec)
+    rtol, atol = ((rs.ANDES_RTOL, rs.ATOL) if rec.machine == stored_runs.machine()
+                  else rs.CROSS_MACHINE["andes"])
+    assert np.array_equal(run.read, rec.run.read)
+    if rec.kind == "grid":
+        np.testing.assert_allclose(run.t, rec.run.t, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(run.per_area, rec.run.per_area, rtol=rtol, atol=atol)
+        assert [t.to_dict() for t in run.trips] == [t.to_dict() for t in rec.run.trips]
+    else:
+        np.testing.assert_allclose(run.rows, rec.run.rows, rtol=rtol, atol=atol)
+        assert run.trips.to_dict() == rec.run.trips.to_dict()
+        assert run.overcurrent == pytest.approx(rec.run.overcurrent, abs=1e-9)
+
+
+def test_a_microgrid_run_is_read_back_bit_for_bit_with_its_fault(tmp_path, monkeypatch):
+    """The microgrid's runs are stored too (``kind="microgrid"``): a fault's two passes,
+    an attack with the paper's SCC; each call again reads its run back, equal bit for
+    bit to running it with the store off (trace, controls, alarms, the line's trip)."""
+    from lfc.testbed import FaultSpec, MicrogridCase
+    from lfc.testbed.fit import design_model
+    monkeypatch.setenv("LFC_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.delenv(SWITCH, raising=False)
+    clock = tmp_path / "clock"
+    monkeypatch.setenv(CLOCK_ENV, str(clock))
+    params = design_model()
+    scc = lfc.SafetyFilter(params, alpha=20.0)
+    for kw in ({"pc_attack": lfc.Sinusoid(0.5, 1.0, start=1.0)}, {"fault": FaultSpec()}):
+        run = dict(design=params, duration=2.0, scc=scc, **kw)
+        lfc.simulate(MicrogridCase(), **run)
+        n = len(clock.read_text().split())
+        again = lfc.simulate(MicrogridCase(), **run)
+        assert len(clock.read_text().split()) == n                   # read back
+        monkeypatch.setenv(SWITCH, "off")
+        fresh = lfc.simulate(MicrogridCase(), **run)
+        monkeypatch.delenv(SWITCH)
+        for frame in ("trace", "controls", "alarms", "trips", "line_trips"):
+            pd.testing.assert_frame_equal(getattr(again, frame), getattr(fresh, frame),
+                                          check_exact=True)
+    assert len(fresh.line_trips) == 1

@@ -269,11 +269,45 @@ def committed_path(case: object, kind: FitKind) -> Path:
     return FITTED_DIR / f"{kind.name}-{getattr(case, 'name', 'microgrid')}.json"
 
 
+#: the package's files and functions whose code a fit depends on besides the plant
+#: side's (:func:`lfc.testbed.stored_runs.plant_digest`): the fitting, the design
+#: models, the microgrid's plant, and the generator side that runs the experiments
+#: without a filter (AGC and the local integrator)
+FIT_FILES = ("model.py", "multiarea.py", "testbed/case.py", "testbed/fit.py",
+             "testbed/grid_fit.py", "testbed/grid_plant.py", "testbed/plant.py",
+             "testbed/protection.py")
+FIT_FUNCTIONS = ("lfc.engine:agc_step", "lfc.engine:generator_period",
+                 "lfc.engine:GeneratorSide")
+
+
+def fit_inputs(root: Path | None = None) -> str:
+    """SHA-256 of what a committed fit was computed from besides its case: the plant
+    side (:func:`~lfc.testbed.stored_runs.plant_digest`: ANDES and the packages under
+    it included) and ``FIT_FILES`` and ``FIT_FUNCTIONS`` under ``root`` (the package).
+    A committed fit whose ``inputs`` differ may be stale: ``python -m lfc fit``
+    compares it with a new fit, ``--write`` replaces it."""
+    from lfc.testbed import stored_runs
+    root = root or Path(__file__).resolve().parents[1]
+    parts = (stored_runs.plant_digest(root, "grid"), stored_runs.plant_digest(root, "microgrid"),
+             stored_runs.source_digest(root, FIT_FILES, FIT_FUNCTIONS))
+    return hashlib.sha256("".join(parts).encode()).hexdigest()
+
+
 def _stamp(case: object) -> dict:
     """What a committed fit was made for: the case and the ANDES version."""
     import andes
 
     return {"case": repr(case), "andes": andes.__version__}
+
+
+def committed_inputs(case: object, kind: FitKind) -> str | None:
+    """The ``inputs`` (:func:`fit_inputs`) the committed fit of ``case`` was made with;
+    None without a committed fit or a record of them."""
+    path = committed_path(case, kind)
+    try:
+        return json.loads(path.read_text(encoding="utf-8")).get("inputs")
+    except (OSError, ValueError, AttributeError):
+        return None
 
 
 def read_committed(case: object, kind: FitKind) -> Any:
@@ -307,7 +341,7 @@ def write_committed(case: object, kind: FitKind, value: Any) -> Path:
     data = kind.encode(value)
     text = json.dumps(data, sort_keys=True)
     stored = {**_stamp(case), "made_by": "python -m lfc fit --write", "fit": data,
-              "sha256": hashlib.sha256(text.encode()).hexdigest()}
+              "inputs": fit_inputs(), "sha256": hashlib.sha256(text.encode()).hexdigest()}
     path = committed_path(case, kind)
     path.parent.mkdir(parents=True, exist_ok=True)
     write_atomic(path, json.dumps(stored, indent=1, sort_keys=True) + "\n")

@@ -41,6 +41,7 @@ Sn_k / Σ Sn``.  The relays of each area read its meter bus.
 from __future__ import annotations
 
 import inspect
+import pickle
 import struct
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -55,7 +56,7 @@ from lfc.relays import RelaySettings, relays_or_default
 from lfc.simulate_multiarea import (MultiAreaResult, area_filter, estimate_noise,
                                     multiarea_result)
 from lfc.testbed.grid import GridCase, build_grid
-from lfc.testbed import stored_runs
+import lfc.testbed.stored_runs as stored_runs
 from lfc.testbed.loop import AndesLoop, AndesPlant, GeneratorSides, TestbedError
 
 
@@ -220,7 +221,10 @@ def _run_stored(make: Callable[[], _Setup], share: bytes | None, key: str | None
             return result, run, False
         setup = make()                  # its generator sides have moved on: fresh ones
     result, run = _run(setup)
-    stored_runs.store(key, run, run.commands.tobytes(), share)
+    stored_runs.store(key, run, run.commands.tobytes(), share,
+                      {"case": getattr(getattr(setup.plant, "case", None), "name",
+                                       type(setup.plant).__name__),
+                       "duration": setup.duration})
     return result, run, True
 
 
@@ -263,6 +267,32 @@ def _replay(setup: _Setup, run: _Shared) -> MultiAreaResult | None:
         if not all(map(_same_float, u, commands)):
             return None
     return _result(setup, run)
+
+
+def rerun(rec: stored_runs.Recording) -> _Shared:
+    """A recording's run computed again on ANDES, fed the commands it holds at its
+    control samples (no generator side computes them): what checks a recording
+    (``tests/test_stored_runs.py``)."""
+    setup = _setup(**pickle.loads(rec.call), filters=None)   # the committed call
+    loop = AndesLoop(setup.plant, setup.loads, setup.gens, setup.relays, setup.stop_on_trip)
+    loop.sides = _Recorded(rec.run.commands)
+    loop.run(setup.duration, setup.step)
+    rows = np.array(loop.rows)
+    n_a = setup.plant.n_areas
+    t = rows[:, 0].round(9)
+    return _Shared(t, rows[:, 1:1 + 8 * n_a].reshape(len(rows), n_a, 8), loop.trips(t),
+                   np.array([k for k, _ in loop.samples], dtype=np.int64),
+                   np.array([u for _, u in loop.samples]).reshape(-1, n_a))
+
+
+class _Recorded:
+    """Generator sides that return recorded commands (:func:`rerun`)."""
+
+    def __init__(self, commands: np.ndarray) -> None:
+        self.commands = commands
+
+    def sample(self, j: int, state: np.ndarray) -> np.ndarray:
+        return self.commands[j].copy()
 
 
 def _same_float(a: float, b: float) -> bool:

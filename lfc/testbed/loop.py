@@ -73,8 +73,8 @@ class RunComplete(Stop):
 #: remainder, not a step: 0.005 s added 320 times falls 2e-16 s short of 1.6 s, and
 #: ANDES then integrates those 2e-16 s; with the IEEE 39-bus system's stabilizers
 #: (an input filter whose time constants are 0) Newton's method fails on a step that
-#: short, and the run was reported as not converged (measured: an attacked run of
-#: 1.6 s or 1.605 s; 2.0 s passed).
+#: short, and the run was reported as not converged (``tests/test_grids.py``: attacked
+#: runs of 1.6 and 1.605 s).
 SLIVER = 1e-9
 
 

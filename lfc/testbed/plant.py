@@ -37,6 +37,7 @@ from lfc.signals import SignalLike
 from lfc.simulate import SimResult, result
 from lfc.testbed.case import MicrogridCase, build_system, check_bus
 from lfc.testbed.loop import AndesLoop, BreakerOpens, TestbedError
+import lfc.testbed.stored_runs as stored_runs
 from lfc.testbed.protection import OvercurrentRelay, OvercurrentSettings
 
 TESTBED_COLUMNS = ("v_gen", "i_line_re", "i_line_im")
@@ -128,23 +129,11 @@ def simulate_microgrid(params: LFCParams, *, duration: float,
     oc = overcurrent or OvercurrentSettings()
     tc = np.arange(n_ctrl) * control_period
 
-    def run(open_t: float | None) -> tuple[AndesLoop, MicrogridPlant]:
-        gen = GeneratorSide(params, scc, estimator, noise_std, seed, tc, pc_attack,
-                            wref_attack, load_feedforward, control_period,
-                            anti_windup=anti_windup, network=network is not None)
-        plant = MicrogridPlant(case, fault, OvercurrentRelay(oc), open_t)
-        loop = AndesLoop(plant, {} if load is None else {0: load}, [gen], relays,
-                         stop_on_trip, network)
-        return loop, plant
+    def side() -> GeneratorSide:
+        return GeneratorSide(params, scc, estimator, noise_std, seed, tc, pc_attack,
+                             wref_attack, load_feedforward, control_period,
+                             anti_windup=anti_windup, network=network is not None)
 
-    loop, plant = run(None)
-    if loop.run(duration, step):  # second pass: the breaker opening as a scheduled ANDES event
-        opened = plant.oc.open_t
-        loop, plant = run(opened)
-        loop.run(duration, step)
-        if plant.oc.open_t is None or abs(plant.oc.open_t - opened) > 1e-9:
-            raise TestbedError(f"the replay's over-current trip ({plant.oc.open_t}) differs "
-                               f"from the first pass ({opened})")
     settings = {"plant": "testbed", "case": repr(case), "params": vars(params),
                 "relays": vars(relays), "duration": duration, "step": step,
                 "control_period": control_period, "seed": seed, "noise_std": list(noise_std),
@@ -152,23 +141,115 @@ def simulate_microgrid(params: LFCParams, *, duration: float,
                 "wref_attack": repr(wref_attack), "load": repr(load), "fault": repr(fault),
                 "overcurrent": repr(oc), "stop_on_trip": stop_on_trip,
                 "load_feedforward": load_feedforward, "anti_windup": anti_windup}
-    return _result(loop, plant, settings)
+    # the run is a function of these and of the commands its generator side returns
+    # (lfc.testbed.stored_runs): read back where stored, else run on ANDES and stored
+    call = {"params": params, "duration": duration, "pc_attack": pc_attack,
+            "wref_attack": wref_attack, "load": load, "fault": fault, "relays": relays,
+            "estimator": estimator, "noise_std": noise_std, "seed": seed,
+            "control_period": control_period, "step": step, "stop_on_trip": stop_on_trip,
+            "load_feedforward": load_feedforward, "anti_windup": anti_windup, "case": case,
+            "overcurrent": oc, "network": network}
+    share, key = stored_runs.scenario_keys(call, "microgrid")
+    for stored in stored_runs.stored(key) if key is not None else ():
+        gen = side()
+        if isinstance(stored, MicrogridRun) and _replays(gen, stored, stop_on_trip):
+            return _result(stored, gen, case, settings)
+    run, gen = _run(case, fault, oc, load, side, relays, stop_on_trip, network, duration, step)
+    if key is not None:
+        stored_runs.store(key, run, run.commands.tobytes(), share,
+                          {"case": "microgrid", "duration": duration}, "microgrid")
+    return _result(run, gen, case, settings)
 
 
-def _result(loop: AndesLoop, plant: MicrogridPlant, settings: dict) -> SimResult:
+@dataclass
+class MicrogridRun:
+    """What a finished microgrid run leaves for a later call whose generator side
+    returns the same commands (:mod:`lfc.testbed.stored_runs`)."""
+
+    rows: np.ndarray            # (rows, 12): AndesLoop.rows (t, MEASURED, TESTBED_COLUMNS)
+    trips: pd.DataFrame         # the frequency relays' trips (relay, t)
+    read: np.ndarray            # (control samples run,): the row each sample read
+    commands: np.ndarray        # (control samples run, 1), pu
+    overcurrent: tuple          # the over-current relay's (trip_t, open_t), s (None: none)
+
+
+def _run(case: MicrogridCase, fault: FaultSpec | None, oc: OvercurrentSettings, load,
+         side, relays: RelaySettings, stop_on_trip: bool, network, duration: float,
+         step: float, commands: np.ndarray | None = None
+         ) -> tuple[MicrogridRun, GeneratorSide]:
+    """Run on ANDES, with a fresh generator side from ``side()`` per pass: a fault takes
+    two (:class:`MicrogridPlant`); ``commands`` (one per control sample), if given, are
+    applied instead of what the generator side returns.  The run, and the generator
+    side of its last pass."""
+    def one(open_t: float | None) -> tuple[AndesLoop, MicrogridPlant]:
+        plant = MicrogridPlant(case, fault, OvercurrentRelay(oc), open_t)
+        loop = AndesLoop(plant, {} if load is None else {0: load}, [side()], relays,
+                         stop_on_trip, network)
+        if commands is not None:
+            from lfc.testbed.grid_plant import _Recorded
+            loop.sides = _Recorded(commands)
+        return loop, plant
+
+    loop, plant = one(None)
+    if loop.run(duration, step):  # second pass: the breaker opening as a scheduled ANDES event
+        opened = plant.oc.open_t
+        loop, plant = one(opened)
+        loop.run(duration, step)
+        if plant.oc.open_t is None or abs(plant.oc.open_t - opened) > 1e-9:
+            raise TestbedError(f"the replay's over-current trip ({plant.oc.open_t}) differs "
+                               f"from the first pass ({opened})")
     rows = np.array(loop.rows)
+    t = rows[:, 0].round(9)        # ANDES accumulates its time in floating point
+    run = MicrogridRun(rows, loop.trips(t)[0],
+                       np.array([k for k, _ in loop.samples], dtype=np.int64),
+                       np.array([u for _, u in loop.samples]).reshape(-1, 1),
+                       (plant.oc.trip_t, plant.oc.open_t))
+    return run, loop.gens[0]
+
+
+def _replays(gen: GeneratorSide, run: MicrogridRun, stop_on_trip: bool) -> bool:
+    """Whether ``gen`` returns ``run``'s commands, bit for bit, at every control sample
+    it read (then ANDES would integrate ``run`` again)."""
+    from lfc.testbed.grid_plant import _same_float
+    from lfc.testbed.loop import GeneratorSides
+    if len(run.read) != len(gen.tc) and not stop_on_trip:
+        return False
+    sides = GeneratorSides([gen])
+    for j, (row, command) in enumerate(zip(run.read, run.commands)):
+        if not _same_float(sides.sample(j, run.rows[row, 1:9].reshape(1, 8))[0], command[0]):
+            return False
+    return True
+
+
+def rerun(rec) -> MicrogridRun:
+    """A recording's run (:class:`lfc.testbed.stored_runs.Recording`) computed again on
+    ANDES, fed the commands it holds (no generator side computes them): what checks a
+    recording (``tests/test_stored_runs.py``)."""
+    import pickle
+    call = pickle.loads(rec.call)                    # the committed call
+    n_ctrl = int(np.ceil(call["duration"] / call["control_period"] - 1e-9))
+    tc = np.arange(n_ctrl) * call["control_period"]
+
+    def side() -> GeneratorSide:
+        return GeneratorSide(call["params"], None, None, (0.0, 0.0), 0, tc, None, None, False,
+                             call["control_period"])
+    return _run(call["case"], call["fault"], call["overcurrent"], call["load"], side,
+                call["relays"], call["stop_on_trip"], None, call["duration"], call["step"],
+                rec.run.commands)[0]
+
+
+def _result(run: MicrogridRun, gen: GeneratorSide, case: MicrogridCase,
+            settings: dict) -> SimResult:
     cols = ("t", *STATES, "p_load", *TESTBED_COLUMNS)
-    trace = pd.DataFrame(rows[:, [0, 1, 2, 3, 4, 5, 6, 9, 10, 11]], columns=list(cols))
+    trace = pd.DataFrame(run.rows[:, [0, 1, 2, 3, 4, 5, 6, 9, 10, 11]], columns=list(cols))
     trace["t"] = trace["t"].round(9)  # ANDES accumulates its time in floating point
     t_end = float(trace["t"].iat[-1])
-    oc = plant.oc
+    trip_t, open_t = run.overcurrent
     line_trips = pd.DataFrame(
-        [(plant.case.protected_line, round(oc.trip_t, 9), round(oc.open_t, 9))]
-        if oc.trip_t is not None and oc.trip_t <= t_end else [],
+        [(case.protected_line, round(trip_t, 9), round(open_t, 9))]
+        if trip_t is not None and trip_t <= t_end else [],
         columns=["line", "trip_t", "open_t"])
-    gen = loop.gens[0]
-    return result(trace, gen.tc, gen.ctrl, loop.trips(trace["t"].to_numpy())[0], gen.scc,
-                  settings, line_trips)
+    return result(trace, gen.tc, gen.ctrl, run.trips, gen.scc, settings, line_trips)
 
 
 def _check_scenario(case: MicrogridCase, duration: float, step: float, control_period: float,

@@ -35,6 +35,7 @@ The files are pickles: keep ``$LFC_CACHE_DIR`` a folder only you can write to.
 
 from __future__ import annotations
 
+import ast
 import functools
 import hashlib
 import io
@@ -64,21 +65,27 @@ RECORD = "LFC_ANDES_RECORD"
 READ_RECORDINGS = "LFC_ANDES_RECORDINGS"
 #: the committed recordings
 RECORDINGS = Path(__file__).resolve().parent / "recordings"
-_MAGIC = b"lfc-andes-recording 1\n"
+_MAGIC = b"lfc-andes-recording 2\n"
 
 #: the modules whose functions and classes a key may name: their code is covered
 #: by the key (the package's sources, the installed numerical packages)
 _TRUSTED = ("lfc", "numpy", "pandas", "builtins", "copyreg", "collections", "_codecs")
 
 _PACKAGE = Path(__file__).resolve().parents[1]
-#: the package's files whose code turns a run's commands into its record: the ANDES
-#: adapter and its grid cases, ANDES' set-up, the relays and the load signals (and
-#: the compiled helpers they use), and this module (the record's format)
-PLANT_FILES = ("_jit.py", "relays.py", "signals.py", "testbed/andes_setup.py",
-               "testbed/grid.py", "testbed/grid_plant.py", "testbed/loop.py",
-               "testbed/stored_runs.py")
-#: functions of other modules the plant side calls (``module:function``)
-PLANT_FUNCTIONS = ("lfc.engine:sample_signal",)
+#: per kind of plant, the code that turns a run's commands into its record: files of the
+#: package (the ANDES adapter, the case, the relays and the load signals, the compiled
+#: helpers they use) and the functions and classes of other modules (``module:name``:
+#: the plant, its run, the record); ANDES' own code is keyed by its version
+#: (``PLANT_PACKAGES``)
+PLANT_CODE = {
+    "grid": ("_jit.py", "relays.py", "signals.py", "testbed/grid.py", "testbed/loop.py",
+             "lfc.engine:sample_signal", "lfc.testbed.grid_plant:GridPlant",
+             "lfc.testbed.grid_plant:_run", "lfc.testbed.grid_plant:_Shared"),
+    "microgrid": ("_jit.py", "relays.py", "signals.py", "testbed/case.py",
+                  "testbed/protection.py", "testbed/loop.py", "lfc.engine:sample_signal",
+                  "lfc.testbed.plant:MicrogridPlant", "lfc.testbed.plant:_run",
+                  "lfc.testbed.plant:MicrogridRun"),
+}
 #: the installed packages a run depends on
 PLANT_PACKAGES = ("andes", "kvxopt", "numba", "numpy", "scipy", "sympy")
 
@@ -123,23 +130,28 @@ def recordings_read() -> bool:
     return value != "off" and not recording()
 
 
-def plant_digest(root: Path = _PACKAGE) -> str:
-    """SHA-256 of the plant side: the files ``PLANT_FILES`` under ``root`` (the
-    package), the source of ``PLANT_FUNCTIONS``, the versions of ``PLANT_PACKAGES``
-    and Python's."""
-    return _plant_digest(str(root))
+def plant_digest(root: Path = _PACKAGE, kind: str = "grid") -> str:
+    """SHA-256 of the plant side of ``kind`` (``"grid"`` or ``"microgrid"``): the code
+    ``PLANT_CODE[kind]`` names under ``root`` (the package: :func:`source_digest`), the
+    versions of ``PLANT_PACKAGES`` and Python's."""
+    if kind not in PLANT_CODE:
+        raise ValueError(f"kind must be one of {tuple(PLANT_CODE)}, got {kind!r}")
+    if root == _PACKAGE:
+        return _package_digest(kind)
+    return _plant_digest(str(root), kind)
 
 
 @functools.lru_cache(maxsize=None)
-def _plant_digest(root: str) -> str:
+def _package_digest(kind: str) -> str:
+    """:func:`plant_digest` of the package itself, computed once per process."""
+    return _plant_digest(str(_PACKAGE), kind)
+
+
+def _plant_digest(root: str, kind: str) -> str:
     digest = hashlib.sha256(f"python {sys.version_info[:2]}".encode())
-    for name in PLANT_FILES:
-        digest.update(name.encode() + (Path(root) / name).read_bytes())
-    for name in PLANT_FUNCTIONS:
-        module, function = name.split(":")
-        path = Path(root) / (module.split(".", 1)[1].replace(".", "/") + ".py")
-        source = _function_source(path, function)
-        digest.update(name.encode() + source.encode())
+    code = PLANT_CODE[kind]
+    digest.update(source_digest(Path(root), tuple(c for c in code if ":" not in c),
+                                tuple(c for c in code if ":" in c)).encode())
     for package in PLANT_PACKAGES:
         try:
             digest.update(f"{package} {metadata.version(package)}".encode())
@@ -148,18 +160,43 @@ def _plant_digest(root: str) -> str:
     return digest.hexdigest()
 
 
-def _function_source(path: Path, name: str) -> str:
-    """The source of the top-level function ``name`` in the file ``path``."""
-    import ast
-    text = path.read_text()
-    for node in ast.parse(text).body:
-        if isinstance(node, ast.FunctionDef) and node.name == name:
-            return ast.get_source_segment(text, node) or ""
-    raise ValueError(f"{path} defines no function {name!r} (PLANT_FUNCTIONS)")
+def source_digest(root: Path, files: tuple[str, ...], functions: tuple[str, ...] = ()) -> str:
+    """SHA-256 of the code of the files ``files`` under ``root`` (the package) and of
+    ``functions`` (``module:name``, a top-level function or class of the package): of
+    their syntax trees without docstrings (an edit of a comment or a docstring leaves
+    it as it is, an edit of the code changes it)."""
+    digest = hashlib.sha256()
+    for name in files:
+        digest.update(name.encode() + _code(ast.parse((root / name).read_text())).encode())
+    for name in functions:
+        module, function = name.split(":")
+        path = root / (module.split(".", 1)[1].replace(".", "/") + ".py")
+        digest.update(name.encode() + _code(_definition(path, function)).encode())
+    return digest.hexdigest()
 
 
-def scenario_keys(call: dict[str, Any]) -> tuple[bytes | None, str | None]:
-    """A call's two keys, from one pickle of its arguments but ``filters``.
+def _definition(path: Path, name: str) -> ast.AST:
+    """The top-level function or class ``name`` of the file ``path``."""
+    for node in ast.parse(path.read_text()).body:
+        if isinstance(node, (ast.FunctionDef, ast.ClassDef)) and node.name == name:
+            return node
+    raise ValueError(f"{path} defines no function or class {name!r}")
+
+
+def _code(tree: ast.AST) -> str:
+    """``tree`` dumped without its docstrings (comments are not in a syntax tree)."""
+    for node in ast.walk(tree):
+        body = getattr(node, "body", None)
+        if (isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+                and body and isinstance(body[0], ast.Expr)
+                and isinstance(body[0].value, ast.Constant) and isinstance(body[0].value.value, str)):
+            node.body = body[1:] or [ast.Pass()]
+    return ast.dump(tree)
+
+
+def scenario_keys(call: dict[str, Any], kind: str = "grid") -> tuple[bytes | None, str | None]:
+    """A call's two keys, from one pickle of its arguments but ``filters``, on a plant
+    of ``kind`` (:func:`plant_digest`).
 
     Returns
     -------
@@ -170,10 +207,10 @@ def scenario_keys(call: dict[str, Any]) -> tuple[bytes | None, str | None]:
         a state of its own), or one whose arguments do not pickle.
     store : str or None
         The key its runs are stored under: the pickle with :func:`plant_digest`.
-        None where ``share`` is, when the store is off (:func:`enabled`), or when the
-        pickle names a function or class from outside the package, numpy and pandas
-        (a notebook's own signal: its code is not in the key, and an edited one would
-        find the old run).
+        None where ``share`` is, when the store is off (:func:`enabled`) and nothing is
+        being recorded (:func:`recording`), or when the pickle names a function or
+        class from outside the package, numpy and pandas (a notebook's own signal: its
+        code is not in the key, and an edited one would find the old run).
     """
     on = enabled()                      # a typo in the switch is refused first
     if call.get("network") is not None:
@@ -185,12 +222,13 @@ def scenario_keys(call: dict[str, Any]) -> tuple[bytes | None, str | None]:
     except (pickle.PicklingError, TypeError, AttributeError):
         return None, None
     share = buffer.getvalue()
-    covered = on and not pickler.outside
-    return share, (_key(share) if covered else None)
+    covered = (on or recording()) and not pickler.outside
+    return share, (_key(share, kind) if covered else None)
 
 
-def _key(share: bytes) -> str:
-    return hashlib.sha256(b"andes-run" + share + plant_digest().encode()).hexdigest()
+def _key(share: bytes, kind: str) -> str:
+    prefix = b"andes-run" if kind == "grid" else f"andes-run {kind}".encode()
+    return hashlib.sha256(prefix + share + plant_digest(kind=kind).encode()).hexdigest()
 
 
 class _KeyPickler(pickle.Pickler):
@@ -236,37 +274,74 @@ def stored(key: str) -> Iterator[Any]:
             warnings.warn(f"{err}; running ANDES instead", RuntimeWarning, stacklevel=2)
 
 
-def store(key: str, run: Any, commands: bytes, share: bytes) -> None:
+def store(key: str, run: Any, commands: bytes, share: bytes, about: dict,
+          kind: str = "grid") -> None:
     """Keep ``run`` under ``key``, named by its ``commands`` (the bytes of every
     command it applied): a run with the same key and commands is the same run.
     With ``$LFC_ANDES_RECORD=write``, also as a recording (``share``: the call's
-    pickle, kept in it)."""
+    pickle, kept in it; ``about``: its ``case`` and ``duration``, s, for its header)."""
     name = f"{key}-{hashlib.sha256(commands).hexdigest()[:16]}"
     folder = _machine_folder()
     write_stored(folder / f"{name}.json", run, pickled)
     prune(folder, LIMIT)
     if recording():
-        write_recording(RECORDINGS / f"{name}.run", Recording(plant_digest(), share, run))
+        write_recording(RECORDINGS / f"{name}.run",
+                        Recording(plant_digest(kind=kind), share, run, machine(), kind),
+                        about)
 
 
 @dataclass(frozen=True)
 class Recording:
     """A committed run: the plant side's digest it was recorded with, the call's
-    pickle (its arguments but its filters) and the run (``grid_plant._Shared``)."""
+    pickle (its arguments but its filters), the run (``grid_plant._Shared``) and the
+    machine that computed it (:func:`machine`)."""
 
     plant: str
     call: bytes
     run: Any
+    machine: str
+    kind: str = "grid"
 
 
-def write_recording(path: Path, rec: Recording) -> None:
-    """Write ``rec`` to ``path``: a header, the SHA-256 of the rest, then the
-    pickle compressed with LZMA (about half the size of the raw trace)."""
+def machine() -> str:
+    """What decides the last bits of a run: the CPU numba compiles for (name and
+    features) and the versions of numpy, scipy, numba and ANDES."""
+    import llvmlite.binding as llvm
+
+    def installed(name: str) -> str:
+        try:
+            return metadata.version(name)
+        except metadata.PackageNotFoundError:
+            return "-"
+
+    features = hashlib.sha1(llvm.get_host_cpu_features().flatten().encode()).hexdigest()[:12]
+    libs = " ".join(f"{n}={installed(n)}" for n in ("numpy", "scipy", "numba", "andes"))
+    return f"{llvm.get_host_cpu_name()} {features} {libs}"
+
+
+def write_recording(path: Path, rec: Recording, about: dict) -> None:
+    """Write ``rec`` to ``path``: a header line, a line of JSON (its kind of plant and
+    ``about``: the case and the run's duration, s: :func:`recording_header`), the
+    SHA-256 of the rest, then the pickle compressed with LZMA (about half the size of
+    the raw trace)."""
+    import json
+
     from lfc._files import replace_atomic
+    head = json.dumps({"kind": rec.kind, **about}, sort_keys=True).encode()
     body = lzma.compress(pickle.dumps(rec, protocol=5), preset=9)
     path.parent.mkdir(parents=True, exist_ok=True)
     replace_atomic(path, lambda tmp: tmp.write_bytes(
-        _MAGIC + hashlib.sha256(body).hexdigest().encode() + b"\n" + body))
+        _MAGIC + head + b"\n" + hashlib.sha256(head + body).hexdigest().encode() + b"\n"
+        + body))
+
+
+def recording_header(path: Path) -> dict:
+    """A recording's kind of plant, case and duration (s), read without its body."""
+    import json
+    with open(path, "rb") as f:
+        if f.readline() != _MAGIC:
+            raise ValueError(f"{path} is not a recording")
+        return json.loads(f.readline())
 
 
 def read_recording(path: Path) -> Recording:
@@ -279,9 +354,10 @@ def read_recording(path: Path) -> Recording:
         file is never read back wrong.
     """
     data = path.read_bytes()
-    head, _, rest = data.partition(b"\n")
+    magic, _, rest = data.partition(b"\n")
+    head, _, rest = rest.partition(b"\n")
     digest, _, body = rest.partition(b"\n")
-    if head + b"\n" != _MAGIC or hashlib.sha256(body).hexdigest().encode() != digest:
+    if magic + b"\n" != _MAGIC or hashlib.sha256(head + body).hexdigest().encode() != digest:
         raise ValueError(f"damaged recording {path} (its header or SHA-256); write it "
                          f"again: LFC_ANDES_RECORD=write (docs/testbed.md)")
     rec = pickle.loads(lzma.decompress(body))   # checked: the committed bytes
