@@ -9,27 +9,65 @@ engine, ``simulate`` and ``simulate_many``) needs numpy, scipy,
 python-control, numba and pandas.  ``lfc.experiments`` (the paper's scenarios,
 maps, red team) builds on it, ``lfc.repro`` (notebooks, figures, command line)
 on both; ``lfc.testbed`` (ANDES) and the cvxpy references are optional extras.
+
+Each name of this namespace is imported when it is first used (``import lfc``
+imports nothing else: the command line and a notebook's first cell start at once).
 """
+
+from __future__ import annotations
+
+import importlib
+import types
 
 __version__ = "0.3.0"   # also in pyproject.toml (tests/test_engine.py checks they match)
 
-from lfc.estimation import KalmanFilter
-from lfc.filters import FilterInfo, SafetyFilter
-from lfc.model import LFCParams, discretize, lfc_matrices, lfc_model
-from lfc.multiarea import MultiAreaParams, multiarea_matrices
-from lfc.relays import RelayBank, RelaySettings
-from lfc.signals import Chirp, Ramp, Samples, Sinusoid, Square, Step
-from lfc.simulate import SimResult
-from lfc.simulate_multiarea import MultiAreaResult
-# last: importing the submodule lfc.simulate binds its name, which this rebinds to the function
-from lfc.run import (simulate, simulate_batch, simulate_many, simulate_multiarea,  # noqa: I001
-                     simulate_multiarea_batch)
-
-__all__ = [
-    "Chirp", "FilterInfo", "KalmanFilter", "LFCParams", "MultiAreaParams", "MultiAreaResult",
-    "Ramp", "RelayBank", "RelaySettings", "SafetyFilter", "Samples", "SimResult", "Sinusoid",
-    "Square", "Step", "discretize", "lfc_matrices", "lfc_model", "multiarea_matrices",
-    "simulate", "simulate_many",
+#: name -> the module that defines it
+_WHERE = {
+    "KalmanFilter": "lfc.estimation",
+    "FilterInfo": "lfc.filters", "SafetyFilter": "lfc.filters",
+    "LFCParams": "lfc.model", "discretize": "lfc.model", "lfc_matrices": "lfc.model",
+    "lfc_model": "lfc.model",
+    "MultiAreaParams": "lfc.multiarea", "multiarea_matrices": "lfc.multiarea",
+    "RelayBank": "lfc.relays", "RelaySettings": "lfc.relays",
+    "Chirp": "lfc.signals", "Ramp": "lfc.signals", "Samples": "lfc.signals",
+    "Sinusoid": "lfc.signals", "Square": "lfc.signals", "Step": "lfc.signals",
+    "SimResult": "lfc.simulate",
+    "MultiAreaResult": "lfc.simulate_multiarea",
+    "simulate": "lfc.run", "simulate_many": "lfc.run",
     # deprecated names of 0.3 (they call simulate and simulate_many), removed in 0.5
-    "simulate_batch", "simulate_multiarea", "simulate_multiarea_batch",
-]
+    "simulate_batch": "lfc.run", "simulate_multiarea": "lfc.run",
+    "simulate_multiarea_batch": "lfc.run",
+}
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str):
+    """The namespace's names, each imported from its module when first used."""
+    where = _WHERE.get(name)
+    if where is None:
+        raise AttributeError(f"module 'lfc' has no attribute {name!r}")
+    value = getattr(importlib.import_module(where), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_WHERE))
+
+
+class _Package(types.ModuleType):
+    """The package's module type: the submodule ``lfc.simulate`` (results) never
+    replaces the function ``lfc.simulate`` (importing a submodule binds its name in
+    the package, which would)."""
+
+    def __setattr__(self, name: str, value: object) -> None:
+        if name in _WHERE and isinstance(value, types.ModuleType):
+            return
+        super().__setattr__(name, value)
+
+
+import sys  # noqa: E402
+
+sys.modules[__name__].__class__ = _Package
+del sys

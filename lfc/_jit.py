@@ -11,30 +11,26 @@ compiled into both of the engine's loops (bench/records/compile.md).
 ``kernel``: the engine's loop, compiled without numba's reference counting
 (``_nrt=False``): it allocates nothing (its caller passes every array, including
 its scratch space), so it needs none, and counting references on every array the
-inlined functions touch cost half of its time (measured: 28.8 against 14.1 ns
-per scenario-step with the paper's filter).
+inlined functions touch would cost about half of its time.
 
 ``maxnum`` / ``minnum``: LLVM's ``maxnum`` / ``minnum`` of two floats (the larger
 / smaller; a NaN argument is ignored).  Written with Python's ``max`` / ``min``,
-a running maximum over an array is not vectorized by LLVM; with these it is
-(the certified filter's row loop: 1.95 against 1.35 ns per row, measured on
-575 rows).
+a running maximum over an array is not vectorized by LLVM; with these it is.
 
 ``choose(c, a, b)``: ``a`` if ``c`` else ``b`` (float64), as LLVM's ``select``, which
 evaluates both.  Written ``a if c else b``, numba makes it a branch; stored where the
 other value was loaded from, LLVM then stores under a mask (``vmaskmovpd``), which an
 AMD Zen 3 executes several times slower than a store.  The engine's lanes
-(``lfc.engine._lane_step``) use it, and write to a second buffer: on an AMD EPYC without
-AVX-512 a batch without filter then ran 1.7 times as fast in lanes, with the paper's
-filter 1.5 times (22.3 against 13.4 and 33.3 against 22.3 ns per scenario-step, medians
-of 3 runs alternated with the code before, one process, 2,000 scenarios of 30 s).
+(``lfc.engine._lane_step``) use it, and write to a second buffer.  What each of the
+three saves: ``bench/records/compile.md``.
 
 The cache.  numba keys a cached function on its own source file only, but these
 functions inline each other across modules (the engine inlines the filters), so
 an edit of one file would leave its callers' machine code stale.  Importing this
 module registers a cache locator for this package's functions whose stamp is a
 hash of every source file that compiles code: any edit recompiles them all
-(≈ 20 s once).  It applies to functions in this package only.
+(:mod:`lfc.warmup` compiles the loops once).  It applies to functions in this package
+only.
 """
 
 from __future__ import annotations

@@ -34,6 +34,8 @@ class Compiling:
     def __init__(self, pool: ProcessPoolExecutor | None, futures: list[Future],
                  started: float) -> None:
         self._pool, self._futures, self._started = pool, futures, started
+        #: whether anything is compiled (False: both loops were in the cache)
+        self.compiled = pool is not None
 
     def result(self) -> None:
         if self._pool is None:
@@ -68,10 +70,13 @@ def start_compiling(say: Callable[[str], None] | None = None) -> Compiling:
                      time.monotonic())
 
 
-def compile_kernels(say: Callable[[str], None] | None = None) -> None:
+def compile_kernels(say: Callable[[str], None] | None = None) -> bool:
     """Compile both loops (:func:`start_compiling`) and wait for them; nothing when
-    both are in the cache already (a rerun of ``reproduce`` pays no start-up)."""
-    start_compiling(say).result()
+    both are in the cache already (a rerun of ``reproduce`` pays no start-up).
+    Whether anything was compiled."""
+    pending = start_compiling(say)
+    pending.result()
+    return pending.compiled
 
 
 def _stderr(line: str) -> None:

@@ -172,10 +172,9 @@ def trip_verdict(tripped: dict, severities: dict, band: float = EDGE) -> str:
     """How many areas tripped, and whether that count is at the edge: the areas
     whose severity lies within ``band`` (relative) of 1, with their severities
     (``"1, at the edge: area 1 at 1.03"``).  Near 1 the moment a relay trips
-    moves with the last bits of the arithmetic (measured: under two OpenBLAS
-    kernels an IEEE 39-bus area at 1.032 tripped a few samples apart, and the
-    other area then peaked at 0.951 on one, 1.22 on the other: one area tripped
-    or two), so such a count is reported with its margin, not as a plain number.
+    moves with the last bits of the arithmetic (under two BLAS kernels one area
+    trips or two: ``bench/records/reproduce.md``), so such a count is reported with
+    its margin, not as a plain number.
 
     ``tripped`` and ``severities`` map each area to its verdict and severity."""
     n = sum(bool(v) for v in tripped.values())

@@ -25,12 +25,12 @@ it (:func:`lfc.testbed.fit.design_model`).
 from __future__ import annotations
 
 from functools import partial
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
-from lfc.model import LFCParams
-from lfc.relays import RelaySettings
-from lfc.run import simulate
-from lfc.simulate import SimResult
+if TYPE_CHECKING:
+    from lfc.model import LFCParams
+    from lfc.relays import RelaySettings
+    from lfc.simulate import SimResult
 
 PLANTS = ("linear", "testbed")   # single-area chapters: the linear model, the ANDES microgrid
 # Notebook 09 runs on all three: the linear model; on ANDES "testbed" is Kundur's two-area
@@ -53,8 +53,7 @@ FIG7_DURATION = 5.0     # s, fault at ATTACK_START, testbed only
 # IEEE 39-bus system (5000 MVA base) the single attack is on its lighter east area (area 1):
 # at 0.5 Hz it stays inside every setting at 0.5 pu (severity 0.75), trips ROCOF at 0.6 pu,
 # and at 0.7 pu ANDES stops converging at 9.5 s; on the west area, with the external
-# system's inertia, 3 pu stays inside (severity 0.36).  Measured once while choosing the
-# amplitude (issue 15's note), not recomputed by a script.
+# system's inertia, 3 pu stays inside (severity 0.36); chapter 09's tables print them.
 MULTIAREA_AMPLITUDE = {"linear": 1.0, "testbed": 3.0, "ieee39": 0.6}
 MULTIAREA_ATTACKED = {"linear": 0, "testbed": 0, "ieee39": 1}   # area of the single attack
 
@@ -69,6 +68,7 @@ def simulator(plant: str) -> Callable[..., SimResult]:
     """The simulation function of ``plant``, called ``(params, **keywords)``:
     :func:`lfc.simulate` of ``params``, or of the ANDES microgrid with the
     design model ``params``."""
+    from lfc.run import simulate
     check_plant(plant)
     if plant == "linear":
         return simulate
@@ -78,11 +78,13 @@ def simulator(plant: str) -> Callable[..., SimResult]:
 
 def _on_microgrid(case, params: LFCParams, **kwargs) -> SimResult:
     """:func:`lfc.simulate` of the microgrid with the design model ``params``."""
+    from lfc.run import simulate
     return simulate(case, design=params, **kwargs)
 
 
 def design_params(plant: str) -> LFCParams:
     """Default design model: ``LFCParams()``, or the one fitted to the testbed."""
+    from lfc.model import LFCParams
     check_plant(plant)
     if plant == "linear":
         return LFCParams()

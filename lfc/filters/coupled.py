@@ -814,9 +814,8 @@ def row_intervals(fd: np.ndarray, x: np.ndarray, u: np.ndarray, p: np.ndarray, k
     column by column), so that LLVM runs the rows in SIMD lanes; each row's sum
     takes its terms in the same order as one row at a time would (the state's,
     then each area's command and load), so the intervals are the same bit for bit
-    (``tests/test_coupled.py``).  Measured against one row after another with
-    ``bench/bench_coupled.py --rows`` on a 2-core AMD EPYC: 12.6 against 19.1 µs
-    per call on the two-area preset, 110 against 212 µs on a ring of 6 areas."""
+    (``tests/test_coupled.py``); ``bench/bench_coupled.py --rows`` measures it against
+    one row after another."""
     inf = np.inf
     n_s, n_a, n_rows = int(fd[N_S]), int(fd[N_A]), int(fd[N_ROWS])
     col = HEAD + 2 * n_rows           # the rows' columns: bound new, bound held, then these
@@ -1018,13 +1017,9 @@ class CoupledFilter:
         that builds and whose :meth:`held_after_step` is at most
         :data:`AUTO_HELD_MAX` (1 s: a legitimate step of ``load_bound -
         recheck_bound`` in any area leaves AGC waiting at most that long), or, if
-        none is, the one that holds the least (the shortest of equals).  Measured
-        (2026-11-28): the two-area preset keeps 8 s (it holds 0.25 s); Kundur as
-        fitted to ANDES 12 s on the exact state (8 s holds 6.5 s) and 16 s on the
-        estimate of ``noise_std=(1e-4, 1e-3)`` (8 s does not build, 12 s holds
-        29.7 s); the three-area preset 8 s and the IEEE 39-bus system 12 s on both
-        (at 8 s it holds 1.26 s on the exact state and does not build on the
-        estimate).
+        none is, the one that holds the least (the shortest of equals): the
+        two-area preset keeps 8 s, Kundur as fitted to ANDES 16 s on the estimate of
+        ``noise_std=(1e-4, 1e-3)`` (``tests/test_coupled_estimate.py``).
 
     Attributes
     ----------
@@ -1135,11 +1130,9 @@ class CoupledFilter:
         some area's held command is not certifiable as a new one — until then
         the filter certifies no command near it, so a slowly moving AGC cannot
         move the command at all (it is held, nothing flagged).  0 if never within
-        ``duration``; ``duration`` if still then.  Measured on the exact state
-        (the estimate converges to it); one call costs about a second per area
-        pair on a 2-core machine.  A diagnostic of the cost of safety: Kundur as
-        fitted to ANDES on the estimate holds 29.7 s at ``horizon=12`` and 0 at
-        16 (``docs/coupled-certificate.md``, "With estimates", Cost)."""
+        ``duration``; ``duration`` if still then.  Computed on the exact state (the
+        estimate converges to it), about a second per area pair.  A diagnostic of the
+        cost of safety (``docs/coupled-certificate.md``, "With estimates", Cost)."""
         o = self.options
         size = o.load_bound - o.recheck_bound if size is None else size
         check_range("size", size, 0.0, o.load_bound, closed=True)

@@ -14,8 +14,8 @@ import time
 from pathlib import Path
 
 from lfc._validate import check_folder
-from lfc.repro import runner
 from lfc.experiments.scenarios import ALL_PLANTS
+from lfc.repro import manifest
 
 
 class _Parser(argparse.ArgumentParser):
@@ -62,13 +62,14 @@ def _parser() -> argparse.ArgumentParser:
     ap = _Parser(prog="python -m lfc", description=__doc__)
     sub = ap.add_subparsers(dest="command", required=True)
     rep = sub.add_parser("reproduce", help="regenerate the paper's figures (notebooks)")
-    rep.add_argument("--only", nargs="+", choices=list(runner.FIGURES), metavar="NAME",
-                     help=f"a subset of {list(runner.FIGURES)}")
+    names = [c.name for c in manifest.CHAPTERS]
+    rep.add_argument("--only", nargs="+", choices=names, metavar="NAME",
+                     help=f"a subset of {names}")
     rep.add_argument("--plant", default="all", choices=(*ALL_PLANTS, "all"),
                      help="'all' (default): every plant each figure supports")
     rep.add_argument("--jobs", type=_jobs, default=2, help="notebooks run in parallel")
-    rep.add_argument("--figures-dir", type=_folder, default=runner.ROOT / "figures")
-    rep.add_argument("--build-dir", type=_folder, default=runner.ROOT / "build")
+    rep.add_argument("--figures-dir", type=_folder, default=manifest.ROOT / "figures")
+    rep.add_argument("--build-dir", type=_folder, default=manifest.ROOT / "build")
     rep.add_argument("--quick", action="store_true",
                      help="every chapter on the linear model with its short parameters, "
                           "claims not checked, figures into BUILD_DIR/quick/figures "
@@ -134,10 +135,10 @@ def _parser() -> argparse.ArgumentParser:
     bt.add_argument("--dask", metavar="ADDRESS", help="run on a Dask scheduler at ADDRESS")
     bk = sub.add_parser("book", help="render the last reproduce's notebooks as HTML in "
                         "build/book/ (executing any that are missing)")
-    bk.add_argument("--only", nargs="+", choices=list(runner.FIGURES), metavar="NAME",
-                    help=f"a subset of {list(runner.FIGURES)}")
-    bk.add_argument("--figures-dir", type=_folder, default=runner.ROOT / "figures")
-    bk.add_argument("--build-dir", type=_folder, default=runner.ROOT / "build")
+    bk.add_argument("--only", nargs="+", choices=names, metavar="NAME",
+                    help=f"a subset of {names}")
+    bk.add_argument("--figures-dir", type=_folder, default=manifest.ROOT / "figures")
+    bk.add_argument("--build-dir", type=_folder, default=manifest.ROOT / "build")
     bk.add_argument("--pdf", action="store_true",
                     help="also print the book to build/book/lfc-scc-book.pdf (needs Chromium)")
     wr = sub.add_parser(
@@ -244,6 +245,7 @@ def _wire(args) -> int:
 
 
 def _readme(check: bool) -> int:
+    from lfc.repro import runner
     from lfc.repro.notebook import documents, readme_mismatches, sync_readme, \
         update_markdown_section
     tables = runner.ROOT / "figures"
@@ -259,6 +261,10 @@ def _readme(check: bool) -> int:
             if timing.exists() and f"<!-- {name[:-3]}:start -->" in doc.read_text():
                 update_markdown_section(doc, name[:-3], timing.read_text())
                 print(f"{doc.name} section {name[:-3]} from {timing}")
+    times = runner.read_json(runner.ROOT / "build" / runner.TIMES_FILE)
+    if times:                                     # each command's last complete run
+        update_markdown_section(docs[0], "times", runner.times_section(times))
+        print(f"README.md section times from build/{runner.TIMES_FILE}")
     changed = [f"{d.name}: {name}" for d in docs for name in sync_readme(d, tables)]
     print("updated sections: " + ", ".join(changed) if changed else "every section up to date")
     return 0
@@ -298,6 +304,7 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as done:          # --help (0) or a usage error (2), already printed
         return int(done.code or 0)
     try:
+        from lfc.repro import runner          # (papermill: not for --help or a usage error)
         if args.command == "reproduce":
             t0 = time.perf_counter()
             outcomes = runner.reproduce(args.only, args.plant, args.jobs, args.figures_dir,
@@ -312,15 +319,22 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 print(runner.summary_table(outcomes).to_string(index=False))
             cached = sum(o.cached for o in outcomes)
+            cpu = sum(getattr(resource.getrusage(who), f) for f in ("ru_utime", "ru_stime")
+                      for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
             if not (args.quick or args.only) and args.plant == "all":   # a full run
-                cpu = sum(getattr(resource.getrusage(who), f) for f in ("ru_utime", "ru_stime")
-                          for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
                 path = (args.build_dir / "reproduce"
                         / runner.TIMING_FILES[cached == len(outcomes)])
                 path.parent.mkdir(parents=True, exist_ok=True)
                 path.write_text(runner.timing_table(outcomes, wall, cpu, args.jobs))
                 print(f"timing: {path} (python -m lfc readme copies it into "
                       "docs/reproducing.md)")
+            if not args.only and args.plant in ("all", "linear") and all(o.ok for o in outcomes):
+                command = "python -m lfc reproduce" + (" --quick" if args.quick else (
+                    " --plant linear" if args.plant == "linear" else ""))
+                runner.record_time(args.build_dir, command, wall, cpu,
+                                   f"{len(outcomes) - cached} notebooks executed, {cached} "
+                                   f"read back" + ("; the loops compiled in the run"
+                                                   if runner.COMPILED_IN_RUN else ""))
             print(f"\nNotebooks ({wall:.0f} s wall on {args.jobs} jobs"
                   + (f"; {cached} of {len(outcomes)} unchanged since their last run, read "
                      f"back from build/ — --no-cache reruns them" if cached else "") + "):")
@@ -366,7 +380,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {_one_line(err)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        runner.stop_kernels()
+        started = sys.modules.get("lfc.repro.runner")     # no runner imported: no kernels
+        if started is not None:
+            started.stop_kernels()
         print("interrupted: finished runs and chunks are kept; rerun the same command to "
               "resume", file=sys.stderr)
         return INTERRUPTED
@@ -389,11 +405,12 @@ def _plot_sweep(args) -> int:
 def _grid(params: list[list[str]]) -> dict[str, list]:
     """The sweep grid of ``-p NAME VALUE...`` options: a repeated name adds its
     values (a value given twice is refused by :func:`runner.validate_parameters`)."""
+    from lfc.repro.runner import parse_value
     grid: dict[str, list] = {}
     for name, *values in params:
         if not values:
             raise ValueError(f"parameter {name!r} has no values")
-        grid.setdefault(name, []).extend(runner.parse_value(v) for v in values)
+        grid.setdefault(name, []).extend(parse_value(v) for v in values)
     return grid
 
 

@@ -10,8 +10,12 @@ Read by the runner (``python -m lfc reproduce`` and ``book``), by the tests
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from lfc.experiments.scenarios import ALL_PLANTS, PLANTS
+
+#: the repository: ``notebooks/``, ``figures/``, ``build/``
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @dataclass(frozen=True)

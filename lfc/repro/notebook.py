@@ -156,6 +156,19 @@ def setup(plant: str, supported: tuple[str, ...] = PLANTS, *, M: float | None = 
     check_plant(plant)
     if plant not in supported:
         raise ValueError(f"plant must be one of {supported} for this notebook, got {plant!r}")
+    relays = check_knobs(plant, M, relay_category, rocof_limit)
+    params = design_params(plant)
+    if M is not None:
+        params = replace(params, M=M)
+    return params, relays
+
+
+def check_knobs(plant: str, M: float | None = None, relay_category: str = "III",
+                rocof_limit: float | None = None) -> RelaySettings:
+    """:func:`setup`'s checks of the physical knobs (before anything is built or run:
+    ``python -m lfc sweep`` calls it for every point); the relays they give.
+
+    Raises ``ValueError`` (a wrong type: ``TypeError``) naming the knob."""
     if M is not None and plant != "linear":
         raise ValueError("M is the linear model's; on the testbed the design model's "
                          "inertia is fitted to ANDES (leave M = None)")
@@ -163,13 +176,10 @@ def setup(plant: str, supported: tuple[str, ...] = PLANTS, *, M: float | None = 
         check_number("M", M)                 # a bool or a string is refused, not coerced
         if not 0.0 < M <= 100.0:
             raise ValueError(f"M must lie in (0, 100] s, got {M!r}")
-    params = design_params(plant)
-    if M is not None:
-        params = replace(params, M=M)
     relays = RelaySettings.ieee1547(relay_category)
     if rocof_limit is not None:
         relays = replace(relays, rocof_limit=rocof_limit)
-    return params, relays
+    return relays
 
 
 def figure_name(base: str, plant: str) -> str:
@@ -278,7 +288,7 @@ def save_table(text: str, directory: str | Path, name: str) -> Path:
     return path
 
 
-RUN_SECTIONS = ("timing", "timing_rerun")   # sections a full reproduce's timing fills
+RUN_SECTIONS = ("timing", "timing_rerun", "times")   # sections runs' timings fill
 
 
 def documents(root: str | Path) -> list[Path]:

@@ -17,6 +17,7 @@ import os
 import re
 import shutil
 import signal
+import sys
 import tempfile
 import threading
 import time
@@ -26,7 +27,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import pandas as pd
-import papermill as pm
 from jupyter_client.manager import KernelManager
 from tqdm.auto import tqdm
 
@@ -34,17 +34,15 @@ from lfc._validate import check_count
 from lfc._files import content_key, folder_lock, write_atomic
 from lfc._pool import completed
 from lfc.experiments.scenarios import ALL_PLANTS
-from lfc.repro.manifest import CHAPTERS
-from lfc.repro.notebook import check_plant, check_type, figure_name, markdown_table
+from lfc.repro.manifest import CHAPTERS, ROOT
+from lfc.repro.notebook import check_knobs, check_plant, check_type, figure_name, markdown_table
 from lfc.warmup import compile_kernels
 
-ROOT = Path(__file__).resolve().parents[2]
 NOTEBOOKS_DIR = ROOT / "notebooks"
 FIGURES = {c.name: c.notebook for c in CHAPTERS}          # name -> notebook
 FIGURE_PLANTS = {c.name: c.plants for c in CHAPTERS}      # name -> plants it runs on
-# Where no run has recorded its time yet: these first, in this order (their measured
-# order on 2 cores, 2026-11-27: a full run, chapter 09's ANDES runs 277-494 s, the red team
-# 172 s, chapters 10 and 11 77 and 54 s; --quick, the red team 25 s, 11 21 s, 10 16 s)
+# Where no run has recorded its time yet: these first, in this order (the longest chapters
+# of a full run and of --quick; their times: docs/reproducing.md's timing table)
 LONGEST_FIRST = ("multiarea", "redteam", "wire", "coupled", "surface")
 POSITIVE = {"duration", "Ts", "control_period", "alpha", "alphas", "dt"}
 
@@ -130,11 +128,22 @@ def _kernel_children() -> list[int]:
 #: The BLAS threads of every kernel :class:`IPCKernelManager` starts (``reproduce``,
 #: ``sweep``, ``papermill --engine lfc``), unless the environment names them: one.
 #: Runs go one per core, and OpenBLAS' default, a thread per core in each process,
-#: oversubscribes the cores; its idle threads spin.  Measured on the suite (two
-#: processes on 2 cores, ``tests/conftest.py`` sets the same): the load bound's tests
-#: 1 min 52 s and 214 s of CPU with the default, 1 min 4 s and 106 s with one.  It
-#: also keeps a run's last bits independent of the machine's number of cores (a
-#: threaded product sums in another order: the IEEE 39-bus fit differs).
+#: oversubscribes the cores; its idle threads spin (``bench/records/test-suite.md``).
+#: It also keeps a run's last bits independent of the machine's number of cores (a
+#: threaded product sums in another order).
+def _papermill():
+    """papermill, imported where a notebook runs (its import takes seconds)."""
+    import papermill
+    return papermill
+
+
+def __getattr__(name: str):
+    """``runner.pm``: papermill, imported when first asked for."""
+    if name == "pm":
+        return _papermill()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 ONE_BLAS_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
 
 
@@ -191,6 +200,7 @@ def execute(notebook: Path, output: Path, parameters: dict,
     output.parent.mkdir(parents=True, exist_ok=True)
     manager = IPCKernelManager if not env else type(
         "RunKernelManager", (IPCKernelManager,), {"extra_env": dict(env)})
+    import papermill as pm
     pm.execute_notebook(str(notebook), str(output), parameters=parameters,
                         cwd=str(notebook.parent), kernel_name="python3",
                         kernel_manager_class=manager, progress_bar=False,
@@ -271,6 +281,9 @@ def _run_one(name: str, notebook: Path, results: Path, parameters: dict,
             deviations = read_json(results / "deviations.json")
             return RunOutcome(name, True, time.perf_counter() - t0, claims, "", deviations,
                               cached=True)
+        last = last_seconds(results)
+        tqdm.write(f"{name}: executing {notebook.name}"
+                   + (f" (its last run took {last:.0f} s)" if last else ""), file=sys.stderr)
         (results / CACHE_FILE).unlink(missing_ok=True)
         for stale in RESULT_FILES:  # never report a claim an earlier run computed
             (results / stale).unlink(missing_ok=True)
@@ -286,7 +299,7 @@ def _run_one(name: str, notebook: Path, results: Path, parameters: dict,
                     env={CLOCK_ENV: str(clock.resolve()),
                          **({} if cache else {SWITCH: "off"})})
             ok = True
-        except pm.PapermillExecutionError as err:
+        except _papermill().PapermillExecutionError as err:
             ok, error = False, f"{err.ename}: {err.evalue}"
         andes = andes_seconds(clock)
         claims = read_json(results / "claims.json")
@@ -375,8 +388,9 @@ def reproduce(only: list[str] | None = None, plant: str = "all", jobs: int = 2,
         raise ValueError(f"none of {names} runs on plant {plant!r} (see FIGURE_PLANTS)")
     if any(p != "linear" for _, p in runs):
         _prepare_testbed()
+    global COMPILED_IN_RUN
     if jobs > 1 and len(runs) > 1:     # kernels started on a cold cache would each compile
-        compile_kernels()
+        COMPILED_IN_RUN = compile_kernels()
     pool = executor or ThreadPoolExecutor(max_workers=jobs)
     futures = {}
     labels = [figure_name(n, p) for n, p in runs]
@@ -477,6 +491,42 @@ def times_table(outcomes: list[RunOutcome]) -> pd.DataFrame:
 
 
 TIMING_FILES = {False: "timing.md", True: "timing_rerun.md"}   # in build/reproduce/
+TIMES_FILE = "times.json"      # in build/: the last run of each command, for the README
+COMPILED_IN_RUN = False        # whether this process's reproduce compiled the loops
+
+
+def record_time(build_dir: Path, command: str, wall: float, cpu: float, note: str) -> None:
+    """Keep how long ``command`` (``"python -m lfc reproduce"``, ``"python -m pytest"``,
+    ...) took in its last complete run — wall and CPU seconds, the machine's cores, the
+    commit, the date and ``note`` (what the run did) — in ``build/times.json``, which
+    ``python -m lfc readme`` writes into the README (:func:`times_section`)."""
+    import json
+    import subprocess
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
+                            capture_output=True, text=True).stdout.strip() or "unknown"
+    path = Path(build_dir) / TIMES_FILE
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with folder_lock(path.parent / ".times"):
+        times = read_json(path)
+        times[command] = {"wall": round(wall, 1), "cpu": round(cpu, 1), "cores": os.cpu_count(),
+                          "commit": commit, "date": time.strftime("%Y-%m-%d"), "note": note}
+        write_atomic(path, json.dumps(times, indent=1, sort_keys=True) + "\n")
+
+
+def _minutes(seconds: float) -> str:
+    m, s = divmod(round(seconds), 60)
+    return f"{m} min {s} s" if m else f"{s} s"
+
+
+def times_section(times: dict) -> str:
+    """The README's ``times`` section: each command's last complete run (:func:`record_time`)."""
+    order = ["python -m lfc reproduce", "python -m lfc reproduce --plant linear",
+             "python -m lfc reproduce --quick", "python -m pytest", "python -m pytest --exhaustive"]
+    lines = [f"- `{c}`: **{_minutes(t['wall'])}** wall, {_minutes(t['cpu'])} of CPU on "
+             f"{t['cores']} cores ({t['note']}; commit {t['commit']}, {t['date']})"
+             for c in order + sorted(set(times) - set(order)) if (t := times.get(c))]
+    return ("The last complete run of each command on this repository's machine, written by "
+            "`python -m lfc readme` from `build/times.json`:\n\n" + "\n".join(lines) + "\n")
 
 
 def timing_table(outcomes: list[RunOutcome], wall: float, cpu: float, jobs: int) -> str:
@@ -522,6 +572,7 @@ def validate_parameters(notebook: Path, parameters: dict[str, list]) -> dict:
     default's element type), non-finite numbers, non-positive times or gains.
 
     Returns the notebook's parameters as papermill inspects them."""
+    import papermill as pm
     known = pm.inspect_notebook(str(notebook))
     for name, values in parameters.items():
         if name not in known:
@@ -544,6 +595,11 @@ def validate_parameters(notebook: Path, parameters: dict[str, list]) -> dict:
                         raise ValueError(f"parameter {name!r} must be > 0, got {value!r}")
             if name == "plant":
                 check_plant(value, ALL_PLANTS)
+    knobs = [k for k in ("plant", "M", "relay_category", "rocof_limit") if k in known]
+    if set(knobs) & set(parameters) - {"plant"}:   # every point's knobs, before any kernel
+        values = [parameters.get(k, [parse_value(known[k]["default"])]) for k in knobs]
+        for point in itertools.product(*values):
+            check_knobs(**dict(zip(knobs, point)))
     return known
 
 
@@ -617,7 +673,7 @@ def _sweep_one(notebook: Path, folder: Path, params: dict, point: dict, key: str
             return ""
         try:
             execute(notebook, folder / notebook.name, params)
-        except pm.PapermillExecutionError as err:
+        except _papermill().PapermillExecutionError as err:
             return f"{run_id(point)}: {err.ename}: {err.evalue}"
         write_atomic(folder / "done.json", json.dumps({"point": point, "key": key}))
     return ""
