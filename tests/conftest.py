@@ -1,4 +1,7 @@
 import os
+import resource
+import time
+from pathlib import Path
 
 # One BLAS thread in every process of the suite (pytest-xdist's workers, the notebook
 # kernels and pools they start), set before anything loads numpy: the suite runs one
@@ -15,13 +18,6 @@ from hypothesis import HealthCheck, settings  # noqa: E402
 
 import tiers  # noqa: E402
 
-# Property tests are derandomized by default, so the suite's verdict is reproducible
-# (fixed seeds); HYPOTHESIS_PROFILE=explore draws new examples on every run.  A test's
-# own count is tiers.examples(n): all n in the exhaustive tier.
-settings.register_profile("default", deadline=None, max_examples=tiers.examples(200),
-                          derandomize=True, suppress_health_check=[HealthCheck.too_slow])
-settings.register_profile("explore", deadline=None, max_examples=tiers.examples(200),
-                          suppress_health_check=[HealthCheck.too_slow])
 
 
 def pytest_addoption(parser):
@@ -30,13 +26,33 @@ def pytest_addoption(parser):
                           "battery (also LFC_TEST_TIER=exhaustive); tests/tiers.py")
 
 
+_STARTED = (time.monotonic(), 0.0)
+
+
+def _cpu() -> float:
+    """CPU seconds of this process and of the children it has waited for (the
+    workers, and in turn their kernels and pools)."""
+    own, children = (resource.getrusage(w) for w in (resource.RUSAGE_SELF,
+                                                      resource.RUSAGE_CHILDREN))
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
 def pytest_configure(config):
     """The tier (before any test module is imported, in every process: the workers
     inherit it), the markers, and — on pytest-xdist's controller, before its workers
     start — the engine's loops compiled in the background (``lfc.warmup``), once each
     and not once per worker, while the workers start and collect."""
+    global _STARTED
+    _STARTED = (time.monotonic(), _cpu())
     if config.getoption("exhaustive"):
         os.environ[tiers.TIER_ENV] = "exhaustive"
+    # Property tests are derandomized by default, so the suite's verdict is reproducible
+    # (fixed seeds); HYPOTHESIS_PROFILE=explore draws new examples on every run.  A
+    # test's own count is tiers.examples(n): all n in the exhaustive tier.
+    settings.register_profile("default", deadline=None, max_examples=tiers.examples(200),
+                              derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+    settings.register_profile("explore", deadline=None, max_examples=tiers.examples(200),
+                              suppress_health_check=[HealthCheck.too_slow])
     settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
     config.addinivalue_line("markers", "exhaustive: runs in the exhaustive tier only "
                                        "(tests/tiers.py)")
@@ -56,6 +72,11 @@ def _compiled(config) -> None:
     if pending is not None:
         config.stash[_COMPILING] = None
         pending.result()
+        config.stash[_DID_COMPILE] = pending.compiled
+
+
+_DID_COMPILE = pytest.StashKey()
+_PASSED = pytest.StashKey()
 
 
 def pytest_collection_finish(session):
@@ -91,8 +112,13 @@ def pytest_collection_modifyitems(config, items):
 _LEFT = pytest.StashKey()
 
 
-def pytest_sessionfinish(session):
-    """A worker hands its counts to the controller (``workeroutput``)."""
+def pytest_sessionfinish(session, exitstatus):
+    """A worker hands its counts to the controller (``workeroutput``); the controller
+    notes whether the whole suite ran and passed (its time goes to the README)."""
+    config = session.config
+    suite = [Path(a).resolve() for a in config.args] == [Path(__file__).resolve().parent]
+    config.stash[_PASSED] = (exitstatus == 0 and suite and not config.option.keyword
+                             and not config.option.markexpr)
     output = getattr(session.config, "workeroutput", None)
     if output is not None:
         output["lfc_left_tests"] = session.config.stash.get(_LEFT, 0)
@@ -108,11 +134,28 @@ def pytest_testnodedown(node, error):
 
 
 def pytest_unconfigure(config):
-    """The last line of a default-tier run: what the exhaustive tier adds (after
-    pytest's own summary); and no compilation left running."""
+    """The run's last lines (after pytest's own summary): its tier's wall and CPU time
+    (also as JSON where ``$LFC_TIER_REPORT`` points: ``.ci/run`` checks the budget),
+    and in the default tier what the exhaustive tier adds; no compilation left."""
     _compiled(config)
     reporter = config.pluginmanager.get_plugin("terminalreporter")
-    if tiers.exhaustive() or hasattr(config, "workerinput") or reporter is None:
+    if hasattr(config, "workerinput") or reporter is None:
+        return
+    tier = "exhaustive" if tiers.exhaustive() else "default"
+    wall, cpu = time.monotonic() - _STARTED[0], _cpu() - _STARTED[1]
+    reporter.write_line(f"the {tier} tier took {wall:.0f} s wall, {cpu:.0f} s of CPU "
+                        f"(this process and the workers, kernels and pools it started)")
+    if os.environ.get("LFC_TIER_REPORT"):
+        import json
+        Path(os.environ["LFC_TIER_REPORT"]).write_text(json.dumps(
+            {"tier": tier, "wall": round(wall, 1), "cpu": round(cpu, 1)}))
+    if config.stash.get(_PASSED, False):          # the whole tier passed: the README's time
+        from lfc.repro import runner
+        compiled = config.stash.get(_DID_COMPILE, False)
+        runner.record_time(runner.ROOT / "build", "python -m pytest" + (
+            " --exhaustive" if tiers.exhaustive() else ""), wall, cpu,
+            "the loops compiled in the run" if compiled else "the loops in numba's cache")
+    if tiers.exhaustive():
         return
     if _WORKERS:   # every worker collected the same tests; battery scenarios add up
         tests = max(w.get("lfc_left_tests", 0) for w in _WORKERS.values())

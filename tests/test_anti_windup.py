@@ -77,6 +77,7 @@ def test_anti_windup_must_be_a_bool():
         lfc.simulate(LFCParams(), duration=0.1, anti_windup="yes")
 
 
+@pytest.mark.andes_recorded
 def test_anti_windup_on_the_andes_testbed():
     """The ANDES loop runs the engine's generator side: the same option, the same
     effect (a 0.2 pu ω_ref bias the certified filter holds off, 4 s)."""

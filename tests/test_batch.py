@@ -8,6 +8,7 @@ from concurrent.futures import Executor, Future
 import numpy as np
 import pandas as pd
 import pytest
+import tiers
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -91,7 +92,7 @@ def test_small_map_matches_simulate_at_its_corners():
         assert m["first_trip_relay"] == row.first_trip_relay
 
 
-@settings(max_examples=8, deadline=None)
+@settings(max_examples=tiers.examples(8), deadline=None)
 @given(chunk=st.integers(1, 12), seed=st.integers(0, 2**16))
 def test_chunking_and_row_order_do_not_change_results(chunk, seed):
     scenarios = random_scenarios(12, seed)
@@ -167,6 +168,7 @@ def test_changed_settings_do_not_reuse_old_chunks(tmp_path):
     assert inline.ran == 2
 
 
+@pytest.mark.exhaustive
 def test_dask_local_cluster_gives_the_same_table_as_the_process_pool():
     distributed = pytest.importorskip("distributed")
     scenarios = random_scenarios(16, 5)
@@ -253,7 +255,7 @@ def _row(r: dict) -> dict:
     return row
 
 
-@settings(max_examples=8, deadline=None)
+@settings(max_examples=tiers.examples(8), deadline=None)
 @given(st.lists(ROW, min_size=6, max_size=6))
 def test_every_batch_row_is_the_matching_simulate_call(rows):
     """Issue "Hardened": a row equals ``simulate`` on the row's plant with the

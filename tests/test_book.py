@@ -199,3 +199,15 @@ def test_printing_without_a_browser_says_what_to_install(book, tmp_path):
         print_pdf([book], tmp_path / "b.pdf", browser="no-such-browser-here")
     with pytest.raises(ValueError, match="pages must name at least one page"):
         print_pdf([], tmp_path / "b.pdf")
+
+
+def test_the_index_shows_a_documented_deviation_as_such():
+    """A chapter whose only failed claim is a documented deviation is not shown as a
+    failure: "1 of 2 claims reproduced, 1 a documented deviation", its explanation as a
+    tooltip, linking to where the testbed differs; a claim that failed otherwise is red."""
+    from lfc.repro.book import _claims_note
+    claims = {"with SCC no relay trips": False, "attack trips without SCC": True}
+    note = _claims_note(claims, {"with SCC no relay trips": "OF2 trips at 1.0361 pu"})
+    assert note.startswith('<span class="ok">1 of 2 claims reproduced, <span title="OF2 trips')
+    assert "1 a documented deviation" in note and 'href="appendix-testbed.html"' in note
+    assert _claims_note(claims, {}).startswith('<span class="no">1 of 2 claims reproduced')

@@ -24,6 +24,7 @@ from functools import partial
 import numpy as np
 import pandas as pd
 import pytest
+import tiers
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from same_metrics import same_metrics
@@ -97,7 +98,7 @@ values = st.one_of(st.floats(allow_nan=True, allow_infinity=True),
 
 
 @pytest.mark.parametrize("method", METHODS)
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=tiers.examples(150), deadline=None)
 @given(x=st.lists(values, min_size=5, max_size=5), u_ref=values, p=values,
        calls=st.integers(1, 3))
 def test_any_input_gives_a_finite_command_and_consistent_flags(method, x, u_ref, p, calls):

@@ -19,6 +19,7 @@ import scipy.sparse as sp
 from scipy.optimize import linprog
 
 import lfc
+import tiers
 from lfc import MultiAreaParams
 from lfc.filters.base import MAX_ABS_INPUT
 from lfc.filters.contract import ContractOptions, contract_design
@@ -160,8 +161,9 @@ def test_a_step_of_exactly_load_bound_just_after_a_control_sample_trips_nothing(
     two-area preset and a chain of four: no trip."""
     instants = tuple(np.round(np.arange(1.0, 6.0, 0.5) + 0.001, 6))
     for grid in (MultiAreaParams.two_area(), ring(4, chain=True)):
-        runs, tripped, outside = battery(grid, "contract", instants=instants,
-                                         step=ContractOptions().load_bound, anti_windup=(True,))
+        runs, tripped, outside = battery(grid, f"contract-exact-step[{grid.n_areas}]", "contract",
+                                         instants=instants, step=ContractOptions().load_bound,
+                                         anti_windup=(True,))
         assert runs == 5 * grid.n_areas * len(instants) * 2 and (tripped, outside) == (0, 0)
 
 
@@ -217,6 +219,7 @@ def test_the_filter_keeps_its_contract_whatever_arrives():
         last = u
 
 
+@pytest.mark.exhaustive
 def test_the_l1_norm_counts_what_lies_beyond_sixty_seconds():
     """Finding, fixed: on a chain of four areas (slowest mode 0.06 1/s) the load's
     and the command's impulse responses still carry more than 1 % of their L1
@@ -236,6 +239,7 @@ def test_the_l1_norm_counts_what_lies_beyond_sixty_seconds():
         assert np.all(gain >= whole) and np.all(gain <= 1.015 * whole)
 
 
+@pytest.mark.andes_recorded
 @pytest.mark.long(35)
 def test_on_andes_the_contracts_trip_nothing_and_the_fit_eats_little_margin():
     """Kundur's two areas on ANDES (measured, not proven: the contracts are the
@@ -267,6 +271,7 @@ def test_on_andes_the_contracts_trip_nothing_and_the_fit_eats_little_margin():
             assert m["max_abs_rocof_meas"] <= share.bound[a, 1], name
 
 
+@pytest.mark.andes_recorded
 @pytest.mark.long(30)
 def test_the_red_teams_winner_on_the_fitted_model_replayed_on_andes_trips_nothing():
     """The red team's coordinated search (a sinusoid on both areas' commands)
@@ -276,8 +281,9 @@ def test_the_red_teams_winner_on_the_fitted_model_replayed_on_andes_trips_nothin
     from lfc.experiments.redteam import coordinated_attacks, coordinated_search
     from lfc.testbed import GridCase, grid_design
     case = GridCase.kundur()
-    found = coordinated_search(grid_design(case), {0: "contract", 1: "contract"},
-                               "sinusoid on P_c", duration=20.0, maxiter=2, popsize=4, jobs=1)
+    found = tiers.searched("contract:kundur-red-team", lambda: coordinated_search(
+        grid_design(case), {0: "contract", 1: "contract"}, "sinusoid on P_c", duration=20.0,
+        maxiter=2, popsize=4, jobs=1))
     assert not found["tripped"]
     r = lfc.simulate(case, duration=20.0,
                      attacks=coordinated_attacks(found["search"], found["theta"], 2, 20.0),
@@ -286,7 +292,7 @@ def test_the_red_teams_winner_on_the_fitted_model_replayed_on_andes_trips_nothin
     assert [int(a.alarms.outside.sum()) for a in r.areas] == [0, 0]
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=tiers.examples(60), deadline=None)
 @given(st.integers(1, 4), st.integers(1, 4), st.integers(0, 2**32 - 1),
        st.sampled_from([0.5, 3.0, 1e6]))
 def test_each_share_the_smaller_of_two_bounds_keeps_every_output_within_its_room(

@@ -22,8 +22,10 @@ from lfc import MultiAreaParams
 from lfc.filters.base import OUTSIDE
 from lfc.filters.coupled import (RHO_NEW, CoupledFilter, CoupledOptions, _error_tail,
                                  _load_error_steps, _sum_abs)
+from lfc.experiments.redteam import severity as sev
 from lfc.simulate_multiarea import simulate_grid_linear
 from test_coupled import RELAYS, THREE, battery, ieee39, kundur
+import tiers
 from test_coupled_baseline import attacks, tally
 
 NOISE = (1e-4, 1e-3)      # pu, pu/s: every area's dw_meas and rocof_meas
@@ -99,10 +101,11 @@ def test_a_step_of_exactly_load_bound_just_after_a_sample_trips_nothing():
     grid = MultiAreaParams.two_area()
     filt = CoupledFilter(grid, RELAYS, noise_std=NOISE)
     instants = tuple(np.round(np.arange(1.0, 6.0, 0.5) + 0.001, 6))
-    runs, tripped, _ = battery(grid, filt, instants=instants, step=0.06,
-                               anti_windup=(True,), **ESTIMATE)
+    runs, tripped, _ = battery(grid, "estimate:exact-step-bound", filt, instants=instants,
+                               step=0.06, anti_windup=(True,), **ESTIMATE)
     assert runs == 200 and tripped == 0
-    runs, tripped, outside = battery(grid, filt, anti_windup=(True,), **ESTIMATE)
+    runs, tripped, outside = battery(grid, "estimate:two-area", filt, anti_windup=(True,),
+                                     **ESTIMATE)
     assert runs == 80 and tripped == 0 and outside <= 4
 
 
@@ -123,24 +126,25 @@ def test_the_battery_on_the_estimate_trips_nothing(name):
                                              r"built: .*raise horizon.*held_after_step"):
             lfc.simulate(grid, duration=1.0, filters={0: "coupled", 1: "coupled"}, **ESTIMATE)
     filt = CoupledFilter(grid, RELAYS, noise_std=NOISE, horizon=horizon)
-    runs, tripped, outside = battery(grid, filt, anti_windup=(True,), **ESTIMATE)
+    runs, tripped, outside = battery(grid, f"estimate:{name}", filt, anti_windup=(True,),
+                                     **ESTIMATE)
     assert runs == 40 * grid.n_areas and tripped == 0
     assert outside <= {"three-area": 0, "kundur": 10, "ieee39": 4}[name]
 
 
-def on_the_estimate(grid: MultiAreaParams, filt: CoupledFilter, loads: list,
-                    seed: int = 0) -> list[dict]:
-    """The battery's five attacks x ``loads`` (each a ``{area: signal}``) with ``filt``
-    at every area, on the estimate (noise ``seed``), with anti-windup: scenarios."""
+def outside_runs(grid: MultiAreaParams, key: str, filt: CoupledFilter, loads: list
+                 ) -> tuple[int, int, int]:
+    """``(scenarios, runs with a trip, runs with an outside flag)`` of the battery's
+    five attacks x ``loads`` (each a ``{area: signal}``) with ``filt`` at every area,
+    on the estimate, with anti-windup (:func:`test_coupled_baseline.tally`)."""
     every = {a: filt for a in range(grid.n_areas)}
-    return [{"attacks": attack, "loads": load, "filters": every, "anti_windup": True,
-             "seed": seed, **ESTIMATE}
-            for attack in attacks(grid.n_areas).values() for load in loads]
+    cases = [(name, i) for name in attacks(grid.n_areas) for i in range(len(loads))]
 
-
-def outside_runs(grid: MultiAreaParams, filt: CoupledFilter, loads: list) -> tuple[int, int, int]:
-    """``(runs, runs with a trip, runs with an outside flag)`` of :func:`on_the_estimate`."""
-    return tally(grid, on_the_estimate(grid, filt, loads))
+    def make(name: str, i: int) -> dict:
+        return {"attacks": attacks(grid.n_areas)[name], "loads": loads[i], "filters": every,
+                "anti_windup": True, "seed": 0, **ESTIMATE}
+    return tally(grid, f"estimate:{key}", cases, make,
+                 lambda name, i: f"{name} | load path {i}: {loads[i]}")
 
 
 @pytest.mark.long(35)
@@ -167,18 +171,21 @@ def test_the_widened_held_level_flags_nothing_within_the_bound_and_misses_what_l
     instants = np.round(np.arange(1.0, 6.0, 0.5) + 0.001, 6)
     steps = [{a: lfc.Step(sign * 0.05, start=t)} for a in range(grid.n_areas)
              for t in instants for sign in (1, -1)]
-    assert outside_runs(grid, widened, steps) == (200, 0, 0)
+    assert outside_runs(grid, f"widened-steps[{name}]", widened, steps) == (200, 0, 0)
     if name == "kundur":
         return
     pulses = [{a: lfc.Step(sign * 0.025, start=t, stop=t + width)} for a in range(2)
               for t in instants[::3] for sign in (1, -1) for width in (0.05, 0.3)]
-    assert outside_runs(grid, widened, pulses) == (160, 0, 0)
+    assert outside_runs(grid, "widened-pulses", widened, pulses) == (160, 0, 0)
     beyond = [{a: lfc.Step(sign * 0.1, start=t)} for a in range(2)
               for t in instants[::3] for sign in (1, -1)]
     sharp = CoupledFilter(grid, RELAYS, noise_std=NOISE)
-    runs, tripped, outside = outside_runs(grid, sharp, beyond)
-    assert (runs, tripped) == (80, 4) and outside >= tripped
-    assert outside_runs(grid, widened, beyond) == (80, 4, 0)
+    runs, tripped, outside = outside_runs(grid, "sharp-beyond", sharp, beyond)
+    assert runs == 80 and 0 < tripped <= outside
+    runs, tripped, outside = outside_runs(grid, "widened-beyond", widened, beyond)
+    assert runs == 80 and tripped > 0 and outside == 0
+    if tiers.exhaustive():
+        assert tripped == 4
 
 
 def widened() -> CoupledFilter:
@@ -273,37 +280,56 @@ def test_at_the_strict_level_outside_comes_before_every_trip_at_the_sharp_one_no
     for name, grid, horizon in cases:
         strict = CoupledFilter(grid, RELAYS, noise_std=NOISE, horizon=horizon,
                                held_level="strict")
-        assert trips_before_outside(grid, strict) == expected[name], name
+        runs, trips, early = trips_before_outside(grid, f"strict[{name}]", strict)
+        assert runs == expected[name][0] and trips > 0 and early == 0, name
+        if tiers.exhaustive():
+            assert (runs, trips, early) == expected[name], name
         if name in ("two-area", "three-area"):
             sharp = CoupledFilter(grid, RELAYS, noise_std=NOISE, horizon=horizon)
-            assert trips_before_outside(grid, sharp)[2] == {"two-area": 16,
-                                                            "three-area": 12}[name]
+            early = trips_before_outside(grid, f"sharp[{name}]", sharp)[2]
+            assert early > 0
+            if tiers.exhaustive():
+                assert early == {"two-area": 16, "three-area": 12}[name]
     two = MultiAreaParams.two_area()
     strict = CoupledFilter(two, RELAYS, noise_std=NOISE, held_level="strict")
-    assert battery(two, strict, anti_windup=(True,), **ESTIMATE) == (80, 0, 7)
+    runs, tripped, outside = battery(two, "estimate:two-area-strict", strict,
+                                     anti_windup=(True,), **ESTIMATE)
+    assert runs == 80 and tripped == 0 and outside > 0
+    if tiers.exhaustive():
+        assert outside == 7
 
 
-def trips_before_outside(grid: MultiAreaParams, filt: CoupledFilter, paths: list | None = None,
+def trips_before_outside(grid: MultiAreaParams, key: str, filt: CoupledFilter,
                          seed: int = 0) -> tuple[int, int, int]:
-    """``(runs, runs that trip, runs that trip before their first outside flag)``
-    of the five attacks x ``paths`` (default :func:`every_period`) with ``filt`` at
-    every area (10 s, noise ``seed``, anti-windup)."""
-    runs = trips = early = 0
-    for attack in attacks(grid.n_areas).values():
-        for loads in paths or every_period(grid.n_areas):
-            r = lfc.simulate(grid, duration=10.0, attacks=attack, loads=loads, seed=seed,
-                             filters={a: filt for a in range(grid.n_areas)},
-                             anti_windup=True, **ESTIMATE)
-            runs += 1
-            if r.tripped:
-                trips += 1
-                trip = min(a.metrics()["first_trip_t"] or np.inf for a in r.areas)
-                flags = [a.alarms.query("outside").t for a in r.areas]
-                early += not min((f.min() for f in flags if len(f)), default=np.inf) < trip
-    return runs, trips, early
+    """``(scenarios, runs that trip, runs that trip before their first outside flag)``
+    of the five attacks x :func:`every_period`'s paths with ``filt`` at every area (10
+    s, noise ``seed``, anti-windup): a battery (``tests/tiers.py``) whose recorded
+    cases are the most severe and those that trip before any flag."""
+    paths = every_period(grid.n_areas)
+    cases = [(name, i) for name in attacks(grid.n_areas) for i in range(len(paths))]
+    picked = tiers.Battery(f"estimate:every-period:{key}", cases,
+                           lambda case: f"{case[0]} | load path {case[1]}")
+    severity, late = [], []
+    trips = early = 0
+    for name, i in picked.scenarios:
+        r = lfc.simulate(grid, duration=10.0, attacks=attacks(grid.n_areas)[name],
+                         loads=paths[i], seed=seed,
+                         filters={a: filt for a in range(grid.n_areas)},
+                         anti_windup=True, **ESTIMATE)
+        severity.append(max(float(sev(m, RELAYS)) for m in r.metrics().values()))
+        unflagged = False
+        if r.tripped:
+            trips += 1
+            trip = min(a.metrics()["first_trip_t"] or np.inf for a in r.areas)
+            flags = [a.alarms.query("outside").t for a in r.areas]
+            unflagged = not min((f.min() for f in flags if len(f)), default=np.inf) < trip
+            early += unflagged
+        late.append(float(unflagged))
+    picked.record(severity, late)
+    return len(cases), trips, early
 
 
-@settings(max_examples=40)
+@settings(max_examples=tiers.examples(40))
 @given(attack=st.sampled_from(sorted(attacks(2))), seed=st.integers(0, 2 ** 31 - 1),
        paths=st.lists(st.tuples(st.sampled_from(["none", "step", "pulse"]),
                                 st.floats(1.0, 9.0), st.floats(0.005, 3.0),
@@ -337,14 +363,22 @@ def test_the_red_teams_coordinated_search_on_the_estimate_trips_nothing_and_flag
     the coupled filters on their grid Kalman estimate, with noise, at both held
     levels: its worst attack stays inside every relay (severity 0.29–0.66 when
     measured) and no filter flags ``outside`` at it."""
-    from lfc.experiments.redteam import coordinated_search
+    from lfc.experiments.redteam import coordinated_attacks, coordinated_search
     grid = MultiAreaParams.two_area()
     for level in ("sharp", "widened"):
         filt = CoupledFilter(grid, RELAYS, noise_std=NOISE, held_level=level)
-        found = coordinated_search(grid, {0: filt, 1: filt}, family, duration=20.0,
-                                   maxiter=2, popsize=4, jobs=1,
-                                   scenario={**ESTIMATE, "anti_windup": True})
+        found = tiers.searched(
+            f"estimate:red-team[{family}-{level}]", lambda: coordinated_search(
+                grid, {0: filt, 1: filt}, family, duration=20.0, maxiter=2, popsize=4,
+                jobs=1, scenario={**ESTIMATE, "anti_windup": True}))
         assert not found["tripped"] and found["severity"] < 1.0 and found["outside"] == 0
+        replayed = simulate_grid_linear(grid, duration=20.0, filters={0: filt, 1: filt},
+                                        attacks=coordinated_attacks(family, found["theta"], 2,
+                                                                    20.0),
+                                        anti_windup=True, **ESTIMATE)
+        worst = max(float(sev(m, RELAYS)) for m in replayed.metrics().values())
+        assert worst == pytest.approx(found["severity"], rel=1e-6)
+        assert sum(a.metrics()["outside"] for a in replayed.areas) == 0
     with pytest.raises(ValueError, match="scenario must not set attacks"):
         coordinated_search(grid, {0: filt, 1: filt}, family, scenario={"attacks": {}})
 
@@ -384,6 +418,7 @@ def test_it_refuses_what_its_error_bound_does_not_cover():
     assert "noise_std=(0.0001, 0.001)" in r.areas[0].settings["filters"][0]
 
 
+@pytest.mark.andes_recorded
 @pytest.mark.long(40)
 def test_on_andes_the_coupled_filters_run_on_their_estimate():
     """Measured on ANDES, not proven (the certificate and its error bound are the
@@ -435,6 +470,7 @@ def test_on_andes_the_coupled_filters_run_on_their_estimate():
             assert all(50 < n < 200 for n in outside["widened"]), outside
 
 
+@pytest.mark.exhaustive
 def test_finding_on_kundur_a_12_s_horizon_holds_agc_after_a_legitimate_step():
     """Finding, pinned (measured): the cost of the estimate behind a stiff tie.
     Kundur as fitted to ANDES (T = 98 pu), the coupled filters on the estimate at
@@ -477,6 +513,7 @@ def test_finding_on_kundur_a_12_s_horizon_holds_agc_after_a_legitimate_step():
             assert not any(a.alarms.outside.any() for a in r.areas)
 
 
+@pytest.mark.long(15)
 def test_an_auto_horizon_is_the_shortest_that_builds_and_keeps_agc_waiting_at_most_1_s(
         monkeypatch):
     """``horizon="auto"``, the finding above turned into a choice: on Kundur as

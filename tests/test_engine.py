@@ -100,12 +100,45 @@ def test_bad_plant_and_noise_columns_name_the_column(column, value, message):
         simulate_many(P, row, duration=1.0, progress=False)
 
 
+HEAVY = ("numpy", "pandas", "numba", "scipy", "control", "cvxpy", "matplotlib", "andes",
+         "papermill", "nbformat", "jupyter_client", "dask", "distributed")
+
+
 def test_import_lfc_loads_no_heavy_or_optional_package():
-    code = ("import sys, lfc; print(sorted(m for m in ('cvxpy', 'matplotlib', 'andes', "
-            "'papermill', 'dask', 'distributed', 'scipy.stats', 'scipy.optimize') if m in sys.modules))")
+    """``import lfc`` imports none of them (each name is imported when first used);
+    the first use imports the core and still none of the optional ones."""
+    code = ("import sys, lfc; print(sorted(m for m in %r if m in sys.modules)); lfc.LFCParams; "
+            "print(sorted(m for m in ('cvxpy', 'matplotlib', 'andes', 'papermill', 'dask', "
+            "'distributed', 'scipy.stats', 'scipy.optimize') if m in sys.modules))" % (HEAVY,))
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)
-    assert out.stdout.strip() == "[]"
+    assert out.stdout.split("\n")[:2] == ["[]", "[]"]
+
+
+def test_the_command_lines_help_and_usage_errors_load_no_heavy_package():
+    """``python -m lfc --help`` and a usage error parse the command line with the
+    standard library and numpy alone (papermill, pandas, numba: where a command runs)."""
+    code = ("import sys; from lfc.repro.cli import main; main(%r); "
+            "print(sorted(m for m in %r if m in sys.modules))")
+    for argv in (["--help"], ["reproduce", "--only", "nope"], ["sweep"]):
+        out = subprocess.run([sys.executable, "-c", code % (argv, HEAVY)], capture_output=True,
+                             text=True)
+        assert out.stdout.strip().splitlines()[-1] == "['numpy']", (argv, out.stdout[-300:])
+
+
+def test_the_package_namespace_is_the_one_it_documents():
+    """Every name of ``lfc.__all__`` resolves (imported on first use), ``lfc.simulate``
+    is the function even after the submodule of that name is imported, and a name the
+    package does not have is an ``AttributeError``."""
+    import importlib
+
+    import lfc
+    for name in lfc.__all__:
+        assert getattr(lfc, name) is not None, name
+    importlib.import_module("lfc.simulate")
+    assert callable(lfc.simulate) and lfc.simulate.__module__ == "lfc.run"
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        lfc.nope  # noqa: B018
 
 
 def _imports(path: Path) -> set[str]:

@@ -8,6 +8,7 @@ import numpy as np
 import pandas as pd
 import papermill
 import pytest
+import tiers
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
@@ -40,7 +41,7 @@ def held_outputs(x: np.ndarray, u: float, seconds: float = 30.0) -> np.ndarray:
     return np.vstack(out)
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=tiers.examples(60), deadline=None)
 @given(z=st.lists(st.floats(-3, 3), min_size=5, max_size=5), u_ref=st.floats(-2, 2))
 @example(z=[0.0, 0.0, 0.0, 0.0, 2.484375], u_ref=0.0)   # hold: found by CI
 def test_a_certified_command_held_forever_keeps_the_relays_quiet(z, u_ref):

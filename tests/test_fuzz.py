@@ -17,6 +17,7 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
+import tiers
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -63,7 +64,7 @@ def consistent(result) -> None:
 
 
 # -- parameter classes -----------------------------------------------------------------------
-@settings(max_examples=80)
+@settings(max_examples=tiers.examples(80))
 @given(name=st.sampled_from(list(LFCParams.__dataclass_fields__)), value=HOSTILE)
 def test_fuzz_plant_parameters(name, value):
     params = outcome(lambda: LFCParams(**{name: value}), name)
@@ -73,7 +74,7 @@ def test_fuzz_plant_parameters(name, value):
             consistent(run)
 
 
-@settings(max_examples=100)
+@settings(max_examples=tiers.examples(100))
 @given(name=st.sampled_from(list(RelaySettings.__dataclass_fields__)), value=HOSTILE)
 def test_fuzz_relay_settings(name, value):
     relays = outcome(lambda: RelaySettings(**{name: value}), name)
@@ -82,7 +83,7 @@ def test_fuzz_relay_settings(name, value):
                                 pc_attack=lfc.Step(0.5, start=0.1)))
 
 
-@settings(max_examples=60)
+@settings(max_examples=tiers.examples(60))
 @given(name=st.sampled_from(["tie", "bias", "k_agc"]), value=HOSTILE)
 def test_fuzz_grid_parameters(name, value):
     two = MultiAreaParams.two_area()
@@ -96,7 +97,7 @@ CERTIFIED_OPTIONS = ["horizon", "load_bound", "load_kind", "margin", "noise_std"
                      "trips_per_hour", "relay_rate", "u_min", "u_max", "control_period"]
 
 
-@settings(max_examples=80)
+@settings(max_examples=tiers.examples(80))
 @given(name=st.sampled_from(PAPER_OPTIONS), value=HOSTILE)
 def test_fuzz_paper_filter_options(name, value):
     filt = outcome(lambda: SafetyFilter(P, **{name: value}), name)
@@ -105,7 +106,7 @@ def test_fuzz_paper_filter_options(name, value):
         assert math.isfinite(u)
 
 
-@settings(max_examples=40)
+@settings(max_examples=tiers.examples(40))
 @given(name=st.sampled_from(CERTIFIED_OPTIONS), value=HOSTILE)
 def test_fuzz_certified_filter_options(name, value):
     filt = outcome(lambda: SafetyFilter(P, method="certified", **{name: value}), name)
@@ -119,7 +120,7 @@ STATE = st.one_of(st.lists(st.floats(allow_nan=True, allow_infinity=True), min_s
                   st.lists(st.floats(-0.1, 0.1), min_size=5, max_size=5).map(np.array))
 
 
-@settings(max_examples=200)
+@settings(max_examples=tiers.examples(200))
 @given(which=st.sampled_from(["paper", "certified"]), x=STATE,
        u_ref=st.floats(allow_nan=True, allow_infinity=True),
        p_load=st.floats(allow_nan=True, allow_infinity=True))
@@ -140,7 +141,7 @@ SIM_ARGS = ["duration", "dt", "control_period", "seed", "noise_std", "stop_on_tr
             "scc", "relays"]
 
 
-@settings(max_examples=150)
+@settings(max_examples=tiers.examples(150))
 @given(name=st.sampled_from(SIM_ARGS), value=HOSTILE,
        scc=st.sampled_from([None, "paper", "certified"]))
 def test_fuzz_simulate_arguments(name, value, scc):
@@ -163,7 +164,7 @@ SIGNALS = {"Sinusoid": (lfc.Sinusoid, ["amplitude", "freq_hz", "start", "stop", 
                      dict(amplitude=0.5, f0_hz=0.1, f1_hz=2.0))}
 
 
-@settings(max_examples=150)
+@settings(max_examples=tiers.examples(150))
 @given(kind=st.sampled_from(list(SIGNALS)), data=st.data(), value=HOSTILE)
 def test_fuzz_signals(kind, data, value):
     cls, names, valid = SIGNALS[kind]
@@ -180,7 +181,7 @@ COLUMNS = ["waveform", "channel", "amplitude", "freq_hz", "start", "alpha", "Ts"
            "uncertainty", "margin", "declare_noise", "relay_noise", "trips_per_hour"]
 
 
-@settings(max_examples=80)
+@settings(max_examples=tiers.examples(80))
 @given(name=st.sampled_from(COLUMNS), value=HOSTILE)
 def test_fuzz_scenario_table_columns(name, value):
     table = pd.DataFrame({"waveform": ["sinusoid", "square"], "channel": "pc",

@@ -95,6 +95,7 @@ def test_a_design_model_on_another_mva_base_is_refused(fit):
         lfc.simulate(CASE, design=other, duration=1.0)
 
 
+@pytest.mark.exhaustive
 def test_the_area_command_reaches_its_governors_on_the_area_base(fit):
     """Without AGC, a 0.02 pu command step in area 0 moves area 0's turbines
     0.02 pu more than area 1's in steady state (equal droops, one frequency):
@@ -111,6 +112,7 @@ def test_the_area_command_reaches_its_governors_on_the_area_base(fit):
     assert not r.tripped
 
 
+@pytest.mark.exhaustive
 def test_batch_equals_one_by_one_and_shares_the_runs_of_filters_that_never_act(
         fit, tmp_path, monkeypatch):
     """Every result of a table, in one process or two, equals its own run, bit for
@@ -247,6 +249,7 @@ def test_the_fitted_models_command_range_is_where_andes_follows_it(name, expecte
     assert "| 0.05 | + / − |" in report.validation_table()
 
 
+@pytest.mark.exhaustive
 def test_a_tgov1n_area_command_enters_after_the_droop(fit39):
     """Without AGC, a 0.02 pu command step in the 39-bus system's area 0: in
     steady state its turbines give the command plus their droop response,
@@ -262,6 +265,7 @@ def test_a_tgov1n_area_command_enters_after_the_droop(fit39):
     assert end["dw_0"] > 0 and not r.tripped
 
 
+@pytest.mark.exhaustive
 def test_stop_on_trip_ends_at_the_first_trip_of_the_full_run(fit):
     attacks = {a: {"ace": lfc.Step(-2.5, 1.0)} for a in range(2)}
     full = lfc.simulate(CASE, design=fit.params, duration=30.0, attacks=attacks)

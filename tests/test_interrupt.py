@@ -100,7 +100,7 @@ def test_ctrl_c_on_batch_stops_its_workers_and_leaves_only_complete_chunks(tmp_p
     """(SIGTERM too: the forked workers inherit its handler and must still die
     when the pool terminates them; they hung the batch once.)"""
     rng = np.random.default_rng(0)
-    n, size = 4000, 100       # 40 chunks of 100 rows: about 0.3 s each on one core
+    n, size = 2000, 100       # 20 chunks of 100 rows: about 0.3 s each on one core
     pd.DataFrame({"waveform": "sinusoid", "channel": "pc", "amplitude": rng.uniform(0, 2, n),
                   "freq_hz": rng.uniform(0.1, 2, n), "start": 1.0, "alpha": 20.0,
                   "Ts": 0.25}).to_csv(tmp_path / "table.csv", index=False)
@@ -191,6 +191,7 @@ def test_an_interrupted_or_damaged_executed_notebook_is_not_complete(tmp_path, t
     assert not book.complete(path)
 
 
+@pytest.mark.long(17)
 def test_two_concurrent_sweeps_on_one_folder_both_finish_with_complete_results(tmp_path):
     """Issue "Hardened": each run folder is locked while a notebook fills it; the
     second sweep waits, finds the run finished and reuses it."""

@@ -3,6 +3,7 @@
 import numpy as np
 import pandas as pd
 import pytest
+import tiers
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -54,7 +55,7 @@ def test_lanes_equal_one_at_a_time_on_every_kind_of_row():
     assert (lanes["alarms"] > 0).any()
 
 
-@settings(max_examples=15)
+@settings(max_examples=tiers.examples(15))
 @given(st.integers(1, 2 * LANES + 3), st.integers(0, 10_000))
 def test_lanes_equal_one_at_a_time_on_any_table(n, seed):
     """Any number of rows (empty lanes in the last block), any mix."""

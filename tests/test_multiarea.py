@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
+import tiers
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
@@ -290,7 +291,7 @@ def test_area_filter_builds_each_areas_own_filter():
 FILTERS3 = {a: area_filter(THREE, a, "certified", RELAYS, 0.01) for a in range(3)}
 
 
-@settings(max_examples=15, deadline=None)
+@settings(max_examples=tiers.examples(15), deadline=None)
 @example(amps=[3.0, -3.0, 3.0], freqs=[0.05, 3.0, 0.3], square=True)
 @example(amps=[0.0, 0.0, 1.0], freqs=[1.0, 1.0, 0.5], square=False)
 @given(amps=st.lists(st.floats(-3.0, 3.0), min_size=3, max_size=3),

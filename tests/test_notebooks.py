@@ -284,6 +284,7 @@ def probe_chapter(monkeypatch):
     probe.register(monkeypatch.setattr)
 
 
+@pytest.mark.exhaustive
 def test_reproduce_only_one_chapter(tmp_path, capsys, probe_chapter):
     code = main(["reproduce", "--only", "probe", "--plant", "linear",
                  "--figures-dir", str(tmp_path / "fig"),
@@ -297,12 +298,18 @@ def test_reproduce_only_one_chapter(tmp_path, capsys, probe_chapter):
     assert (tmp_path / "build" / "reproduce" / "probe" / "probe.ipynb").exists()
 
 
+@pytest.mark.long(22)
 def test_reproduce_reads_an_unchanged_run_back_and_reruns_a_changed_or_damaged_one(
         tmp_path, capsys, probe_chapter):
     args = ["reproduce", "--only", "probe", "--plant", "linear", "--figures-dir",
             str(tmp_path / "fig"), "--build-dir", str(tmp_path / "build")]
     figure = tmp_path / "fig" / "probe.png"
-    assert main(args) == 0 and "executed" in capsys.readouterr().out
+    assert main(args) == 0
+    out = capsys.readouterr().out        # the claims' table, each notebook's time
+    assert "executed" in out and "wall on" in out
+    rows = [line for line in out.splitlines() if line.strip().startswith("probe ")]
+    assert len(rows) == 3 and all(line.split()[-1] == "yes" for line in rows[:2])
+    assert (tmp_path / "build" / "reproduce" / "probe" / "probe.ipynb").exists()
     first = figure.read_bytes()
     assert main(args) == 0                         # nothing changed: read back, says so
     out = capsys.readouterr().out
@@ -419,6 +426,7 @@ def test_two_processes_that_want_one_stored_result_compute_it_once(tmp_path):
     assert len(list(tmp_path.glob("ran-*"))) == 1
 
 
+@pytest.mark.long(23)
 def test_sweep_table_and_resume(tmp_path):
     out = tmp_path / "sweep"
     grid = {"alpha": [3.0, 20.0], "duration": [2.0]}
@@ -489,6 +497,9 @@ def test_a_chapters_sweep_reads_its_cached_scan_back(tmp_path, monkeypatch):
     (["-p", "alpha", "3", "--jobs", "0"], "--jobs must be an integer >= 1"),
     (["-p", "plant", "simscape"], "plant must be one of"),
     (["-p", "plant", "linear", "testbed", "simscape"], "plant must be one of"),
+    (["-p", "relay_category", "IV"], "category must be one of"),        # a knob's value,
+    (["-p", "M", "0"], "M must lie in (0, 100] s"),                        # checked before
+    (["-p", "plant", "linear", "testbed", "-p", "M", "2.0"], "M is the linear model's"),
 ])
 def test_sweep_rejects_bad_parameters_before_running(args, message, tmp_path, capsys):
     nb = str(runner.NOTEBOOKS_DIR / runner.FIGURES["fig4"])

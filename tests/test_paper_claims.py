@@ -1,15 +1,16 @@
-"""The paper's claims on the notebooks' own runs, and the ranges around them.
+"""The paper's claims on the chapters' scenarios, and the ranges around them.
 
-The scenarios are built once, on the notebooks' pages; each claim is defined
-once, in ``lfc.experiments.claims``.  The fixtures execute the figure notebooks
-at their default parameters (the documented scenarios, linear plant) and read
-what they computed; the other tests probe the ranges around the paper's
-attacks with the API, named after the range they cover.  The paper's SCC runs
-at its default (strongest) reading."""
+The scenarios are built on the notebooks' pages; ``tests/chapters.py`` builds each
+one again through the API at the notebook's own defaults (its parameters cell), and
+each claim is defined once, in ``lfc.experiments.claims``.  The exhaustive tier also
+executes each figure notebook at its defaults and reads what it computed (shared by
+the workers); the other tests probe the ranges around the paper's attacks with the
+API, named after the range they cover.  The paper's SCC runs at its default
+(strongest) reading."""
 
 import functools
-import json
 
+import chapters
 import numpy as np
 import pytest
 
@@ -26,32 +27,51 @@ CLAIMS = {"tutorial": paper_claims.tutorial_claims, "fig4": paper_claims.fig4_cl
 
 
 @functools.lru_cache(maxsize=None)
-def notebook_run(name: str, tmp: str) -> tuple[dict, dict]:
-    """Execute a chapter at its defaults (linear); its claims and metrics."""
-    nb = runner.NOTEBOOKS_DIR / chapter(name).notebook
-    out = f"{tmp}/{name}"
-    faster = {"edge_durations": [10.0], "edge_amplitudes": [0.2, 0.3, 0.1]} \
-        if name == "fig4" else {}                 # the edge scan has tests of its own below
-    runner.execute(nb, runner.Path(out) / nb.name,
-                   {"figures_dir": out, "results_dir": out, **faster})
-    read = lambda f: json.loads((runner.Path(out) / f).read_text())   # noqa: E731
-    return read("claims.json"), read("metrics.json")
+def chapter_runs(name: str) -> tuple[dict, dict]:
+    """Chapter ``name``'s claims and each run's metrics, built through the API."""
+    claims, runs = chapters.BUILDERS[name]("linear")
+    return claims, {k: r.metrics() for k, r in runs.items()}
 
 
 @pytest.fixture(scope="module")
-def runs(tmp_path_factory):
-    tmp = str(tmp_path_factory.mktemp("paper"))
-    return lambda name: notebook_run(name, tmp)
+def runs():
+    return chapter_runs
 
 
 @pytest.mark.parametrize("name", list(CLAIMS))
 def test_every_claim_of_the_paper_holds_on_the_notebooks_runs(runs, name):
     """The notebook computes its claims with ``lfc.experiments.claims`` (one
-    definition) and every one holds."""
+    definition) and every one holds on its scenario, built through the API at the
+    notebook's defaults (``tests/chapters.py``)."""
     source = (runner.NOTEBOOKS_DIR / chapter(name).notebook).read_text()
     assert f"{CLAIMS[name].__name__}(" in source
     claims, _ = runs(name)
     assert claims and all(claims.values()), claims
+
+
+@pytest.mark.exhaustive
+@pytest.mark.parametrize("name", list(CLAIMS))
+def test_the_executed_notebook_computes_the_same_claims_and_metrics(name, request,
+                                                                   tmp_path_factory):
+    """The notebook executed at its defaults (once per session, shared by the
+    workers): its claims all hold, and are the ones computed through the API, on
+    the same metrics (the API's scenario is the notebook's)."""
+    import json
+    faster = {"edge_durations": [10.0], "edge_amplitudes": [0.2, 0.3, 0.1]} \
+        if name == "fig4" else {}                 # the edge scan has tests of its own below
+    out = chapters.executed(name, chapters.shared_folder(request.config, tmp_path_factory),
+                            faster)
+    claims = json.loads((out / "claims.json").read_text())
+    metrics = json.loads((out / "metrics.json").read_text())
+    api_claims, api_metrics = chapter_runs(name)
+    assert claims == api_claims and all(claims.values())
+    for panel, m in api_metrics.items():
+        for key, value in m.items():
+            got = metrics[panel][key]
+            if isinstance(value, float):
+                assert got == pytest.approx(value, rel=1e-12, abs=1e-15), (panel, key)
+            else:
+                assert got == value, (panel, key)
 
 
 def test_fig4a_attack_trips_rocof_well_beyond_the_setting(runs):

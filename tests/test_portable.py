@@ -83,6 +83,7 @@ def _same(a, b, where: str) -> None:
         assert a == b, (where, a, b)        # verdicts: bools, relays, counts
 
 
+@pytest.mark.exhaustive
 @pytest.mark.skipif("avx2" not in FLAGS, reason="needs an x86 CPU with AVX2 (Haswell kernels)")
 def test_the_linear_chapters_verdicts_and_numbers_do_not_depend_on_the_blas_kernel():
     first, second = (_run(core) for core in CORES)

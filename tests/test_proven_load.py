@@ -4,8 +4,12 @@ by the peak of the step response instead of the L1 norm."""
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
+import pandas as pd
 import pytest
+import tiers
 
 import lfc
 from lfc import LFCParams, SafetyFilter
@@ -16,6 +20,31 @@ from lfc.model import lfc_matrices, output_matrix
 
 P, RELAYS = LFCParams(), lfc.RelaySettings()
 FIVE = np.linspace(1.5, 10.5, 5)   # s: instants across the attacks
+
+
+def tiered(key: str, scc, steps: tuple[float, ...], *, instants, attacks: dict | None = None,
+           **run) -> pd.DataFrame:
+    """:func:`lfc.experiments.load_during_attack.battery` in this tier (``tests/tiers.py``):
+    the whole battery in the exhaustive tier (its most severe runs and those that flag
+    ``outside`` the most recorded), the recorded ones in the default tier (each through
+    the same function, one attack, size and instant at a time).  The table's rows,
+    and its ``len`` in ``attrs["scenarios"]``."""
+    from lfc.experiments.load_during_attack import ATTACKS
+    attacks = ATTACKS if attacks is None else attacks
+    cases = list(itertools.product(attacks, steps, (1, -1), instants))
+    picked = tiers.Battery(f"load:{key}", cases,
+                           lambda c: f"{c[0]} | {c[2] * c[1]:+g} pu at {c[3]:.4g} s")
+    if tiers.exhaustive():
+        table = battery(P, scc, steps, instants=instants, attacks=attacks, **run)
+        assert [(r.attack, r.step, r.t_step) for r in table.itertuples()] == [
+            (a, sign * size, float(t)) for a, size, sign, t in cases]     # the same order
+    else:
+        rows = [battery(P, scc, (size,), instants=np.array([t]), attacks={a: attacks[a]}, **run)
+                .query("step == @sign * @size") for a, size, sign, t in picked.scenarios]
+        table = pd.concat(rows, ignore_index=True)
+    picked.record(table.severity, table.outside)
+    table.attrs["scenarios"] = len(cases)
+    return table
 
 
 @pytest.mark.parametrize("plant", box_plants(P, 0.2)[::8])
@@ -40,6 +69,7 @@ def test_largest_load_bound_meets_the_issues_floors():
         SafetyFilter(P, method="certified", load_kind="steps", load_bound=0.3)
 
 
+@pytest.mark.exhaustive
 @pytest.mark.long(33)
 def test_largest_load_bound_of_the_robust_configuration():
     robust = largest_load_bound(P, RELAYS, load_kind="steps", uncertainty=0.2,
@@ -49,14 +79,14 @@ def test_largest_load_bound_of_the_robust_configuration():
 
 def test_without_a_load_bound_a_step_during_an_attack_trips():
     """The audit's finding, pinned: load_bound = 0 covers no load at all."""
-    table = battery(P, SafetyFilter(P, method="certified"), (0.1,), instants=FIVE)
+    table = tiered("no-bound", SafetyFilter(P, method="certified"), (0.1,), instants=FIVE)
     assert table.tripped.sum() > 0
 
 
 def test_exact_state_steps_up_to_0p1_pu_during_every_attack_trip_nothing():
     scc = SafetyFilter(P, method="certified", load_kind="steps", load_bound=0.1)
-    table = battery(P, scc, (0.02, 0.05, 0.1), instants=FIVE)
-    assert len(table) == 4 * 3 * 2 * 5
+    table = tiered("steps-0.1", scc, (0.02, 0.05, 0.1), instants=FIVE)
+    assert table.attrs["scenarios"] == 4 * 3 * 2 * 5
     assert table.tripped.sum() == 0 and (table.outside > 0).sum() == 0
     assert table.severity.max() < 1.0
 
@@ -71,11 +101,11 @@ def test_a_hold_is_proven_period_by_period_with_recheck_bound():
     scc = SafetyFilter(P, method="certified", load_kind="steps", load_bound=0.1,
                        recheck_bound=0.06)
     instants = np.arange(1.501, 10.5, 0.25)
-    table = battery(P, scc, (0.06,), instants=instants)
-    assert len(table) == 4 * 2 * len(instants) == 288
+    table = tiered("recheck-0.06", scc, (0.06,), instants=instants)
+    assert table.attrs["scenarios"] == 4 * 2 * len(instants) == 288
     assert table.tripped.sum() == 0 and (table.outside > 0).sum() == 0
     assert table.severity.max() < 1.0
-    above = battery(P, scc, (0.1,), instants=instants)
+    above = tiered("recheck-above", scc, (0.1,), instants=instants)
     assert above.tripped.sum() == 0 and (above.outside > 0).sum() > 0
 
 
@@ -93,8 +123,8 @@ def test_recheck_bound_is_refused_where_it_cannot_hold(options, match):
 def test_robust_kalman_steps_up_to_0p05_pu_during_every_attack_trip_nothing():
     scc = SafetyFilter(P, method="certified", load_kind="steps", load_bound=0.05,
                        uncertainty=0.2, noise_std=(1e-4, 1e-3))
-    table = battery(P, scc, (0.02, 0.05), instants=FIVE, estimator="kalman",
-                    noise_std=(1e-4, 1e-3), seed=3)
+    table = tiered("robust-kalman", scc, (0.02, 0.05), instants=FIVE, estimator="kalman",
+                   noise_std=(1e-4, 1e-3), seed=3)
     assert table.tripped.sum() == 0 and (table.outside > 0).sum() == 0
 
 
@@ -110,6 +140,7 @@ def test_finding_at_the_largest_bound_a_full_step_under_attack_freezes_the_filte
     assert res.alarms[res.alarms.outside].t.max() > 11.9
 
 
+@pytest.mark.exhaustive
 @pytest.mark.long(38)
 def test_the_readmes_tradeoff_table_is_this_runs():
     """The load-during-attack table of docs/certified-filter.md, recomputed (12 s)."""
@@ -131,19 +162,30 @@ def test_the_readmes_tradeoff_table_is_this_runs():
 
 
 def test_every_test_the_readmes_guarantees_table_names_exists():
+    """Every test the README's guarantees table names exists, runs in the default tier
+    (it is not marked ``exhaustive``), and so does every test ``docs/guarantees.md``
+    names (there, any tier)."""
+    import importlib
     import re
     from pathlib import Path
     root = Path(__file__).parents[1]
     readme = root.joinpath("README.md").read_text()
     start = readme.index("**Guarantees at a glance.**")
-    table = readme[start:readme.index("**What is measured, not proven**", start)]
+    table = readme[start:readme.index("\n\n", readme.index("| setting |", start))]
     named = re.findall(r"`(tests/test_\w+\.py)::(test_\w+)`", table)
-    bare = re.findall(r"(?<![:\w/])`(test_\w+)`", table)
-    assert len(named) >= 8
+    assert len(named) >= 10 and len(named) == table.count("\n|") - 2   # one per row
+    for f, name in named:
+        module = importlib.import_module(Path(f).stem)
+        test = getattr(module, name)
+        marks = {m.name for m in getattr(test, "pytestmark", [])}
+        assert "exhaustive" not in marks, (f, name)
+    doc = root.joinpath("docs", "guarantees.md").read_text()
+    named = re.findall(r"`(tests/test_\w+\.py)::(test_\w+)", doc)
     files = {f for f, _ in named}
+    assert len(named) >= 8
     for f, name in named:
         assert re.search(rf"^def {name}\(", root.joinpath(f).read_text(), re.M), (f, name)
-    for name in bare:   # a test named without its file: in one of the files the table names
+    for name in re.findall(r"(?<![:\w/])`(test_\w+)", doc):   # named without its file
         assert any(re.search(rf"^def {name}\(", root.joinpath(f).read_text(), re.M)
                    for f in files), name
 
@@ -174,18 +216,21 @@ def test_red_team_winners_replay_exactly_and_steps_during_them_trip_nothing():
     from lfc.experiments.redteam import (FAMILIES, Defender, family_search,
                                          freeform_search, replay, severity)
     certified = Defender("certified", method="certified")
-    found = [family_search(P, certified, f, duration=8.0, maxiter=2, popsize=3)
-             for f in FAMILIES] + [freeform_search(P, certified, maxiter=2, popsize=1)]
+    found = [tiers.searched(f"load:red-team[{f}]", lambda f=f: family_search(
+        P, certified, f, duration=8.0, maxiter=2, popsize=3)) for f in FAMILIES]
+    found.append(tiers.searched("load:red-team[free-form]", lambda: freeform_search(
+        P, certified, maxiter=2, popsize=1)))
     for f in found:
         run = lfc.simulate(P, duration=8.0 if f["search"] in FAMILIES else 6.0,
                            scc=SafetyFilter(P, method="certified"), **replay(f, 8.0))
-        assert float(severity(run.metrics(), RELAYS)) == pytest.approx(f["severity"], abs=1e-12)
+        assert float(severity(run.metrics(), RELAYS)) == pytest.approx(
+            f["severity"], abs=1e-12 if tiers.exhaustive() else tiers.SAME)
     strongest = sorted(found, key=lambda f: -f["severity"])[:3]
     assert strongest[-1]["severity"] > 0.95                     # they ride the limits
     winners = {f["search"]: replay(f, 8.0) for f in strongest}
     scc = SafetyFilter(P, method="certified", load_kind="steps", load_bound=0.1)
-    table = battery(P, scc, (0.02, 0.05, 0.1), instants=FIVE, attacks=winners)
-    assert len(table) == 3 * 3 * 2 * 5
+    table = tiered("red-team-winners", scc, (0.02, 0.05, 0.1), instants=FIVE, attacks=winners)
+    assert table.attrs["scenarios"] == 3 * 3 * 2 * 5
     assert table.tripped.sum() == 0 and (table.outside > 0).sum() == 0
 
 
@@ -195,6 +240,7 @@ def test_replay_refuses_what_it_cannot_replay():
         replay({"search": "bias on ACE", "theta": (1.0,)}, 8.0)
 
 
+@pytest.mark.exhaustive
 def test_the_readmes_bound_price_table_is_this_runs():
     """docs/certified-filter.md's table of what a load bound costs when nothing attacks (robust
     configuration, Kalman estimate, seed 1), recomputed (≈ 50 s)."""

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import tiers
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -32,7 +33,7 @@ def test_the_derivative_bound_does_not_depend_on_the_load_range(monkeypatch):
     np.testing.assert_allclose(taus[0], taus[1], rtol=1e-5)   # HiGHS tolerances: 5e-7 seen
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=tiers.examples(60), deadline=None)
 @given(p=st.floats(-50.0, 50.0), dw=st.floats(-0.01, 0.01), dpg=st.floats(-0.05, 0.05))
 def test_a_constant_load_shifts_the_certified_interval(p, dw, dpg):
     """At the state shifted by the load's equilibrium (``dPg = dPm = p``), the

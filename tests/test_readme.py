@@ -3,6 +3,8 @@ minutes, and generated tables that match the figures they come from."""
 
 import re
 
+import pytest
+
 from lfc.repro import runner
 from lfc.repro.book import APPENDICES, github_anchor
 from lfc.repro.notebook import documents, readme_mismatches, sync_readme
@@ -40,6 +42,13 @@ def test_the_readme_is_short_and_speaks_to_a_newcomer():
     assert linked == set(APPENDICES)
     for doc in documents(runner.ROOT)[1:]:
         assert not re.search(r"\bthe issue\b|notes §|Robust issue|Proven issue", doc.read_text())
+
+
+def test_every_readme_line_reads_as_reference():
+    """No line of the README is longer than 400 characters (a table cell holds one short
+    line; the full statements are in the appendices)."""
+    long = [i + 1 for i, line in enumerate(README.read_text().splitlines()) if len(line) > 400]
+    assert not long, f"README lines longer than 400 characters: {long}"
 
 
 def test_every_link_between_the_readme_and_the_appendices_resolves():
@@ -124,6 +133,7 @@ def test_the_readmes_quick_start_runs_and_stops_the_attack(tmp_path, monkeypatch
         "trace.csv", "controls.csv", "trips.csv", "alarms.csv", "metrics.json"}
 
 
+@pytest.mark.exhaustive
 def test_a_reader_goes_from_the_readme_to_a_modified_attack_without_touching_figures(tmp_path):
     """The path a newcomer takes (walked twice by an agent session that had never seen
     the project, acting as a reader: 5.5 and 2.1 minutes from the README to a modified

@@ -12,6 +12,7 @@ import warnings
 import numpy as np
 import pandas as pd
 import pytest
+import tiers
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
@@ -152,7 +153,7 @@ def test_a_chunk_with_a_valid_checksum_but_impossible_metrics_is_recomputed(tmp_
                                   SANE_METRICS, check_dtype=False)
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+@settings(max_examples=tiers.examples(60), deadline=None, suppress_health_check=[HealthCheck.too_slow,
                                                                    HealthCheck.function_scoped_fixture])
 @given(data=st.data())
 def test_property_damaged_chunk_files_never_give_a_wrong_result(tmp_path_factory, data):
@@ -195,7 +196,7 @@ BAD = {"waveform": ["saw", 3], "channel": ["Pc", None], "amplitude": [math.nan, 
 corruption = st.one_of(st.none(), st.sampled_from([(c, v) for c, vs in BAD.items() for v in vs]))
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=tiers.examples(60), deadline=None)
 @given(rows=st.lists(VALID_ROW, min_size=1, max_size=3), bad=corruption,
        which=st.integers(0, 2))
 def test_property_a_scenario_table_is_refused_or_simulated_correctly(rows, bad, which):
@@ -277,7 +278,7 @@ def test_a_huge_command_or_state_is_invalid_input_not_passed_through(name):
 
 
 @pytest.mark.parametrize("name", list(FILTERS))
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=tiers.examples(150), deadline=None)
 @given(x=st.lists(absurd, min_size=5, max_size=5), u_ref=absurd, p=absurd)
 def test_property_filters_never_raise_and_return_a_finite_command(name, x, u_ref, p):
     filt = FILTER_OBJECTS[name]
@@ -353,7 +354,7 @@ def test_cli_usage_error_is_one_line(capsys):
     one_line_error(capsys)
 
 
-@settings(max_examples=40, deadline=None,
+@settings(max_examples=tiers.examples(40), deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(args=st.lists(st.sampled_from(["--duration", "-1", "0", "nan", "1e-5", "0.5", "--out",
                                       "--chunk-size", "0", "2", "x", "--dask", "", "-p"]),

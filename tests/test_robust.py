@@ -15,6 +15,7 @@ from dataclasses import replace
 import numpy as np
 import pandas as pd
 import pytest
+import tiers
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.linalg import expm
@@ -77,6 +78,19 @@ def attacks() -> pd.DataFrame:
     return strong_attacks()
 
 
+def run_battery(key: str, table: pd.DataFrame, **options) -> pd.DataFrame:
+    """``simulate_many`` of the battery ``table`` in this tier (``tests/tiers.py``): every
+    row in the exhaustive tier, its most severe (and most flagged) recorded rows in the
+    default tier; the metrics indexed as ``table``."""
+    picked = tiers.Battery.of_table(key, table)
+    rows = table.loc[picked.scenarios]
+    res = lfc.simulate_many(P, rows, progress=False, **options)
+    res.index = rows.index
+    sev = np.maximum(res.max_abs_rocof_meas / RELAYS.rocof_limit, res.max_abs_dw_meas / RELAYS.F)
+    picked.record(sev, res.outside)
+    return res
+
+
 # -- between samples -------------------------------------------------------------------------
 @pytest.mark.parametrize("dt", [2.5e-4, 5e-4, 1e-3, 2e-3])
 def test_no_trip_at_any_plant_step(dt):
@@ -110,8 +124,8 @@ def test_robust_filter_never_trips_at_the_box_corners_or_inside(attacks):
     (measured), the strong attacks, plant step 0.5 ms."""
     table = on_plants(attacks.assign(method="certified", uncertainty=BOX_WIDTH),
                       corners() + interior(8))
-    res = lfc.simulate_many(P, table, duration=15.0, dt=5e-4, progress=False, chunk_size=200)
-    assert len(res) == 40 * len(attacks) >= 40 * 20
+    assert len(table) == 40 * len(attacks) >= 40 * 20
+    res = run_battery("robust:box", table, duration=15.0, dt=5e-4, chunk_size=200)
     assert not res.tripped.any()
 
 
@@ -150,7 +164,7 @@ ROBUST_FILTER = lfc.SafetyFilter(P, RELAYS, method="certified", uncertainty=BOX_
 STATE_SCALE = np.array([0.2, 0.2, 0.01, 0.01, 0.02])
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=tiers.examples(40), deadline=None)
 @given(z=st.lists(st.floats(-2, 2), min_size=5, max_size=5), u_ref=st.floats(-2, 2),
        corner=st.integers(0, 31), p_load=st.floats(-0.1, 0.1))
 def test_a_certified_command_held_keeps_every_corner_inside_at_a_quarter_millisecond(
@@ -179,9 +193,10 @@ def test_robust_filter_on_kalman_estimates_over_many_seeds(attacks):
     table = pd.concat([table.assign(seed=s) for s in range(16)], ignore_index=True)
     weakest = replace(P, M=0.8 * P.M, D=0.8 * P.D, tau_g=1.2 * P.tau_g, tau_t=1.2 * P.tau_t,
                       droop=0.8 * P.droop)
-    res = lfc.simulate_many(P, on_plants(table, [P, weakest]), duration=10.0,
-                             progress=False, chunk_size=200)
-    assert len(res) >= 2 * 16 * 20 and not res.tripped.any()
+    table = on_plants(table, [P, weakest])
+    assert len(table) >= 2 * 16 * 20
+    res = run_battery("robust:kalman-seeds", table, duration=10.0, chunk_size=200)
+    assert not res.tripped.any()
 
 
 @pytest.mark.long(38)
@@ -193,8 +208,8 @@ def test_robust_filter_on_kalman_estimates_at_all_32_corners(attacks):
     (the guarantee ends there; what saves them is measured, not proven)."""
     table = on_plants(attacks.assign(**ROBUST, noise_w=NOISE[0], noise_rocof=NOISE[1],
                                      seed=0), corners())
-    res = lfc.simulate_many(P, table, duration=10.0, progress=False, chunk_size=200)
-    assert len(res) == 32 * len(attacks) >= 32 * 20
+    assert len(table) == 32 * len(attacks) >= 32 * 20
+    res = run_battery("robust:kalman-corners", table, duration=10.0, chunk_size=200)
     assert not res.tripped.any()
     sev = np.maximum(res.max_abs_rocof_meas / RELAYS.rocof_limit,
                      res.max_abs_dw_meas / RELAYS.F)
@@ -214,9 +229,9 @@ def test_off_the_box_every_trip_is_flagged_outside_first(attacks):
     weak = [c for c in wide if c.M < P.M]
     table = on_plants(attacks.assign(**ROBUST, noise_w=NOISE[0], noise_rocof=NOISE[1],
                                      seed=0), weak)
-    res = lfc.simulate_many(P, table, duration=10.0, progress=False, chunk_size=200)
-    trips = table[res.tripped.to_numpy()]
-    assert len(trips) >= 10
+    res = run_battery("robust:off-the-box", table, duration=10.0, chunk_size=200)
+    trips = table.loc[res.index[res.tripped.to_numpy()]]
+    assert len(trips) >= (10 if tiers.exhaustive() else 1)
     scc = lfc.SafetyFilter(P, method="certified", uncertainty=BOX_WIDTH, noise_std=NOISE)
     kalman = KalmanFilter(P, 0.01, meas_std=NOISE)     # what a batch row uses: the design
     for _, row in trips.iterrows():
@@ -232,7 +247,7 @@ def test_undeclared_noise_trips_the_certified_filter(attacks):
     """Without ``noise_std`` the certificate trusts the estimate: some seed trips."""
     table = attacks.assign(method="certified", noise_w=NOISE[0], noise_rocof=NOISE[1])
     table = pd.concat([table.assign(seed=s) for s in range(4)], ignore_index=True)
-    assert lfc.simulate_many(P, table, duration=15.0, progress=False).tripped.any()
+    assert run_battery("robust:undeclared-noise", table, duration=15.0).tripped.any()
 
 
 def test_noisy_relays_trip_rate_within_the_claim(attacks):

@@ -39,6 +39,7 @@ def test_builds_power_flow_converges_and_starts_at_nominal():
     assert not r.metrics()["tripped"] and set(r.metrics()) == set(METRIC_KEYS)
 
 
+@pytest.mark.exhaustive
 def test_the_fit_is_cached_on_disk_checked_and_refit_when_damaged(fit, tmp_path, monkeypatch):
     """The cache of a computed fit (a case without a committed fit: none here)."""
     monkeypatch.setenv("LFC_CACHE_DIR", str(tmp_path))
@@ -71,6 +72,7 @@ def test_fitted_model_small_signal_error_is_small_and_reported(fit):
     assert "| M (s) |" in fit.table()
 
 
+@pytest.mark.exhaustive
 def test_testbed_matches_fitted_model_on_a_new_small_signal(fit):
     """A different input from the fit's (a 0.5 Hz, 0.01 pu command oscillation):
     the fitted linear model tracks the testbed within twice the fit error."""
@@ -174,6 +176,7 @@ def test_non_convergence_raises_with_time_and_reason(params):
         lfc.simulate(CASE, design=params, duration=2.0, fault=fault)
 
 
+@pytest.mark.exhaustive
 def test_fig5_bias_beats_the_paper_scc_on_the_testbed_at_both_outside_readings(params):
     """The documented deviation of Fig. 5, and how it depends on E9's reading: the
     SCC's prediction leaves its safe set only after the frequency has crossed OF2;
@@ -188,6 +191,7 @@ def test_fig5_bias_beats_the_paper_scc_on_the_testbed_at_both_outside_readings(p
     assert 0.0302 < push["max_abs_dw_meas"] < 0.0306
 
 
+@pytest.mark.exhaustive
 def test_robust_filter_with_the_fitted_models_box_holds_on_the_testbed(params, fit):
     """Issue "Robust": declared, the ±20 % box around the fitted model (which
     contains the case-data model); the robust filter stops the Fig. 5 bias that
@@ -218,6 +222,7 @@ def test_every_andes_run_reports_the_seconds_andes_itself_computed(params, tmp_p
     from lfc.testbed.loop import CLOCK_ENV
     clock = tmp_path / "andes_seconds.txt"
     monkeypatch.setenv(CLOCK_ENV, str(clock))
+    monkeypatch.setenv("LFC_ANDES_RUNS", "off")        # every call runs ANDES
     for _ in range(2):
         t0 = time.process_time()
         lfc.simulate(CASE, design=params, duration=0.5)

@@ -12,6 +12,8 @@ Both tiers run the same test ids.  Three things differ:
   exhaustive tier checks the record: a battery whose ``k`` most severe scenarios are
   no longer the recorded ones fails, saying so (``LFC_UPDATE_WORST_CASES=1`` writes
   the new ones);
+* a red-team search (:func:`searched`) runs in the exhaustive tier; the default tier
+  takes the attack it found from the record;
 * hypothesis draws :func:`examples` examples: a test's full count in the exhaustive
   tier, a quarter of it (at least 5) in the default one.
 
@@ -23,6 +25,7 @@ battery scenarios the exhaustive tier adds (:func:`summary`).
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import tempfile
@@ -106,33 +109,87 @@ class Battery(Generic[T]):
         self.scenarios = [s for s, name in zip(self.all, self.labels) if name in names]
         LEFT_OUT[key] = len(self.all) - len(self.scenarios)
 
-    def record(self, severity: Iterable[float]) -> None:
-        """Check (exhaustive tier) that the ``k`` most severe of ``severity`` (one per
-        scenario run, in :attr:`scenarios`' order) are the recorded ones; with
+    @classmethod
+    def of_table(cls, key: str, table, k: int = 3) -> "Battery":
+        """A battery of a scenario table's rows (a ``simulate_many`` table): each row
+        named by its values; :attr:`scenarios` are index labels (``table.loc[...]``)."""
+        def short(v) -> str:
+            if isinstance(v, (tuple, list)) or getattr(v, "ndim", 0) > 0:   # sampled
+                return "#" + hashlib.sha1(repr(tuple(map(float, v))).encode()).hexdigest()[:12]
+            return repr(v.item() if hasattr(v, "item") else v)
+
+        def label(i) -> str:
+            return ", ".join(f"{c}={short(v)}" for c, v in table.loc[i].items()
+                             if not (isinstance(v, float) and v != v))
+        return cls(key, list(table.index), label, k)
+
+    def record(self, severity: Iterable[float], flagged: Iterable[float] | None = None
+               ) -> None:
+        """Check (exhaustive tier) that the recorded scenarios are the ``k`` most severe
+        of ``severity`` (one per scenario run, in :attr:`scenarios`' order) and, given
+        ``flagged`` (per scenario: the samples flagged ``outside``, or whatever count a
+        finding is about), the ``k`` where it is largest (and above 0); with
         ``LFC_UPDATE_WORST_CASES=1`` write them instead.  Nothing in the default tier."""
         if not exhaustive():
             return
         values = [float(v) for v in severity]
-        if len(values) != len(self.all):
+        flags = [float(v) for v in flagged] if flagged is not None else [0.0] * len(values)
+        if not len(values) == len(flags) == len(self.all):
             raise ValueError(f"{self.key}: {len(values)} severities for {len(self.all)} "
                              f"scenarios")
-        order = sorted(range(len(values)), key=lambda i: (-values[i], self.labels[i]))
-        top = [{"label": self.labels[i], "severity": round(values[i], 9)}
-               for i in order[:self.k]]
+        worst = sorted(range(len(values)), key=lambda i: (-values[i], self.labels[i]))
+        flagged = [i for i in sorted(range(len(flags)), key=lambda i: (-flags[i], self.labels[i]))
+                   if flags[i] > 0]
+        top = [{"label": self.labels[i], "severity": round(values[i], 9),
+                "by": "severity" if i in worst[:self.k] else "flagged",
+                **({"flagged": int(flags[i])} if flags[i] else {})}
+               for i in dict.fromkeys(worst[:self.k] + flagged[:self.k])]
         if os.environ.get(UPDATE_ENV) == "1":
             _write(self.key, {"k": self.k, "of": len(values), "cases": top})
             return
         recorded = _read().get(self.key)
         assert recorded is not None, f"{self.key}: not recorded ({UPDATE_ENV}=1 writes it)"
-        kth = values[order[min(self.k, len(values)) - 1]]
-        by_label = dict(zip(self.labels, values))
-        stale = [case["label"] for case in recorded["cases"]
-                 if case["label"] not in by_label
-                 or by_label[case["label"]] < kth - SAME * max(1.0, abs(kth))]
-        assert not stale and recorded["of"] == len(values), (
-            f"{self.key}: the battery's {self.k} most severe scenarios are now {top}; the "
-            f"record holds {recorded['cases']} of {recorded['of']}: rerun with "
-            f"{UPDATE_ENV}=1 to write them to {RECORD}")
+        index = {name: i for i, name in enumerate(self.labels)}
+        names = [case["label"] for case in recorded["cases"]]
+        stale = [name for name in names if name not in index]
+        kth = values[worst[min(self.k, len(values)) - 1]]
+        by_severity = [name for name, case in zip(names, recorded["cases"])
+                       if case.get("by", "severity") == "severity" and name in index]
+        dropped = [name for name in by_severity
+                   if values[index[name]] < kth - SAME * max(1.0, abs(kth))]
+        kth_flag = flags[flagged[min(self.k, len(flagged)) - 1]] if flagged else 0.0
+        unflagged = [self.labels[i] for i in flagged[:self.k]
+                     if self.labels[i] not in names and flags[i] > kth_flag]
+        assert not (stale or dropped or unflagged) and recorded["of"] == len(values) and \
+            len(by_severity) == min(self.k, len(values)), (
+                f"{self.key}: the battery's worst scenarios are now {top}; the record holds "
+                f"{recorded['cases']} of {recorded['of']}: rerun with {UPDATE_ENV}=1 to "
+                f"write them to {RECORD}")
+
+
+def searched(key: str, search: Callable[[], dict]) -> dict:
+    """A red-team search's result (a dict with a ``severity``): in the default tier the
+    one recorded in ``tests/data/worst_cases.json``; in the exhaustive tier the search
+    runs, and fails if it found an attack more severe than the recorded one (by more
+    than ``SAME``: the record no longer holds the worst case; ``LFC_UPDATE_WORST_CASES=1``
+    writes it).  Lists read back as tuples."""
+    recorded = _read().get(key)
+    if not exhaustive():
+        if recorded is None:
+            raise AssertionError(f"{key}: no search recorded in {RECORD.name}; run "
+                                 f"{UPDATE_ENV}=1 python -m pytest --exhaustive -k ... once")
+        LEFT_OUT[key] = 1
+        return {k: tuple(v) if isinstance(v, list) else v for k, v in recorded["found"].items()}
+    found = search()
+    if os.environ.get(UPDATE_ENV) == "1":
+        _write(key, {"found": json.loads(json.dumps(found))})
+        return found
+    assert recorded is not None, f"{key}: not recorded ({UPDATE_ENV}=1 writes it)"
+    worst = recorded["found"]["severity"]
+    assert found["severity"] <= worst + SAME * max(1.0, abs(worst)), (
+        f"{key}: the search found severity {found['severity']:.9g}, above the recorded "
+        f"{worst:.9g}: rerun with {UPDATE_ENV}=1 to record {found}")
+    return found
 
 
 def _write(key: str, entry: dict) -> None:
