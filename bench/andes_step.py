@@ -66,8 +66,7 @@ def microgrid() -> None:
     for name in ("fig4", "fig5", "fig6", "fig7"):
         got = {}
         for step in STEPS:
-            (claims, runs), seconds = timed(lambda: chapters.BUILDERS[name]("testbed",
-                                                                            step=step))
+            (claims, runs), seconds = timed(lambda: chapters.BUILDERS[name]("testbed", step=step))
             got[step] = claims, {k: r.metrics() for k, r in runs.items()}, seconds
         (c5, m5, s5), (c10, m10, s10) = got[STEPS[0]], got[STEPS[1]]
         print(f"{name} on the microgrid: claims {'the same' if c5 == c10 else 'DIFFER'}, "
