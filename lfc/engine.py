@@ -819,6 +819,7 @@ class Scenarios:
             raise ValueError("relay_noise=True needs noise_std > 0 (the relays' measurement "
                              "noise)")
         check_coupled(filters, grid, estimator, noise_std)
+        check_load_measured(filters, estimator, feedforward)
         f_is = [-1 if filters.get(a) is None else self._filters.index(
             id(filters[a]), lambda: self._checked(a, filters[a])) for a in range(n)]
         row, noise, sig, n_samples = [], [], [], self._n_samples   # kept once all areas pass
@@ -963,6 +964,28 @@ def lane_blocks(plant_of: np.ndarray, rows: np.ndarray,
         blocks.append(np.concatenate([mine, np.full(pad, -1)]).reshape(-1, LANES))
     return ((np.concatenate(blocks) if blocks else np.zeros((0, LANES))).astype(np.int64),
             (np.concatenate(left) if left else np.zeros(0)).astype(np.int64))
+
+
+def check_load_measured(filters: dict, estimator, feedforward: bool) -> None:
+    """``ValueError`` if a filter whose hold is proven period by period
+    (``recheck_bound`` > 0: :mod:`lfc.filters.certified`, :mod:`lfc.filters.coupled`)
+    is given neither the load (``feedforward``, :func:`lfc.simulate`'s
+    ``load_feedforward``) nor an estimate of it (an estimator): its re-check would
+    take the load for 0 whatever it did, and the period-by-period guarantee assumes
+    the load it is given is the load.  A coupled filter always reads every area's
+    load (the grid's)."""
+    if feedforward or estimator is not None:
+        return
+    for a, scc in filters.items():
+        if isinstance(scc, CoupledFilter):
+            continue
+        bound = getattr(getattr(scc, "options", None), "recheck_bound", 0.0)
+        if bound > 0:
+            where = "" if a is None else f" of area {a}"
+            raise ValueError(f"the filter{where} has recheck_bound={bound:g} pu, whose "
+                             f"period-by-period hold needs the load measured: give "
+                             f"load_feedforward=True (feedforward=True for a grid), an "
+                             f"estimator, or build the filter with recheck_bound=0")
 
 
 def check_coupled(filters: dict, grid: MultiAreaParams, estimator,

@@ -89,6 +89,13 @@ def simulate(plant, *, duration: float, design=None, **kwargs):
         from lfc.simulate_multiarea import simulate_grid_linear
         return simulate_grid_linear(plant, duration=duration, **kwargs)
     kind = _testbed_kind(plant)
+    from lfc.engine import check_load_measured
+    if kind == "microgrid":
+        check_load_measured({None: kwargs.get("scc")}, kwargs.get("estimator"),
+                            kwargs.get("load_feedforward", False))
+    elif kind is not None:
+        check_load_measured(kwargs.get("filters") or {}, kwargs.get("estimator"),
+                            kwargs.get("feedforward", True))
     if kind == "microgrid":
         from lfc.testbed.fit import design_model
         from lfc.testbed.plant import simulate_microgrid

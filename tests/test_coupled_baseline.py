@@ -137,18 +137,19 @@ def test_per_area_filters_covering_steps_ride_every_step_of_the_battery(grid, re
 
 def test_finding_behind_kundurs_stiff_tie_the_steps_filters_leave_their_certificate():
     """On Kundur's two-area system as fitted to ANDES (T = 98 pu) the same filters
-    build and nothing trips, but 117 of 160 runs flag ``outside`` (none without the
-    load step): the step and the tie-line flow it sets swinging vary the net
-    disturbance by more than the bound while a command is held, and a larger bound
-    leaves less certified (0.2 pu: 141 runs flag it)."""
+    build and nothing trips, but runs flag ``outside`` (none without the load step):
+    the step and the tie-line flow it sets swinging vary the net disturbance while a
+    command is held.  Without ``recheck_bound``, 5 of 160 runs (their sampled total
+    variation exceeds the bound: a breach; 117 before the held level absorbed the
+    load's move within the bound); with it, 118 (the coming period is not re-proven)."""
     from lfc.testbed import GridCase, grid_design
     grid = grid_design(GridCase.kundur())
-    for recheck in (False, True):
+    for recheck, most in ((False, (1, 15)), (True, (100, 135))):
         name = f"baseline[kundur-steps{'-recheck' if recheck else ''}]"
         runs, tripped, outside = battery(grid, name, steps_filters(grid, 0.1, recheck))
         assert runs == 160 and tripped == 0 and outside > 0
         if tiers.exhaustive():
-            assert 100 <= outside <= 135
+            assert most[0] <= outside <= most[1]
 
 
 @pytest.mark.parametrize("recheck", [False, True], ids=["certified-only", "recheck"])
@@ -158,8 +159,9 @@ def test_the_steps_filters_on_the_findings_of_the_default_per_area_filter(rechec
     load_bound=0.1`` at every area instead: no ``outside`` on the three-area
     sinusoid, on Kundur's fitted model under the ACE attack, with each area's
     Kalman filter (noise declared), and behind a T = 98 pu tie for the default
-    area (which the default cannot even build); the lightly damped area still
-    flags it (71 samples when measured, against more than 100).  Without
+    area (which the default cannot even build), and on the lightly damped area
+    (which flagged it at about 70 samples before the held level absorbed the load's
+    move within the bound).  Without
     ``recheck_bound`` the certificate covers the net disturbance's total variation
     since the *held command was certified*, which a tie-line flow accumulates while
     a command is held (measured, not proven); with it each hold is re-proven period
@@ -186,4 +188,4 @@ def test_the_steps_filters_on_the_findings_of_the_default_per_area_filter(rechec
     squares = {a: {"pc": lfc.Square(amp, freq, start=1.0)}
                for a, (amp, freq) in enumerate(((3.0, 0.05), (-3.0, 3.0), (3.0, 0.3)))}
     flagged = outside(grid, duration=15.0, attacks=squares)
-    assert flagged[:2] == [0, 0] and 30 <= flagged[2] <= 100
+    assert flagged == [0, 0, 0]

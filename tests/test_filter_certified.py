@@ -136,7 +136,7 @@ def test_a_load_step_beyond_the_assumption_is_flagged_not_silent():
     r = lfc.simulate(P, duration=5.0, load=lfc.Step(1.25 * e12, 1.0), scc=CERT)
     assert r.metrics()["tripped"]                # physics: E12
     assert r.alarms.outside.any()                # and the filter says it lost its guarantee
-    assert "load beyond load_bound" in r.alarms.reason[r.alarms.outside].iloc[0]
+    assert "the load moved beyond load_bound" in r.alarms.reason[r.alarms.outside].iloc[0]
 
 
 def test_load_bound_covers_load_steps_and_rejects_impossible_bounds():

@@ -38,7 +38,7 @@ ALARM_FLAGS = ("active", "infeasible", "outside", "invalid_input", "solver_error
 _FLAG_BITS = dict(zip(ALARM_FLAGS, (ACTIVE, INFEASIBLE, OUTSIDE, INVALID, SOLVER_ERROR)))
 _BINDING = (("frequency", BIND_FREQ), ("rocof", BIND_ROCOF), ("certified", BIND_CERT),
             ("u_min", BIND_UMIN), ("u_max", BIND_UMAX))
-MEMORY = 2  # floats of memory per scenario, for every method
+MEMORY = 3  # floats of memory per scenario, for every method
 CONSTRAINTS = ("frequency", "rocof")   # the barrier constraints, in the order of the outputs
 MAX_ABS_INPUT = 1e6  # pu, pu/s: a state, command or load beyond is a corrupted message
 

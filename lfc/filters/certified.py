@@ -26,8 +26,8 @@ control-invariant set with a *hold* backup law:
   stays ``tau`` inside the limits in continuous time; the held command is
   re-checked with ``tau`` only, which its own trajectory always passes.  If
   no new command is certified the filter holds the last one (flag ``active``,
-  binding ``"certified"``); if even that fails its check — only possible when
-  an assumption below is broken — it still holds it and flags ``outside``.
+  binding ``"certified"``); if even that fails its check it still holds it and
+  flags ``outside`` (its meaning: below).
 
 **Guarantee (proven).**  For every plant whose M, D, tau_g, tau_t and droop are
 among the certified plants (``uncertainty``: the design model and the 32
@@ -56,10 +56,35 @@ ROCOF), and an error ``e_p`` in the load estimate by the estimation bound; a
 bound that leaves nothing is rejected at construction, naming what is left
 (:func:`largest_load_bound` finds the largest).  Not covered with
 ``noise_std``: the Kalman estimate's transient after a load step (its error
-leaves the steady-state ellipsoid until the load estimate has caught up).  With ``trips_per_hour``, the limits
-are tightened further so that relays reading the outputs through white
-Gaussian noise ``noise_std`` at ``relay_rate`` trip at most that often (a
-union bound over an hour of samples).
+leaves the steady-state ellipsoid until the load estimate has caught up).  With
+``trips_per_hour``, the limits are tightened further so that relays reading the
+outputs through white Gaussian noise ``noise_std`` at ``relay_rate`` trip at most
+that often (a union bound over an hour of samples).
+
+**What ``outside`` means.**  With ``load_kind="steps"`` (proven): the held level
+adds back what a load within the assumptions can have done since the command's
+certification (theorem C of ``docs/coupled-certificate.md`` for one area: the rows
+by ``load_bound`` times ``sup |S|`` for the load given, ``sup S - inf S`` for a load
+not given, the equilibrium by the load's shift of it, the terminal set by
+:func:`load_moves_terminal`).  So on the design model (no ``uncertainty``), with
+the exact state, the load given (``load_feedforward``) or not, and the load's
+total variation since each certification within ``load_bound`` (``load_bound -
+recheck_bound`` with ``recheck_bound``), ``outside`` is never raised: a flag means
+an assumption is broken.  The held command is also flagged when the total
+variation of the load given, sampled at the calls, exceeds ``load_bound`` (a
+breach seen directly; not on an estimate, ``noise_std``, nor with
+``recheck_bound``).  With ``load_kind="band"`` the held check is a
+re-certification at the load given now, with the whole band around it: passing it
+proves the hold from now on (the grids' per-area guarantee rests on it,
+:mod:`lfc.simulate_multiarea`), and ``outside`` means only that it could not be
+re-proven from this state — raised while the band assumption (around the load
+given at the certification) still holds when the load has moved within the band
+since (its effect is then in the state and the band is allowed again):
+``tests/test_proven_load.py`` pins it.  With a box or an estimate neither is
+proven (the held check at a plant other than the true one, or at an estimate, can
+fail with every assumption holding).  No sampled filter flags a trip within one
+control period of an assumption breaking (a step just after a sample):
+``outside`` comes at the next sample at the earliest.
 
 **A hold proven period by period** (``recheck_bound`` > 0, ``load_kind="steps"``).
 Without it a held command is proven only while the load's total variation since
@@ -76,7 +101,9 @@ the load's variation from then on is within ``load_bound``) or held and re-check
 without an ``outside`` flag, and within each control period the load varies by at
 most ``recheck_bound`` — whatever it did before.  Proven up to the first
 ``outside`` flag; ``tests/test_proven_load.py`` checks it at steps of exactly
-``recheck_bound`` landing at every instant of every attack.
+``recheck_bound`` landing at every instant of every attack.  The filter must be
+given the load (``load_feedforward=True``) or an estimate of it: a run without
+either is refused (:func:`lfc.engine.check_load_measured`).
 
 **Measured, not proven.**  Plants inside the box but not at its corners (the
 held response is not monotone in the parameters): tested on random interior
@@ -91,8 +118,9 @@ over the box (``tests/test_robust.py``: 16 seeds x 23 attacks, design model
 and weakest corner; one seed x 23 attacks at all 32 corners, where some runs
 flag ``outside``: the error left its bound and the filter said so).  Off the
 box (the corners of a ±40 % box) the filter trips, and every trip measured
-came after an ``outside`` flag (0.05–7.7 s before).  ``margin`` tightens both limits by a fraction for anything
-else (no guarantee there).
+came after an ``outside`` flag (0.05–7.7 s before) on that set — not in
+general (module docstring, "What ``outside`` means").  ``margin`` tightens both
+limits by a fraction for anything else (no guarantee there).
 
 ``details`` of a :class:`~lfc.filters.base.FilterInfo`: the certified interval
 ``(lo, hi)`` (pu; ``lo > hi`` where none is certified).
@@ -127,7 +155,7 @@ LOAD_KINDS = ("band", "steps")   # what load_bound bounds (module docstring)
 LP_LOAD = 1.0          # pu: load range of _derivative_bound's programs (V does not depend on it)
 NUMERIC_MARGIN = 1e-6  # relative tightening that absorbs floating-point differences
 # layout of the data array decide() reads: a header, then one block per plant
-U_MIN, U_MAX, N_PLANTS, N_ROWS, F_LIM, R_LIM, HEAD = range(7)
+U_MIN, U_MAX, N_PLANTS, N_ROWS, F_LIM, R_LIM, LOAD_ROOM, HEAD = range(8)
 (EQ_PER_P, EQ_HALF, EQ_HALF_HELD, RHO, RHO_HELD, A_QUAD, Y0_F, Y0_R, Y0_F_HELD, Y0_R_HELD,
  BLOCK_HEAD) = range(11)
 # per output, m rows in each of N_COLS columns: a, b (new), a, b (held), the five of G, l
@@ -357,13 +385,18 @@ class CertifiedSet:
                                    (o.recheck_bound, o.control_period))
                        for p, g in zip(self.plants, gains)]
         self.n_rows = 2 * len(self.times)
+        # the held command's load monitor: how far the load given may move from the one
+        # given at its certification within the assumptions (none on an estimate, nor
+        # with recheck_bound, whose hold is proven period by period however far it moved)
+        monitored = cov is None and o.recheck_bound == 0 and o.load_kind == "steps"
+        self.load_room = o.load_bound * (1 + NUMERIC_MARGIN) + 1e-12 if monitored else math.inf
         self.tau = max(b.tau for b in self.blocks)   # largest inter-sample tightening (pu, pu/s)
 
     def pack(self) -> np.ndarray:
         """The data array :func:`decide` reads (layout in the module's constants)."""
         head = np.zeros(HEAD)
         head[:] = (self.u_min, self.u_max, len(self.blocks), self.n_rows,
-                   self.relays.F, self.relays.rocof_limit)
+                   self.relays.F, self.relays.rocof_limit, self.load_room)
         return np.concatenate([head] + [b.pack() for b in self.blocks])
 
 
@@ -401,11 +434,12 @@ class _PlantBlock:
         A, B = lfc_matrices(plant)
         C = output_matrix()
         q = -np.linalg.solve(A, B)                       # x_eq = q[:, 0] u + q[:, 1] p
-        self.load_gain = gain = load_gains(A, B[:, 1], C)[load_kind]   # per pu of load_bound
+        gains_of_kind = load_gains(A, B[:, 1], C)
+        self.load_gain = gain = gains_of_kind[load_kind]   # per pu of load_bound
         lim = limits - load * gain                        # the load covered
         if np.any(lim <= 0):
             most = float(np.min(limits / gain))
-            steps = load_gains(A, B[:, 1], C)["steps"]
+            steps = gains_of_kind["steps"]
             hint = (f"; load_kind='steps' (one step, a ramp or any monotone change) takes "
                     f"{_pair(steps)} per pu and allows < {float(np.min(limits / steps)):.4g} pu"
                     if load_kind == "band" else "")
@@ -431,10 +465,20 @@ class _PlantBlock:
             lim = lim - est
         else:
             est = np.zeros(2)
-        # the held command's re-check: with "band" the load may still move by the whole
-        # bound around the load given now; with "steps" the variation since its
-        # certification is spent on the way here, so the check is for the load given now
-        held = lim + load * gain if load_kind == "steps" else lim
+        # the held command's re-check.  "band": a re-certification at the load given
+        # now, the whole band around it (a hold passing it is proven from now on: the
+        # grids' per-area guarantee, lfc.simulate_multiarea).  "steps" (theorem C): the
+        # trajectory from here with the load given now differs from the one certified
+        # by what the load did since (the state holds that effect), at most its total
+        # variation times sup |S| (the load given now the true one) or sup S - inf S
+        # (the swing: a load not given, taken for the one given at the certification),
+        # so the re-check adds that back and never fails while the assumptions hold;
+        # recheck_bound (the load given: lfc.engine.check_load_measured) takes the
+        # coming period's room from it
+        if load_kind == "band":
+            held = lim
+        else:
+            held = lim + load * (gain if recheck[0] > 0 else gains_of_kind["swing"])
         # recheck_bound: the held command's trajectory must leave room for the load's
         # variation within the coming period, whose effect until the next sample is at
         # most its total variation times the step response's peak over one period
@@ -460,11 +504,27 @@ class _PlantBlock:
             raise ValueError(f"the tightenings leave nothing of the relay limits: "
                              f"{self._budget()}; lower load_bound, noise_std, "
                              f"trips_per_hour or margin")
-        self._terminal(A, C, q, times[-1], {"new": lim, "held": held}, t_max, cov, kappa)
+        spent = load - recheck[0] if load_kind == "steps" else 0.0
+        self._terminal(A, B[:, 1], C, q, times[-1], {"new": lim, "held": held}, t_max, cov,
+                       kappa, spent, load_kind, recheck[0])
 
-    def _terminal(self, A, C, q, horizon, lims, t_max, cov, kappa) -> None:
+    def _terminal(self, A, bl, C, q, horizon, lims, t_max, cov, kappa, spent, load_kind,
+                  recheck) -> None:
         """Continuous-time Lyapunov ellipsoid around the held command's equilibrium,
-        the room that leaves the equilibrium, and ``e_T = E x + eu u + el p``."""
+        the room that leaves the equilibrium, and ``e_T = E x + eu u + el p``.
+
+        The new level's ellipsoid takes at most half of the frequency's room and its
+        equilibrium the rest.  The held level absorbs what a load within the
+        assumptions did since the command's certification (``spent`` pu:
+        ``load_bound`` less ``recheck_bound`` for ``"steps"``): it moves the
+        equilibrium frequency by at most ``spent |dw_p|`` and ``e_T`` by at most
+        ``spent`` times :func:`load_moves_terminal` in ``P``'s norm, so a command
+        certified at the new level passes the held one (exact state, this plant).
+        Where the held rows' room fits a wider pair (the ellipsoid at most half of
+        the frequency's room) the held level takes it.  The held level's terminal set
+        need not fit the limits: a held command is proven by its certification (and,
+        with ``recheck_bound``, period by period by its rows, within one period of the
+        horizon's start), not by this check."""
         lim_new = lims["new"] - 2 * t_max
         scale = np.array([1.0, 1.0, lim_new[0], lim_new[0], lim_new[1]])
         self.P = solve_continuous_lyapunov(A.T, -np.diag(scale ** -2.0))
@@ -480,16 +540,25 @@ class _PlantBlock:
             error = kappa * math.sqrt(np.max(np.linalg.eigvalsh(m.T @ self.P @ m)))
             eq_error = kappa * math.sqrt(cov[5, 5]) * abs(dw_p / dw_u)
         self.eq_per_p = -dw_p / dw_u
-        self.rho, self.eq_half = {}, {}
-        for level, factor in (("new", 2.0), ("held", 1.0)):
-            room = lims[level] - factor * t_max
-            rho = float(min(0.5 * room[0] / sigma[0], room[1] / sigma[1]))
-            if rho <= 0:
-                raise ValueError(f"the tightenings leave no room for the terminal set: "
-                                 f"{self._budget()}; lower load_bound, noise_std, "
-                                 f"trips_per_hour or margin")
-            self.rho[level] = rho - error
-            self.eq_half[level] = (room[0] - rho * sigma[0]) / abs(dw_u) - eq_error
+        room = lims["new"] - 2 * t_max
+        r = float(min(0.5 * room[0] / sigma[0], room[1] / sigma[1]))
+        if r <= 0:
+            raise ValueError(f"the tightenings leave no room for the terminal set: "
+                             f"{self._budget()}; lower load_bound, noise_std, "
+                             f"trips_per_hour or margin")
+        h = room[0] - r * sigma[0]
+        moved = spent * load_moves_terminal(A, bl, self.E, self.P, load_given=recheck > 0)
+        drift = spent * abs(dw_p)
+        # the held level: theorem C's, NUMERIC_MARGIN wider (a command certified on the
+        # new level's boundary, with a load of exactly the bound since, lands on it), or
+        # the largest pair that fits the held rows' room if that is wider
+        wide = 1.0 + NUMERIC_MARGIN
+        hold = lims["held"] - t_max
+        r_fit = float(min(0.5 * hold[0] / sigma[0], hold[1] / sigma[1]))
+        self.rho = {"new": r - error, "held": max((r + moved) * wide, r_fit) - error}
+        self.eq_half = {"new": h / abs(dw_u) - eq_error,
+                        "held": max((h + drift) * wide, hold[0] - r_fit * sigma[0])
+                        / abs(dw_u) - eq_error}
         if self.rho["new"] <= 0:
             raise ValueError(f"the estimation error moves the state at the horizon by "
                              f"{error:.3g} in the terminal set's norm, more than the radius "
@@ -516,6 +585,22 @@ class _PlantBlock:
         if len(out) != BLOCK_HEAD + N_COLS * len(self.l) + ELL_SIZE:   # the layout above
             raise RuntimeError("the certified filter's data layout is inconsistent")
         return out
+
+
+def load_moves_terminal(A: np.ndarray, bl: np.ndarray, E: np.ndarray, P: np.ndarray, *,
+                        load_given: bool = False) -> float:
+    """How far, in ``P``'s norm, a load of total variation 1 pu moves ``e_T = E (x -
+    x_eq)`` between a command's certification and a re-check (a proven bound), the
+    re-check given the true load (``load_given``) or the load given at the
+    certification.
+
+    A step ``d`` at ``s`` before the re-check leaves ``-e^{As} q_p d`` of the new
+    equilibrium's deviation (the load given), or ``(I - e^{As}) q_p d`` of the old
+    one's; ``||E e^{As} z||_P`` does not grow with ``s`` (``P`` is a Lyapunov matrix
+    of ``A``): at most ``||E q_p||_P``, or twice that."""
+    z = E @ np.linalg.solve(A, bl)
+    moved = float(np.sqrt(max(z @ P @ z, 0.0)))
+    return moved if load_given else 2.0 * moved
 
 
 def _rows(hu: np.ndarray, lim: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -721,9 +806,10 @@ class CertifiedFilter(Backend):
             return ("invalid input (non-finite or beyond 1e6: a corrupted message); last "
                     "certified command held")
         if flags & OUTSIDE:
-            return ("nothing is certified and the last command fails its own check (load "
-                    "beyond load_bound, a plant outside the box or a larger estimation "
-                    "error); last certified command held")
+            return ("nothing is certified and the last command fails its own check (exact "
+                    "state, design model: the load moved beyond load_bound; with a box or "
+                    "an estimate also a plant outside it, a larger estimation error, or the "
+                    "check's conservatism); last certified command held")
         if flags & ACTIVE and not flags & BIND_CERT:
             return "no new command is certified from this state; last certified command held"
         return "command clipped to the certified interval" if flags & ACTIVE else ""
@@ -814,7 +900,11 @@ def decide(fd: np.ndarray, x: np.ndarray, u_ref: float, p: float, mem: np.ndarra
     """One call of the certified filter (module docstring).
 
     ``fd`` is :meth:`CertifiedSet.pack`'s data, ``mem[0]`` the last certified
-    command (held when no new one is certified).  Returns ``(u, flags, h_freq,
+    command (held when no new one is certified), ``mem[1]`` the load given at the
+    last call, ``mem[2]`` its total variation since the certification (sampled: at
+    most the true one): a held command is flagged ``outside`` if it fails its check
+    or, with ``load_kind="steps"``, that variation exceeds ``load_bound`` (a breach of
+    the assumptions; not with ``noise_std`` or ``recheck_bound``).  Returns ``(u, flags, h_freq,
     h_rocof, margin_freq, margin_rocof, y_freq, y_rocof, lo, hi)``; the margins
     are the distances from ``u`` to the ends of each relay's own interval.
     """
@@ -827,10 +917,13 @@ def decide(fd: np.ndarray, x: np.ndarray, u_ref: float, p: float, mem: np.ndarra
     flags = 0
     if certified:
         u = min(max(u_ref, lo), hi)
+        mem[1], mem[2] = p, 0.0             # the load given now, its move since
     else:                                   # hold; check the held command at its own level
         u = mem[0]
         lo_f, hi_f, lo_r, hi_r = _interval(fd, x, p, True)
-        if not (max(lo_f, lo_r) <= u <= min(hi_f, hi_r)):
+        moved = mem[2] + abs(p - mem[1])    # the load given's total variation, sampled
+        mem[1], mem[2] = p, moved
+        if not (max(lo_f, lo_r) <= u <= min(hi_f, hi_r)) or moved > fd[LOAD_ROOM]:
             flags |= OUTSIDE
     mem[0] = u
     flags |= applied_flags(u, u_ref, certified, fd[U_MIN], fd[U_MAX])

@@ -6,7 +6,7 @@ response ``h(t) = C e^{At} b`` and step response ``S(t) = C A^-1 (e^{At} - I) b`
 
 * :func:`load_gains` — ``"band"``: ``int |h|``, the most any input within ±1 pu
   moves ``y`` (the L1 norm); ``"steps"``: ``sup |S|``, the most an input of total
-  variation 1 pu moves it;
+  variation 1 pu moves it; ``"swing"``: ``sup S - inf S``;
 * :func:`period_step_gain` — ``sup |S|`` within one control period;
 * :func:`rate_gains` — the most a held input moving by at most 1 pu/s moves ``y``
   away from where its final value puts it.
@@ -86,7 +86,12 @@ def load_gains(A: np.ndarray, bl: np.ndarray, C: np.ndarray) -> dict[str, np.nda
     * ``"steps"``: ``sup_t |S(t)|``: a load ``L`` of total variation ``V`` moves
       the output by ``int S(t - s) dL(s)``, at most ``V sup |S|``; on the same
       grid, plus the most ``S`` can move within half a step (``|h| dt / 2``) and
-      1 %, and the final value.
+      1 %, and the final value;
+    * ``"swing"``: ``sup S - inf S`` (0 and the final value included), the most
+      ``int (S(t - s) - S(t - s + d)) dL(s)`` can be for a load of total variation
+      1 pu that stops at a lag ``d`` (what a re-check that takes the load for 0
+      has to absorb: :class:`lfc.filters.certified.CertifiedSet`); same grid and
+      allowances.
 
     The horizon grows while it matters (module docstring): on a chain of six
     areas the L1 norm over 60 s is 0.6 of the whole (``tests/test_contract.py``).
@@ -97,26 +102,30 @@ def load_gains(A: np.ndarray, bl: np.ndarray, C: np.ndarray) -> dict[str, np.nda
     size = int(round(L1_HORIZON / DT))
 
     @functools.cache
-    def piece(start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+    def piece(start: int, stop: int) -> tuple[np.ndarray, ...]:
         t = np.arange(start, stop) * DT
         resp, step = responses(A, bl, C, t)
-        return (np.trapezoid(np.abs(resp), t, axis=1),
-                np.abs(step).max(axis=1) + 0.5 * DT * np.abs(resp).max(axis=1))
+        slack = 0.5 * DT * np.abs(resp).max(axis=1)
+        return (np.trapezoid(np.abs(resp), t, axis=1), np.abs(step).max(axis=1) + slack,
+                step.max(axis=1) + slack, step.min(axis=1) - slack)
 
-    def gains(horizon: float) -> tuple[np.ndarray, np.ndarray]:
+    def gains(horizon: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         n = len(np.arange(0.0, horizon, DT))
-        band, peak = np.zeros(len(C)), np.zeros(len(C))
+        zero = np.zeros(len(C))
+        band, peak, high, low = zero, zero, np.maximum(zero, final), np.minimum(zero, final)
         for start in range(0, n, size):       # the next piece's first point closes each
-            b, p = piece(start, min(start + size + 1, n))
+            b, p, hi, lo = piece(start, min(start + size + 1, n))
             band, peak = band + b, np.maximum(peak, p)
-        return band, np.maximum(peak, np.abs(final))
+            high, low = np.maximum(high, hi), np.minimum(low, lo)
+        return band, np.maximum(peak, np.abs(final)), high - low
 
-    def tails(horizon: float) -> tuple[np.ndarray, np.ndarray]:
+    def tails(horizon: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         decay = np.exp(w.real * horizon)
-        return residue @ (decay / -w.real), residue @ (decay / np.abs(w))
+        beyond = residue @ (decay / np.abs(w))
+        return residue @ (decay / -w.real), beyond, 2 * beyond
 
-    band, steps = _until_negligible(gains, tails, -w.real.max(), "a load gain")
-    return {"band": band, "steps": steps}
+    band, steps, swing = _until_negligible(gains, tails, -w.real.max(), "a load gain")
+    return {"band": band, "steps": steps, "swing": swing}
 
 
 def period_step_gain(A: np.ndarray, bl: np.ndarray, C: np.ndarray,
