@@ -153,7 +153,8 @@ def pytest_unconfigure(config):
         from lfc.repro import runner
         compiled = config.stash.get(_DID_COMPILE, False)
         runner.record_time(runner.ROOT / "build", "python -m pytest" + (
-            " --exhaustive" if tiers.exhaustive() else ""), wall, cpu,
+            " --exhaustive" if tiers.exhaustive() else "") + ("" if compiled else ", again"),
+            wall, cpu,
             "the loops compiled in the run" if compiled else "the loops in numba's cache")
     if tiers.exhaustive():
         return

@@ -330,7 +330,8 @@ def main(argv: list[str] | None = None) -> int:
                       "docs/reproducing.md)")
             if not args.only and args.plant in ("all", "linear") and all(o.ok for o in outcomes):
                 command = "python -m lfc reproduce" + (" --quick" if args.quick else (
-                    " --plant linear" if args.plant == "linear" else ""))
+                    " --plant linear" if args.plant == "linear" else "")) + (
+                    ", again" if cached else "")       # a first run and a rerun, apart
                 runner.record_time(args.build_dir, command, wall, cpu,
                                    f"{len(outcomes) - cached} notebooks executed, {cached} "
                                    f"read back" + ("; the loops compiled in the run"

@@ -497,7 +497,8 @@ COMPILED_IN_RUN = False        # whether this process's reproduce compiled the l
 
 def record_time(build_dir: Path, command: str, wall: float, cpu: float, note: str) -> None:
     """Keep how long ``command`` (``"python -m lfc reproduce"``, ``"python -m pytest"``,
-    ...) took in its last complete run — wall and CPU seconds, the machine's cores, the
+    ...; ``", again"`` appended for a run that read back what an earlier one left: its
+    notebooks, the compiled loops) took in its last complete run — wall and CPU seconds, the machine's cores, the
     commit, the date and ``note`` (what the run did) — in ``build/times.json``, which
     ``python -m lfc readme`` writes into the README (:func:`times_section`)."""
     import json
@@ -520,9 +521,12 @@ def _minutes(seconds: float) -> str:
 
 def times_section(times: dict) -> str:
     """The README's ``times`` section: each command's last complete run (:func:`record_time`)."""
-    order = ["python -m lfc reproduce", "python -m lfc reproduce --plant linear",
-             "python -m lfc reproduce --quick", "python -m pytest", "python -m pytest --exhaustive"]
-    lines = [f"- `{c}`: **{_minutes(t['wall'])}** wall, {_minutes(t['cpu'])} of CPU on "
+    order = [f"{c}{again}" for c in ("python -m lfc reproduce",
+                                     "python -m lfc reproduce --plant linear",
+                                     "python -m lfc reproduce --quick", "python -m pytest",
+                                     "python -m pytest --exhaustive") for again in ("", ", again")]
+    lines = [f"- `{c.removesuffix(', again')}`{' again' if c.endswith(', again') else ''}: "
+             f"**{_minutes(t['wall'])}** wall, {_minutes(t['cpu'])} of CPU on "
              f"{t['cores']} cores ({t['note']}; commit {t['commit']}, {t['date']})"
              for c in order + sorted(set(times) - set(order)) if (t := times.get(c))]
     return ("The last complete run of each command on this repository's machine, written by "
