@@ -322,8 +322,8 @@ def main(argv: list[str] | None = None) -> int:
             cpu = sum(getattr(resource.getrusage(who), f) for f in ("ru_utime", "ru_stime")
                       for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
             if not (args.quick or args.only) and args.plant == "all":   # a full run
-                path = (args.build_dir / "reproduce"
-                        / runner.TIMING_FILES[cached == len(outcomes)])
+                path = (args.build_dir / "reproduce"      # a rerun keeps the full run's
+                        / runner.TIMING_FILES[cached > 0])
                 path.parent.mkdir(parents=True, exist_ok=True)
                 path.write_text(runner.timing_table(outcomes, wall, cpu, args.jobs))
                 print(f"timing: {path} (python -m lfc readme copies it into "

@@ -535,7 +535,7 @@ def times_section(times: dict) -> str:
 
 def timing_table(outcomes: list[RunOutcome], wall: float, cpu: float, jobs: int) -> str:
     """A full run's timing as markdown, for the README's ``timing`` (a run that
-    executed notebooks) or ``timing_rerun`` section (every notebook read back):
+    executed every notebook) or ``timing_rerun`` section (one that read any back):
     the machine, the commit, wall and CPU time (s), ANDES' own computing and the
     floor it sets on ``jobs`` cores (s), each notebook's time."""
     import subprocess
