@@ -23,6 +23,20 @@ from pathlib import Path
 from typing import Any
 
 
+#: the environment variable naming the file a notebook run lists what it wrote in
+WRITTEN_ENV = "LFC_WRITTEN"
+
+
+def note_written(path: Path | str) -> None:
+    """Add ``path``'s name to the list in the file ``$LFC_WRITTEN`` names (the
+    runner's record of what one notebook run wrote into the figures folder, which
+    concurrent runs share); nothing without it."""
+    log = os.environ.get(WRITTEN_ENV)
+    if log:
+        with open(log, "a", encoding="utf-8") as f:
+            f.write(Path(path).name + "\n")
+
+
 def replace_atomic(path: Path, write: Callable[[Path], None]) -> None:
     """Call ``write`` on a unique temporary file, then rename it onto ``path``: a
     reader never sees half a file, and concurrent writers never share a

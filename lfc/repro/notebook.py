@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from lfc._files import cache_folder, cached, content_key
+from lfc._files import cache_folder, cached, content_key, note_written
 from lfc._format import STABLE_DIGITS, count, number
 from lfc._validate import check_number
 from lfc.experiments.deviations import DEVIATIONS
@@ -285,6 +285,7 @@ def save_table(text: str, directory: str | Path, name: str) -> Path:
     path = Path(directory) / f"{name}.md"
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(text.strip() + "\n")
+    note_written(path)
     return path
 
 

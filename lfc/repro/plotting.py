@@ -18,7 +18,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 from matplotlib.ticker import NullFormatter, ScalarFormatter
 
-from lfc._files import replace_atomic
+from lfc._files import note_written, replace_atomic
 from lfc.experiments.surface import scc_label
 from lfc.relays import RelaySettings
 from lfc.simulate import SimResult
@@ -211,6 +211,8 @@ def save_figure(fig: Figure, directory: str | Path, name: str) -> None:
         tmp, format="png", dpi=150, metadata={"Software": None}))
     replace_atomic(out / f"{name}.pdf", lambda tmp: fig.savefig(
         tmp, format="pdf", metadata={"CreationDate": None, "Creator": None, "Producer": None}))
+    note_written(out / f"{name}.png")
+    note_written(out / f"{name}.pdf")
 
 
 TRIP_COLORS = {"none": "#eeeeee", "OF2": "tab:red", "UF2": "tab:blue", "ROCOF": "tab:orange"}

@@ -31,7 +31,7 @@ from jupyter_client.manager import KernelManager
 from tqdm.auto import tqdm
 
 from lfc._validate import check_count
-from lfc._files import content_key, folder_lock, write_atomic
+from lfc._files import WRITTEN_ENV, content_key, folder_lock, write_atomic
 from lfc._pool import completed
 from lfc.experiments.scenarios import ALL_PLANTS
 from lfc.repro.manifest import CHAPTERS, ROOT
@@ -223,10 +223,15 @@ def _hash(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def _written(folder: Path, since_ns: int) -> dict[str, str]:
-    """The files of ``folder`` modified at or after ``since_ns`` and their hashes."""
-    return {p.name: _hash(p) for p in sorted(folder.glob("*"))
-            if p.is_file() and p.stat().st_mtime_ns >= since_ns}
+def _written(folder: Path, log: Path) -> dict[str, str]:
+    """The files of ``folder`` a run listed in ``log`` (:func:`lfc._files.note_written`:
+    concurrent runs share the folder, so its modification times do not say whose a
+    file is) and their hashes."""
+    try:
+        names = sorted(set(log.read_text(encoding="utf-8").split()))
+    except OSError:
+        return {}
+    return {name: _hash(folder / name) for name in names if (folder / name).is_file()}
 
 
 def _from_cache(results: Path, key: str, figures: Path) -> bool:
@@ -291,12 +296,13 @@ def _run_one(name: str, notebook: Path, results: Path, parameters: dict,
         from lfc.testbed.stored_runs import SWITCH
 
         error = ""
-        start = time.time_ns()
+        written = (results / WRITTEN_LOG).resolve()
+        written.unlink(missing_ok=True)
         clock = results / ANDES_CLOCK     # every ANDES run of the notebook adds a line
         clock.unlink(missing_ok=True)
         try:
             execute(notebook, results / notebook.name, parameters,
-                    env={CLOCK_ENV: str(clock.resolve()),
+                    env={CLOCK_ENV: str(clock.resolve()), WRITTEN_ENV: str(written),
                          **({} if cache else {SWITCH: "off"})})
             ok = True
         except _papermill().PapermillExecutionError as err:
@@ -308,7 +314,7 @@ def _run_one(name: str, notebook: Path, results: Path, parameters: dict,
                 or all(v or c in deviations for c, v in claims.items()))
         if ok and held:
             files = [results / f for f in (*RESULT_FILES, notebook.name)]
-            record = {"key": key, "figures": _written(figures, start) if figures.is_dir()
+            record = {"key": key, "figures": _written(figures, written) if figures.is_dir()
                       else {}, "results": {p.name: _hash(p) for p in files if p.is_file()},
                       "seconds": round(time.perf_counter() - t0, 1)}   # submission_order
             write_atomic(results / CACHE_FILE, json.dumps(record, indent=1))
@@ -317,6 +323,7 @@ def _run_one(name: str, notebook: Path, results: Path, parameters: dict,
 
 
 ANDES_CLOCK = "andes_seconds.txt"   # in a run's results folder (lfc.testbed.loop.CLOCK_ENV)
+WRITTEN_LOG = "written.txt"         # in a run's results folder: what it wrote (WRITTEN_ENV)
 
 
 def andes_seconds(clock: Path) -> float:
