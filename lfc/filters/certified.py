@@ -506,10 +506,10 @@ class _PlantBlock:
                              f"trips_per_hour or margin")
         spent = load - recheck[0] if load_kind == "steps" else 0.0
         self._terminal(A, B[:, 1], C, q, times[-1], {"new": lim, "held": held}, t_max, cov,
-                       kappa, spent, load_kind, recheck[0])
+                       kappa, spent, recheck[0] > 0)
 
-    def _terminal(self, A, bl, C, q, horizon, lims, t_max, cov, kappa, spent, load_kind,
-                  recheck) -> None:
+    def _terminal(self, A, bl, C, q, horizon, lims, t_max, cov, kappa, spent,
+                  load_given) -> None:
         """Continuous-time Lyapunov ellipsoid around the held command's equilibrium,
         the room that leaves the equilibrium, and ``e_T = E x + eu u + el p``.
 
@@ -518,7 +518,8 @@ class _PlantBlock:
         assumptions did since the command's certification (``spent`` pu:
         ``load_bound`` less ``recheck_bound`` for ``"steps"``): it moves the
         equilibrium frequency by at most ``spent |dw_p|`` and ``e_T`` by at most
-        ``spent`` times :func:`load_moves_terminal` in ``P``'s norm, so a command
+        ``spent`` times :func:`load_moves_terminal` in ``P``'s norm (``load_given``:
+        with ``recheck_bound``, which needs it), so a command
         certified at the new level passes the held one (exact state, this plant).
         Where the held rows' room fits a wider pair (the ellipsoid at most half of
         the frequency's room) the held level takes it.  The held level's terminal set
@@ -547,7 +548,7 @@ class _PlantBlock:
                              f"{self._budget()}; lower load_bound, noise_std, "
                              f"trips_per_hour or margin")
         h = room[0] - r * sigma[0]
-        moved = spent * load_moves_terminal(A, bl, self.E, self.P, load_given=recheck > 0)
+        moved = spent * load_moves_terminal(A, bl, self.E, self.P, load_given=load_given)
         drift = spent * abs(dw_p)
         # the held level: theorem C's, NUMERIC_MARGIN wider (a command certified on the
         # new level's boundary, with a load of exactly the bound since, lands on it), or
