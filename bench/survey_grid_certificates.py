@@ -113,9 +113,18 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from test_contract import RELAYS, combined_worst_case, worst_commands  # noqa: E402  (the tests', not copies)
 from test_coupled import (LIGHT, LIGHT_AGC_GAINS, THREE, agc_alone_on_light,  # noqa: E402
                           battery, ieee39, kundur, restored_after, ring)
-from test_coupled_baseline import runs_of  # noqa: E402
-from test_coupled_estimate import (NOISE, every_period, on_the_estimate,  # noqa: E402
+from test_coupled_baseline import attacks, runs_of  # noqa: E402
+from test_coupled_estimate import (ESTIMATE, NOISE, every_period,  # noqa: E402
                                    trips_before_outside)
+
+
+def on_the_estimate(grid, filt, loads: list, seed: int = 0) -> list[dict]:
+    """The battery's five attacks x ``loads`` (each a ``{area: signal}``) with ``filt``
+    at every area, on the estimate (noise ``seed``), with anti-windup: scenarios."""
+    every = {a: filt for a in range(grid.n_areas)}
+    return [{"attacks": attack, "loads": load, "filters": every, "anti_windup": True,
+             "seed": seed, **ESTIMATE}
+            for attack in attacks(grid.n_areas).values() for load in loads]
 
 
 def grids() -> None:

@@ -302,7 +302,7 @@ def test_finding_on_two_lightly_damped_areas_agc_restores_in_up_to_a_minute():
     nothing trips, but AGC takes longer than the issue's 40 s to bring frequency
     and schedules back from where the attack left the grid: with the contracts
     25-43 s (42.6 s after the ACE bias when measured), with the coupled
-    certificate 31-60 s (four of five attacks beyond 40 s).  The same step
+    certificate 41-59 s (all five attacks beyond 40 s).  The same step
     without an attack is restored in 29 s with or without the contracts (they
     never act on it).
 
@@ -332,7 +332,7 @@ def test_finding_on_two_lightly_damped_areas_agc_restores_in_up_to_a_minute():
             residue[kind, key] = agc_residue(r.trace, range(2), 11.0)   # the attack's end
         late[kind] = sum(t > 40.0 for t in times)
         assert 20.0 < min(times) and max(times) < {"contract": 45.0, "coupled": 65.0}[kind], kind
-    assert late == {"contract": 1, "coupled": 4}
+    assert late == {"contract": 1, "coupled": 5}
     on_inputs = ("square on area 0's ω_ref", "bias on every ACE")
     assert min(residue["coupled", k] for k in on_inputs) > 0.25
     assert residue["contract", "bias on every ACE"] > 0.25
@@ -479,7 +479,7 @@ def test_the_tightest_case_a_search_found_reaches_the_certificates_ceiling_and_h
     delay), a 0.25 ms plant step.  Area 0's frequency peaks at 0.992 of its
     limit: the held vector's own prediction sits on its tightest row (slack 0)
     and the step adds its full load gain, so what is left is the allowance
-    between samples and the 1 % on the gains.  The certificate is tight there,
+    between samples.  The certificate is tight there,
     and holds; without the step the peak is 0.79."""
     grid = MultiAreaParams.two_area(LIGHT)
     relays = dataclasses.replace(RELAYS, of2_delay=0.0, uf2_delay=0.0)
@@ -691,7 +691,7 @@ def test_on_andes_ieee39_a_load_budget_for_the_fits_mismatch_leaves_no_outside()
     and a 12 s horizon, the same run as the finding above (chapter 09's coordinated
     sinusoid and a -0.05 pu step in area 1) flags no ``outside`` and trips nothing,
     and the price on the model is nil here: a legitimate 0.05 pu step holds no
-    area's AGC (``held_after_step`` 0 s; the default's 1.26 s).  The other runs
+    area's AGC (``held_after_step`` 0 s; the default's 1.22 s).  The other runs
     that chose the budget, and those that checked it after, are printed by
     ``python bench/survey_grid_certificates.py --mismatch-budget``
     (``docs/coupled-certificate.md``, "What the fit's mismatch eats"); this one pins it."""
@@ -710,7 +710,7 @@ def test_on_andes_ieee39_a_load_budget_for_the_fits_mismatch_leaves_no_outside()
 # Not marked long (it takes about 190 s of CPU): started first, it waited 159 s, idle,
 # for the IEEE 39-bus fit the chapter 09 test computes on the other worker (measured
 # with a per-test CPU record of the suite); in file order the fit is done by then.
-def test_on_andes_ieee39_the_red_teams_winner_trips_the_coupled_filters_only_beyond_the_range():
+def test_on_andes_ieee39_the_red_teams_winner_leaves_the_certificate_only_beyond_the_range():
     """Measured on ANDES (the coupled certificate is the fitted model's, not
     ANDES'): the red team's coordinated search (a square wave on both areas'
     commands) against the coupled filters of the IEEE 39-bus system's areas as
@@ -718,39 +718,43 @@ def test_on_andes_ieee39_the_red_teams_winner_trips_the_coupled_filters_only_bey
 
     * As built by default, every command within the fitted model's range
       (±0.2 pu, 1 GW: ``lfc.testbed.grid_fit.validated_range``): its winner
-      trips neither the fitted model (severity 0.31) nor ANDES (19 ``outside``
+      trips neither the fitted model (severity 0.32) nor ANDES (18 ``outside``
       samples per area when measured).
     * Finding, pinned — why the range: without it (``u_min``/``u_max`` = ∓∞) the
-      winner trips nothing on the fitted model (severity 0.38) but trips ROCOF on
-      ANDES after ``outside`` flags (peak 0.45 pu/s when measured): the filters
-      hold commands of about -1 and +0.65 pu (5 and 3 GW the opposite ways), far
-      beyond where the linear tie describes ANDES', whose machines then swing
-      apart.  The per-area certified filters, kept within the same range
-      (``simulate_multiarea.area_filter``), trip nothing on that winner (without
-      the range they tripped on it too); nor do the contracts (boxes of ±0.15 pu)."""
+      winner trips nothing on the fitted model (severity 0.38); on ANDES the
+      filters hold commands up to 0.57 pu (2.8 GW), far beyond where the linear
+      tie describes ANDES', and flag ``outside`` at 311 samples per area — the
+      fitted model's certificate no longer covers ANDES, and the filters say so.
+      It does not trip there now (severity 0.35); before the enclosures of the
+      Rigor issue, whose gains are about 1 % smaller, the same attack drove those
+      commands to -1 and +0.65 pu and tripped ROCOF after the flags: without the
+      range the outcome on ANDES sits at the edge.  The per-area certified
+      filters, kept within the same range (``simulate_multiarea.area_filter``),
+      trip nothing on that winner; without the range they trip on it; nor do the
+      contracts (boxes of ±0.15 pu)."""
     from lfc.experiments.redteam import coordinated_attacks, coordinated_search
     from lfc.testbed import GridCase, grid_design
     case = GridCase.ieee39()
     design = grid_design(case)
     assert design.command_range == 0.2
     unbounded = CoupledFilter(design, RELAYS, u_min=-np.inf, u_max=np.inf)
-    for filters, trips in (({0: "coupled", 1: "coupled"}, False),
-                           ({0: unbounded, 1: unbounded}, True)):
+    for filters, ranged in (({0: "coupled", 1: "coupled"}, True),
+                            ({0: unbounded, 1: unbounded}, False)):
         found = tiers.searched(
-            f"coupled:ieee39-red-team[{'unbounded' if trips else 'ranged'}]",
+            f"coupled:ieee39-red-team[{'ranged' if ranged else 'unbounded'}]",
             lambda: coordinated_search(design, filters, "square on P_c", duration=20.0,
                                        maxiter=2, popsize=4, jobs=1))
         assert not found["tripped"]
         replay = coordinated_attacks("square on P_c", found["theta"], 2, 20.0)
         r = lfc.simulate(case, duration=20.0, filters=filters, anti_windup=True,
                          attacks=replay, stop_on_trip=True)   # the verdict is in at a trip
-        assert r.tripped == trips
-        if trips:
-            first_trip = min(a.metrics()["first_trip_t"] or np.inf for a in r.areas)
-            first_outside = min(a.alarms.query("outside").t.min() for a in r.areas)
-            assert first_outside < first_trip
-        else:
-            assert max(float(a.controls.pc.abs().max()) for a in r.areas) <= 0.2
+        assert not r.tripped
+        held = max(float(a.controls.pc.abs().max()) for a in r.areas)
+        flags = [int(a.metrics()["outside"]) for a in r.areas]
+        if ranged:
+            assert held <= 0.2 and max(flags) < 50
+        else:                      # far beyond the range, and the filters say so
+            assert held > 0.5 and min(flags) > 300
     unranged = dataclasses.replace(design, command_range=np.inf)
     for grid, kind, trips in ((design, "certified", False), (design, "contract", False),
                               (unranged, "certified", True)):

@@ -1,5 +1,7 @@
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from lfc import KalmanFilter, LFCParams, Sinusoid, Step, simulate
 
@@ -43,3 +45,27 @@ def test_converged_gain_is_stable():
 def test_bad_parameters(kwargs, name):
     with pytest.raises(ValueError, match=name):
         KalmanFilter(P, **kwargs)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.floats(1e-6, 1 - 1e-9), st.integers(1, 10**7))
+def test_a_runs_confidence_is_the_union_bound_and_its_inverse_never_falls_short(run, n):
+    """``run_confidence`` is ``1 - n (1 - confidence)`` (at least 0);
+    ``confidence_for_run`` its inverse, rounded so the run's figure is never below
+    what was asked."""
+    from lfc.estimation import confidence_for_run, run_confidence
+    c = confidence_for_run(run, n)
+    assert run <= run_confidence(c, n) <= run + 1e-6
+    assert run_confidence(0.9999, 2000) == pytest.approx(0.8)
+    assert run_confidence(0.9999, 20_000) == 0.0
+
+
+def test_a_runs_confidence_refuses_what_is_not_a_probability():
+    from lfc.estimation import confidence_for_run, run_confidence
+    for bad in (0.0, 1.0, -0.1, float("nan")):
+        with pytest.raises(ValueError, match="confidence must lie in"):
+            run_confidence(bad, 10)
+        with pytest.raises(ValueError, match="run must lie in"):
+            confidence_for_run(bad, 10)
+    with pytest.raises(ValueError, match="certifications"):
+        run_confidence(0.5, 0)

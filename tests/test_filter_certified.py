@@ -144,12 +144,12 @@ def test_load_bound_covers_load_steps_and_rejects_impossible_bounds():
     r = lfc.simulate(P, duration=10.0, load=lfc.Step(0.05, 1.0),
                      pc_attack=lfc.Square(1.0, 0.3, start=1.0), scc=covered)
     assert not r.metrics()["tripped"]
-    with pytest.raises(ValueError, match=r"load_bound=0.2 pu is too large.*must be < 0.05925"):
+    with pytest.raises(ValueError, match=r"load_bound=0.2 pu is too large.*must be < 0.05984"):
         CertifiedSet(P, RELAYS, load_bound=P.M * RELAYS.rocof_limit)
     # a bound that leaves the samples' limits but no terminal set names itself, not the
     # estimation error (there is none here)
     with pytest.raises(ValueError, match="no room for the terminal set: .*load .*lower load_bound"):
-        CertifiedSet(P, RELAYS, load_bound=0.0588)
+        CertifiedSet(P, RELAYS, load_bound=0.05935)
 
 
 def test_invalid_input_holds_the_last_certified_command():

@@ -15,7 +15,10 @@ generation with :func:`lfc.simulate_many` (``vectorized=True`` in scipy's
 * :func:`coordinated_search`: an interconnected grid (:mod:`lfc.multiarea`),
   one family's parameters chosen separately for every area at once (a
   coordinated attack; families also on the ACE each area's AGC integrates),
-  severity the worst over the areas, with :func:`lfc.simulate_many`.
+  severity the worst over the areas, with :func:`lfc.simulate_many`;
+* :func:`lfc.experiments.adaptive.adaptive_search`: an attacker in the loop that
+  reads every area's interval from its filter each period and pushes at its
+  edges (certified, contract and coupled filters; not a waveform).
 
 Both can search the plant and the noise too (``Search``): each attack's plant
 anywhere in a box around the design model (M, D, τ_G, τ_T, R within

@@ -144,7 +144,7 @@ from lfc.estimation import KalmanFilter, check_noise_std, measurement_std
 from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, OUTSIDE, Backend, Options,
                               applied_flags, built_once, check_limits, given, hold_invalid,
                               option, valid_input)
-from lfc.filters.responses import L1_HORIZON, load_gains, period_step_gain
+from lfc.filters.responses import L1_HORIZON, load_gains, peak_norm, period_step_gain
 from lfc.model import LFCParams, lfc_matrices, output_matrix
 from lfc.relays import RelaySettings
 
@@ -619,15 +619,15 @@ def _error_bound(A: np.ndarray, C: np.ndarray, q_p: np.ndarray, cov: np.ndarray,
     time of a held trajectory with a constant true load: the true trajectory is
     the estimated one plus ``w(t) e`` with ``w(t) = [C e^{At}, C (I - e^{At}) q_p]``,
     so over the error ellipsoid ``e' cov^-1 e <= kappa^2`` the shift is at most
-    ``sup_t kappa sqrt(w(t) cov w(t)')``.  On a grid of 0.1 ms to 0.2 s, 1 ms to
-    2 s and 10 ms to ``L1_HORIZON`` (finest where the fast modes move), plus 1 %
-    for between grid points."""
+    ``kappa sup_t ||w(t) L||`` (``cov = L L'``): an enclosure
+    (:func:`~lfc.filters.responses.peak_norm`) from a grid of 0.1 ms to 0.2 s,
+    1 ms to 2 s and 10 ms to ``L1_HORIZON`` (finest where the fast modes move)."""
     t = np.concatenate([np.arange(0.0, 0.2, 1e-4), np.arange(0.2, 2.0, 1e-3),
-                        np.arange(2.0, L1_HORIZON, 1e-2)])
-    E = _expm_at(A, t)
-    w = np.concatenate([C @ E, (C @ (np.eye(len(A))[None] - E) @ q_p)[..., None]], axis=2)
-    spread = w @ np.linalg.cholesky(cov)                        # (t, 2, 6)
-    return 1.01 * kappa * np.sqrt(np.max(np.sum(spread ** 2, axis=2), axis=0))
+                        np.arange(2.0, L1_HORIZON + 1e-9, 1e-2)])
+    L = np.linalg.cholesky(cov)
+    M = np.hstack([np.eye(len(A)), -q_p[:, None]]) @ L
+    offset = np.hstack([np.zeros((len(C), len(A))), (C @ q_p)[:, None]]) @ L
+    return kappa * peak_norm(A, C, M, offset, t)
 
 
 def _derivative_bound(A: np.ndarray, B: np.ndarray, C: np.ndarray, G: np.ndarray,

@@ -86,7 +86,7 @@ the estimate's error bound) is the fitted model's: measured there, not proven
 (``tests/test_coupled_estimate.py::test_on_andes_the_coupled_filters_run_on_their_estimate``).  Without the command range a red-team
 attack found against the IEEE 39-bus system's fitted model trips ROCOF on ANDES;
 within it the winners trip nothing there, though ``outside`` is flagged
-(``tests/test_coupled.py::test_on_andes_ieee39_the_red_teams_winner_trips_the_coupled_filters_only_beyond_the_range``).
+(``tests/test_coupled.py::test_on_andes_ieee39_the_red_teams_winner_leaves_the_certificate_only_beyond_the_range``).
 """
 
 from __future__ import annotations
@@ -126,6 +126,7 @@ AUTO_HORIZONS = (8.0, 12.0, 16.0, 20.0)   # s: horizon="auto"'s candidates, shor
 AUTO_HELD_MAX = 1.0   # s: how long "auto" lets a legitimate step leave AGC waiting (it restores
                       # in about 20 s on the grids of docs/coupled-certificate.md)
 ERROR_OFFSETS = 11   # instants in a control period at which the error lemma steps a load
+BENDS = 11            # instants in a control period at which it bounds the steps' curvature
 HELD_LEVELS = ("sharp", "widened", "strict")
 OUTSIDE_WHY = {   # what an outside flag may mean: the exact state, then each held level
     None: "the loads moved by more than the bounds",
@@ -458,13 +459,12 @@ class CoupledSet:
             # the certification moves row i by at most V g_i, the loads after it by
             # at most V' load: with V + V' <= load_bound, max(g_i, load) covers both
             steps = _load_error_steps(self.kalman, A, Bl, o.control_period)
-            g, g0 = 1.01 * _sup_abs(w, steps), 1.01 * _sup_abs(w0, steps)
+            g, g0 = steps.sup(w), steps.sup(w0)
             load_rows, load_0 = np.maximum(load, g), np.maximum(load, g0)
             if o.held_level == "strict":     # the coming period's rows (theorem B')
                 coming = np.arange(len(times)) <= np.searchsorted(times, o.control_period)
-                tail = _error_tail(self.kalman)
-                ell[coming] = _sum_abs(w[coming], steps, ERROR_OFFSETS * n_a, tail)
-                ell0 = _sum_abs(w0, steps, ERROR_OFFSETS * n_a, tail)
+                ell[coming] = steps.total(w[coming])
+                ell0 = steps.total(w0)
         self.budget = {"load": _by_kind(o.load_bound * load),
                        "re-check": _by_kind(o.recheck_bound * again),
                        "between samples": _by_kind(t_max + tau0),
@@ -474,7 +474,10 @@ class CoupledSet:
         # C''s ("widened"): wider by what the estimate's error may move a row at the
         # re-check, its noise's part and its loads' part (a total variation of at
         # most load_bound - recheck_bound, the assumption of C')
-        spent = 1.01 * (o.load_bound - o.recheck_bound)   # what the held level absorbs
+        # what the held level absorbs, NUMERIC_MARGIN more (a step of exactly that
+        # size lands the equilibrium on the held level's boundary, where rounding
+        # would decide)
+        spent = (1.0 + NUMERIC_MARGIN) * (o.load_bound - o.recheck_bound)
         widened = o.held_level == "widened"
         bound_new = limits - o.load_bound * load_rows - t_max - tau - est   # (n, outputs)
         bound_held = held - t_max + (est + spent * g if widened else -est)
@@ -503,8 +506,6 @@ class CoupledSet:
         # certified (up to load_bound - recheck_bound): its equilibrium frequency
         # moves by at most that times |dw_p|, its state at the horizon by that times
         # kappa in the ellipsoid's norm (which only decreases along e^{At})
-        # (plus 1 %, as the load gains: a step of exactly that size lands the
-        # equilibrium on the held level's boundary, where rounding would decide)
         dw_peak = float(np.max(np.abs(dw_p)))      # equilibrium frequency per pu of load
         drift = spent * dw_peak
         hold = held - t_max                                # room at each level, per output
@@ -536,8 +537,8 @@ class CoupledSet:
                 m = K.T @ Eh @ np.hstack([np.eye(n_r), -ql])
                 err_t = kappa_e * math.sqrt(np.max(np.linalg.eigvalsh(m @ cov @ m.T)))
                 err_eq = kappa_e * math.sqrt(dw_p @ cov[n_r:, n_r:] @ dw_p)
-                g_t = 1.01 * float(np.max(np.linalg.norm(steps @ m.T, axis=1)))
-                g_eq = 1.01 * float(np.max(np.abs(steps[:, n_r:] @ dw_p)))
+                g_t = steps.sup_norm(m)
+                g_eq = float(np.max(steps.sup(np.concatenate([np.zeros(n_r), dw_p]))))
             after = np.tile([g_eq, 0.0], n_a) + g_t * sigma         # per output, per pu
             new = limits - o.load_bound * np.maximum(load, after) - 2 * t_max
             free = hold[0::2] - spent * kappa * sigma[0::2] - drift   # the held level's
@@ -685,8 +686,68 @@ def _made_invariant(A: np.ndarray, C: np.ndarray, Q: np.ndarray,
     return moved * min(1.0, float(np.min(room ** 2 / reach)))
 
 
+@dataclass(frozen=True)
+class LoadErrors:
+    """The grid Kalman filter's error after a unit load step
+    (:func:`_load_error_steps`), and what bounds it between its offsets and after
+    its last age.
+
+    ``rows`` (ages x ``per_age``, n_k): ``e(m; d, j)`` for ages ``m = 1..M``, per age
+    the offsets ``d`` (``spacing`` s apart) times the areas ``j``.  Between two
+    offsets ``e`` leaves its linear interpolation by at most ``spacing^2 / 8 sup_d
+    |e''|``, and ``e''(m; d, j) = D_m v(T - d, j)`` with ``D_m = Phi^(m-1) (I - K
+    C)[:, :n_r]``, ``Phi = (I - K C) A`` and ``v(s, j) = A e^{As} Bl_j``: ``bends``
+    holds ``D_m v(s, j)`` on a grid of ``s`` over the period (per age ``per_bend``
+    rows); between its points ``v`` leaves its interpolation by at most ``ds^2 / 8
+    sup |A^3 e^{As} Bl_j|``, which ``pads`` (ages,) carries in ``Q``'s norm below.
+
+    Beyond the last age, in the norm ``||x||_Q = sqrt(x' Q x)`` of the solution of
+    ``Phi' Q Phi - Q + I = 0``, each sample shrinks the error by at least ``ratio``:
+    ``||Phi x||_Q^2 = ||x||_Q^2 - ||x||^2 + x' R x <= ratio^2 ||x||_Q^2`` with
+    ``ratio^2 = 1 - (1 - ||R||) / lambda_max(Q)``, ``R`` the computed solution's
+    residual; ``last`` is at least ``sup_(d,j) ||e(M; d, j)||_Q``, and ``half`` =
+    ``Q^{-1/2}`` turns a norm into a bound: ``|w x| <= ||w Q^{-1/2}|| ||x||_Q``."""
+
+    rows: np.ndarray
+    per_age: int
+    spacing: float
+    bends: np.ndarray
+    per_bend: int
+    pads: np.ndarray
+    last: float
+    ratio: float
+    half: np.ndarray
+
+    def sup(self, w: np.ndarray) -> np.ndarray:
+        """At least ``sup_(m,d,j) |w e(m; d, j)|`` per row of ``w`` (..., n_k), every
+        age and every instant of the period included."""
+        scale = np.linalg.norm(w @ self.half, axis=-1)
+        between = self.spacing ** 2 / 8 * (_sup_abs(w, self.bends) + scale * self.pads.max())
+        return np.maximum(_sup_abs(w, self.rows) + between, scale * self.ratio * self.last)
+
+    def sup_norm(self, W: np.ndarray) -> float:
+        """At least ``sup_(m,d,j) ||W e(m; d, j)||`` (``W`` a matrix): the larger
+        end's norm plus ``spacing^2 / 8`` times ``sup ||W e''||``."""
+        scale = float(np.linalg.norm(W @ self.half, 2))
+        bend = float(np.max(np.linalg.norm(self.bends @ W.T, axis=1))
+                     + scale * self.pads.max())
+        return max(float(np.max(np.linalg.norm(self.rows @ W.T, axis=1)))
+                   + self.spacing ** 2 / 8 * bend, scale * self.ratio * self.last)
+
+    def total(self, w: np.ndarray) -> np.ndarray:
+        """At least ``sum_m sup_(d,j) |w e(m; d, j)|`` per row of ``w`` (..., n_k),
+        over every age: how far a load path whose variation within every control
+        period is at most 1 moves ``w e`` (its steps of age ``m`` each by at most
+        their variation times the age's largest response)."""
+        scale = np.linalg.norm(w @ self.half, axis=-1)
+        between = self.spacing ** 2 / 8 * (_age_max(w, self.bends, self.per_bend).sum(axis=-1)
+                                           + scale * self.pads.sum())
+        return (_age_max(w, self.rows, self.per_age).sum(axis=-1) + between
+                + scale * self.last * self.ratio / (1.0 - self.ratio))
+
+
 def _load_error_steps(kalman: GridKalman, A: np.ndarray, Bl: np.ndarray, period: float,
-                      offsets: int = ERROR_OFFSETS, tol: float = 1e-6) -> np.ndarray:
+                      offsets: int = ERROR_OFFSETS, tol: float = 1e-9) -> LoadErrors:
     """The grid Kalman filter's error (reduced states, then loads) at every
     control sample after a unit load step in any area at any instant: rows
     ``e(m; d, j)`` for ages ``m >= 1`` samples, ``offsets`` instants ``d`` in the
@@ -700,11 +761,30 @@ def _load_error_steps(kalman: GridKalman, A: np.ndarray, Bl: np.ndarray, period:
     by ``(I - K C)`` (correction) and ``A`` (prediction).  The error is linear in
     the load path (and independent of every command and attack), so a load path
     of total variation ``V`` moves any linear function ``w e`` of the error by at
-    most ``V sup |w e(m; d, j)|`` (1 % is added for the instants between the
-    offsets by the callers)."""
+    most ``V sup |w e(m; d, j)|`` over every age and instant
+    (:meth:`LoadErrors.sup`)."""
+    from scipy.linalg import solve_discrete_lyapunov
+
     n_r, n_a = len(A), Bl.shape[1]
     ikc = _correction(kalman)
     phi = ikc @ kalman.A
+    Q = solve_discrete_lyapunov(phi.T, np.eye(len(phi)))
+    Q = 0.5 * (Q + Q.T)
+    residual = float(np.linalg.norm(phi.T @ Q @ phi - Q + np.eye(len(phi)), 2))
+    lam, vec = np.linalg.eigh(Q)
+    ratio2 = 1.0 - (1.0 - residual) / float(lam.max())
+    if not (lam.min() > 0 and residual < 1.0 and ratio2 < 1.0):
+        raise ValueError("the grid Kalman filter's error does not decay")
+    root = vec @ np.diag(np.sqrt(lam)) @ vec.T                       # Q^{1/2}
+    half = vec @ np.diag(lam ** -0.5) @ vec.T                        # Q^{-1/2}
+    # v(s, j) = A e^{As} Bl_j on BENDS instants; between them v leaves its
+    # interpolation by at most ds^2 / 8 sup ||A^3 e^{As} Bl_j||: on 1,000 instants,
+    # times e^{||A|| u} (||e^{A(s + u)} x|| <= e^{||A|| u} ||e^{As} x||)
+    s = np.linspace(0.0, period, BENDS)
+    v = (A @ _expm_at(A, s) @ Bl).transpose(1, 0, 2).reshape(n_r, -1)   # (n_r, BENDS n_a)
+    fine = np.linspace(0.0, period, 1001)
+    third = float(np.max(np.linalg.norm(A @ A @ A @ _expm_at(A, fine) @ Bl, axis=1)))
+    third *= math.exp(float(np.linalg.norm(A, 2)) * fine[1])
     jumps = []
     for d in np.linspace(0.0, period, offsets):
         block = np.zeros((n_r + n_a, n_r + n_a))
@@ -712,17 +792,24 @@ def _load_error_steps(kalman: GridKalman, A: np.ndarray, Bl: np.ndarray, period:
         integral = expm(block * (period - d))[:n_r, n_r:]           # int_0^{T-d} e^{As} ds Bl
         jumps.append(np.vstack([integral, np.eye(n_a)]))            # (n_k, n_a)
     e = ikc @ np.hstack(jumps)                                       # (n_k, offsets * n_a)
-    out, peak = [], 0.0
+    drift = ikc[:, :n_r]                                             # D_m
+    out, bends, pads, peak = [], [], [], 0.0
     for _ in range(100_000):
         out.append(e.T)
+        bends.append((drift @ v).T)
+        pads.append((s[1] ** 2 / 8) * np.linalg.norm(root @ drift, 2) * third)
         size = float(np.max(np.abs(e)))
         peak = max(peak, size)
         if size < tol * peak:
             break
-        e = phi @ e
+        e, drift = phi @ e, phi @ drift
     else:
         raise ValueError("the grid Kalman filter's error does not decay")
-    return np.vstack(out)
+    spacing = period / (offsets - 1)
+    bend = np.linalg.norm(root @ drift @ v, axis=0).max() + pads[-1]
+    last = float(np.max(np.linalg.norm(root @ e, axis=0))) + spacing ** 2 / 8 * bend
+    return LoadErrors(np.vstack(out), offsets * n_a, spacing, np.vstack(bends), BENDS * n_a,
+                      np.array(pads), last, math.sqrt(max(ratio2, 0.0)), half)
 
 
 def _correction(kalman: GridKalman) -> np.ndarray:
@@ -730,27 +817,13 @@ def _correction(kalman: GridKalman) -> np.ndarray:
     return np.eye(len(kalman.A)) - kalman.gain @ kalman.C
 
 
-def _error_tail(kalman: GridKalman) -> float:
-    """``rho / (1 - rho)``, ``rho`` the spectral radius of the error's map from one
-    sample to the next, ``(I - K C) A``: what the ages beyond
-    :func:`_load_error_steps`' last add to a sum over ages, per unit of the last
-    (at the slowest mode's rate)."""
-    rho = float(np.max(np.abs(np.linalg.eigvals(_correction(kalman) @ kalman.A))))
-    if rho >= 1.0:
-        raise ValueError("the grid Kalman filter's error does not decay")
-    return rho / (1.0 - rho)
-
-
-def _sum_abs(w: np.ndarray, steps: np.ndarray, per_age: int, tail: float) -> np.ndarray:
-    """``1.01 (sum_m max_(d,j) |w e(m; d, j)| + tail * max_(d,j) |w e(M; d, j)|)``
-    for each row of ``w`` (shape ``(..., n_k)``): how far a load path whose
-    variation within every control period is at most 1 moves ``w e``, its steps
-    of age ``m`` (``steps``' blocks of ``per_age`` rows, :func:`_load_error_steps`)
-    each by at most their variation times the age's largest response; the ages
-    after the last, ``M``, at most ``tail`` (:func:`_error_tail`) times it; 1 %
-    for the instants between the offsets, as in the callers of :func:`_sup_abs`."""
-    ages = np.max(np.abs(w @ steps.T).reshape(*w.shape[:-1], -1, per_age), axis=-1)
-    return 1.01 * (np.sum(ages, axis=-1) + tail * ages[..., -1])
+def _age_max(w: np.ndarray, rows: np.ndarray, per: int, chunk: int = 4096) -> np.ndarray:
+    """``max |w row|`` over each age's block of ``per`` rows of ``rows``, for each row
+    of ``w`` (shape ``(..., n_k)``): (..., ages), whole ages at a time."""
+    step = max(1, chunk // per) * per
+    return np.concatenate([np.max(np.abs(w @ rows[i:i + step].T)
+                                  .reshape(*w.shape[:-1], -1, per), axis=-1)
+                           for i in range(0, len(rows), step)], axis=-1)
 
 
 def _sup_abs(w: np.ndarray, steps: np.ndarray, chunk: int = 4096) -> np.ndarray:

@@ -42,17 +42,19 @@ import numpy as np
 import pandas as pd
 
 from lfc._validate import check_seed
-from lfc.engine import GeneratorSide, check_area_keys, sample_signal
+from lfc.engine import GeneratorSide, check_area_keys
 from lfc.filters import SafetyFilter
 from lfc.filters.coupled import CoupledFilter
+from lfc.lockstep import LinearGrid
 from lfc.model import STATES, LFCParams
+from lfc.multiarea import MultiAreaParams, as_grid
+from lfc.relays import relays_or_default
 from lfc.run import _testbed_kind
-from lfc.multiarea import N_AREA_STATES, MultiAreaParams, as_grid, discretize_grid
-from lfc.relays import RELAY_NAMES, relay_sample, relays_or_default
 from lfc.simulate import SimResult, check_timing, result
 from lfc.simulate_multiarea import MultiAreaResult, area_filter, multiarea_result
 from lfc.wire.attacks import WireAttack
 from lfc.wire.link import Link
+
 PROTOCOLS = ("modbus", "dnp3")
 AGC = ("generator", "centre")
 MODES = ("lockstep", "realtime")
@@ -232,7 +234,6 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
         loads = check_area_keys(load, n_a, "load")
     n_steps = int(round(duration / dt))
     n_ctrl = -(-n_steps // ratio)
-    t = np.arange(n_steps + 1) * dt
     tc = np.arange(n_ctrl) * period
     k_freq, k_tie = grid.agc_gains()
     feedforward = (not single) if feedforward is None else feedforward
@@ -242,43 +243,21 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
                           k_agc=(k_freq[a], k_tie[a]) if local else (0.0, 0.0), network=True,
                           anti_windup=anti_windup and local)
             for a in range(n_a)]
-    A, Bu, Bl = discretize_grid(grid, dt)
-    inc, m = grid.incidence(), N_AREA_STATES
-    p = np.column_stack([sample_signal(loads.get(a), t, f"load[{a}]") for a in range(n_a)])
-    limits, delays = relays.arrays()
-    start, due = np.full((n_a, 3), np.nan), np.zeros((n_a, 3))
-    for a in range(n_a):
-        relay_sample(0.0, 0.0, 0.0, limits, delays, start[a], due[a])
+    plant = LinearGrid(grid, loads, n_steps, ratio, dt, relays)
 
     link = Link(n_a, _transport(protocol), policies, np.arange(n_ctrl) * ratio * dt, period,
                 None if local else k_freq[0] * period, anti_windup)
-    state = {"x": np.zeros(A.shape[0])}
-    xs = np.zeros((n_steps + 1, A.shape[0]))
-    trips = np.zeros((n_steps + 1, n_a), np.int64)
 
     def generate(j: int, lateness: float) -> None:
         """Every generator at control sample j: take the command, filter, then the
         grid holds every command for one period; relays watched, reports published."""
-        x, k0 = state["x"], j * ratio
+        seen = plant.measured(j)
         links = link.deliver(j, gens)
-        u = np.zeros(n_a)
-        for a, gen in enumerate(gens):
-            tie = 0.0
-            for line in range(inc.shape[1]):
-                tie += inc[a, line] * x[m * n_a + line]
-            u[a] = gen.step(j, x[m * a:m * (a + 1)], float(p[k0, a] + tie), tie)
-        bits, x_j = np.zeros(n_a, np.int64), x
-        with np.errstate(over="ignore", invalid="ignore"):   # non-finite: refused after the run
-            for k in range(k0, min(k0 + ratio, n_steps)):
-                x = A @ x + Bu @ u + Bl @ p[k]
-                xs[k + 1] = x
-                for a in range(n_a):
-                    trips[k + 1, a] = relay_sample((k + 1) * dt, x[m * a + 3], x[m * a + 4],
-                                                   limits, delays, start[a], due[a])
-                    bits[a] |= trips[k + 1, a]
-        state["x"] = x
+        u = np.array([gen.step(j, seen[a, :5], seen[a, 7], seen[a, 6])
+                      for a, gen in enumerate(gens)])
+        bits = plant.advance(j, u)
         for a, gen in enumerate(gens):   # what each measured at the sample
-            link.publish(j, a, gen, x_j[m * a:m * (a + 1)], links[a], bits[a], lateness)
+            link.publish(j, a, gen, seen[a, :5], links[a], bits[a], lateness)
 
     try:
         link.open()
@@ -291,13 +270,11 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
             _realtime(n_ctrl, period, link.send, generate, link.read)
     finally:
         link.close()
-    if not np.isfinite(xs).all():
+    if not np.isfinite(plant.xs).all():
         raise ValueError("the plant became non-finite: an attack (a bias or a factor so large "
                          "that the plant overflows) or a load signal gives a non-finite value, "
                          "and no filter stood in the way; lfc.simulate refuses the same run")
-    trip_rows = [pd.DataFrame([(RELAY_NAMES[r], float(t[k])) for k in np.flatnonzero(trips[:, a])
-                               for r in range(3) if trips[k, a] >> r & 1],
-                              columns=["relay", "t"]) for a in range(n_a)]
+    trip_rows = plant.trip_rows()
     settings = {"params": repr(params), "relays": vars(relays), "duration": duration,
                 "dt": dt, "control_period": control_period, "seed": seed,
                 "noise_std": list(noise_std), "protocol": protocol,
@@ -307,15 +284,15 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
                                    getattr(filters[a], "method", "?") for a in range(n_a)),
                 "scc": repr(filters), "load": repr(loads), "anti_windup": anti_windup,
                 "agc": agc, "mode": mode, "feedforward": feedforward}
-    states = xs[:, :m * n_a].reshape(n_steps + 1, n_a, m)
+    states = plant.states()
     if single:
-        trace = pd.DataFrame({"t": t})
+        trace = pd.DataFrame({"t": plant.t})
         for i, name in enumerate(STATES):
             trace[name] = states[:, 0, i]
-        trace["p_load"] = p[:, 0]
+        trace["p_load"] = plant.p[:, 0]
         sim = result(trace, tc, gens[0].ctrl, trip_rows[0], scc, settings)
     else:
-        sim = multiarea_result(grid, t, states, p, xs[:, m * n_a:] @ inc.T, trip_rows, tc,
+        sim = multiarea_result(grid, plant.t, states, plant.p, plant.exports(), trip_rows, tc,
                                [gen.ctrl for gen in gens], filters, settings)
     return WireResult(sim, *link.outcome(n_ctrl), settings)
 
