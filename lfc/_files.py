@@ -138,7 +138,9 @@ def cache_folder() -> Path:
 def read_stored(path: Path, decode: Callable[[dict], Any],
                 check: Callable[[Any], None] = lambda value: None) -> Any:
     """The value stored at ``path`` (:func:`write_stored`); None if absent, damaged
-    (its SHA-256) or not sane (``check`` raises ``ValueError``), the last two with a
+    (its SHA-256), sealed for another request (the file name it was written under,
+    which names its request: a file copied or swapped from another name is not read
+    back) or not sane (``check`` raises ``ValueError``), the last three with a
     ``RuntimeWarning`` naming the file."""
     if not path.exists():
         return None
@@ -147,19 +149,25 @@ def read_stored(path: Path, decode: Callable[[dict], Any],
         payload = stored["payload"]
         if hashlib.sha256(payload.encode()).hexdigest() != stored["sha256"]:
             raise ValueError("checksum mismatch")
-        value = decode(json.loads(payload))
+        sealed = json.loads(payload)
+        if not isinstance(sealed, dict) or sealed.get("seal") != path.name:
+            raise ValueError(f"written for another request "
+                             f"({sealed.get('seal') if isinstance(sealed, dict) else None!r})")
+        value = decode(sealed["value"])
         check(value)
         return value
-    except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, RecursionError) as err:
         warnings.warn(f"damaged cache file {path} ({err}); computing it again", RuntimeWarning,
                       stacklevel=2)
         return None
 
 
 def write_stored(path: Path, value: Any, encode: Callable[[Any], dict]) -> None:
-    """Store ``encode(value)`` (JSON) with its SHA-256 at ``path``, atomically; a
-    file that cannot be written is skipped with a ``RuntimeWarning``."""
-    payload = json.dumps(encode(value), sort_keys=True)
+    """Store ``encode(value)`` (JSON) sealed with ``path``'s name (which names the
+    request it answers: the callers' names are keys of every input) and with its
+    SHA-256, atomically; a file that cannot be written is skipped with a
+    ``RuntimeWarning``."""
+    payload = json.dumps({"seal": path.name, "value": encode(value)}, sort_keys=True)
     text = json.dumps({"payload": payload,
                        "sha256": hashlib.sha256(payload.encode()).hexdigest()})
     try:

@@ -50,6 +50,44 @@ def as_float(value: float) -> float:
         return math.inf if value > 0 else -math.inf
 
 
+def engine_number(name: str, value: Any, hint: Any) -> Any:
+    """``value`` (which conforms to ``hint``) in the engine's types: a number where
+    the hint says ``float`` (a ``Fraction``, a numpy scalar, an integer) as a
+    Python float, in a tuple of floats likewise; anything else as it is.  An
+    integer too large for a float is refused naming ``name`` (``ValueError``):
+    nothing accepted fails later inside numba, scipy or numpy."""
+    floats = _float_hint(hint)
+    if floats and _is_number(value):
+        return _float(name, value)
+    if floats is None and isinstance(value, tuple):
+        return tuple(_float(f"{name}[{i}]", v) if _is_number(v) else v
+                     for i, v in enumerate(value))
+    return value
+
+
+def _float_hint(hint: Any) -> bool | None:
+    """True if ``hint`` admits a float (``float``, ``float | None``); None for a
+    tuple of floats; False otherwise."""
+    if hint is float:
+        return True
+    args = get_args(hint)
+    if get_origin(hint) is tuple:
+        return None if args and all(a is float or a is Ellipsis for a in args) else False
+    if get_origin(hint) in (Union, UnionType):
+        if float in args:
+            return True
+        return None if any(get_origin(a) is tuple and _float_hint(a) is None
+                           for a in args) else False
+    return False
+
+
+def _float(name: str, value: Any) -> float:
+    try:
+        return float(value)
+    except OverflowError:
+        raise ValueError(f"{name} = {value!r:.40} is too large for a float") from None
+
+
 def is_sequence(value: object) -> bool:
     """Whether ``value`` is an ordered sequence of values: a list, a tuple or a 1-D
     array (not a string, a set or a dict, whose order or meaning differs)."""
@@ -121,7 +159,7 @@ def check_multiple(name: str, value: float, of_name: str, of: float) -> int:
     ``of`` (both > 0); return the integer ratio."""
     check_positive(name, value)
     check_positive(of_name, of)
-    ratio = value / of
+    ratio = as_float(value) / as_float(of)      # a float32 or a Fraction: in doubles
     if abs(ratio - round(ratio)) > 1e-9 * ratio or round(ratio) < 1:
         raise ValueError(f"{name} must be a positive integer multiple of {of_name} ({of}), "
                          f"got {value}")

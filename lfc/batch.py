@@ -475,7 +475,8 @@ def simulate_table(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
     results, todo = {}, []
     for i, chunk in enumerate(chunks):
         path = None if folder is None else folder / f"chunk_{i:05d}_{_digest(chunk, args)}.csv"
-        stored = _read_chunk(path, len(chunk)) if path is not None and path.exists() else None
+        stored = (_read_chunk(path, chunk.index) if path is not None and path.exists()
+                  else None)
         if stored is not None:
             results[i] = stored.set_axis(chunk.index)
         else:
@@ -542,17 +543,22 @@ CHUNK_MAGIC = "# lfc-chunk"
 
 
 def _write_chunk(path: Path, metrics: pd.DataFrame) -> None:
-    """Write ``metrics`` with its row count and checksum, atomically (a unique
-    temporary file renamed into place)."""
+    """Write ``metrics`` with its row count, its seal (``path``'s name, a key of the
+    chunk's scenarios, the run's settings and the code: :func:`_digest`) and a
+    checksum of both, atomically (a unique temporary file renamed into place)."""
     body = metrics.to_csv()
-    header = (f"{CHUNK_MAGIC} rows={len(metrics)} "
-              f"sha256={hashlib.sha256(body.encode()).hexdigest()}\n")
+    sealed = f"key={path.name} rows={len(metrics)}"
+    header = (f"{CHUNK_MAGIC} {sealed} "
+              f"sha256={hashlib.sha256((sealed + body).encode()).hexdigest()}\n")
     write_atomic(path, header + body)
 
 
-def _read_chunk(path: Path, rows: int) -> pd.DataFrame | None:
-    """The metrics stored in ``path``, or None — with a :class:`ChunkWarning`
-    naming the file — if it is unreadable, damaged or not of ``rows`` rows."""
+def _read_chunk(path: Path, index: pd.Index) -> pd.DataFrame | None:
+    """The metrics stored in ``path`` for the scenarios of ``index``, or None — with
+    a :class:`ChunkWarning` naming the file — if it is unreadable, damaged, sealed
+    for another request (copied or swapped from another chunk's or run's name) or
+    not of these rows."""
+    rows = len(index)
     def damaged(why: str) -> None:
         warnings.warn(f"chunk file {path} is damaged ({why}); recomputing it", ChunkWarning,
                       stacklevel=4)
@@ -563,15 +569,20 @@ def _read_chunk(path: Path, rows: int) -> pd.DataFrame | None:
         return damaged(f"unreadable: {err}")
     header, _, body = text.partition("\n")
     head = dict(f.split("=", 1) for f in header.removeprefix(CHUNK_MAGIC).split() if "=" in f)
-    if not header.startswith(CHUNK_MAGIC) or set(head) != {"rows", "sha256"}:
+    if not header.startswith(CHUNK_MAGIC) or set(head) != {"key", "rows", "sha256"}:
         return damaged("no lfc-chunk header")
+    sealed = f"key={head['key']} rows={head['rows']}"
+    if hashlib.sha256((sealed + body).encode()).hexdigest() != head["sha256"]:
+        return damaged("checksum mismatch: cut short or changed")
+    if head["key"] != path.name:
+        return damaged(f"written for another request ({head['key']})")
     if head["rows"] != str(rows):
         return damaged(f"{head['rows']} rows stored, {rows} expected")
-    if hashlib.sha256(body.encode()).hexdigest() != head["sha256"]:
-        return damaged("checksum mismatch: cut short or changed")
     metrics = pd.read_csv(io.StringIO(body), index_col=0)
     if len(metrics) != rows or list(metrics.columns) != list(METRIC_KEYS):
         return damaged("unexpected rows or columns")
+    if list(metrics.index.astype(str)) != list(index.astype(str)):
+        return damaged("stored for other rows")
     insane = _insane(metrics)
     return damaged(insane) if insane else metrics
 

@@ -147,9 +147,9 @@ def test_a_chunk_with_a_valid_checksum_but_impossible_metrics_is_recomputed(tmp_
     path = tmp_path / "chunk.csv"
     batch._write_chunk(path, metrics)
     with pytest.warns(ChunkWarning, match=why):
-        assert batch._read_chunk(path, 3) is None
+        assert batch._read_chunk(path, SANE_METRICS.index) is None
     batch._write_chunk(path, SANE_METRICS)
-    pd.testing.assert_frame_equal(batch._read_chunk(path, 3).reset_index(drop=True),
+    pd.testing.assert_frame_equal(batch._read_chunk(path, SANE_METRICS.index).reset_index(drop=True),
                                   SANE_METRICS, check_dtype=False)
 
 
@@ -173,7 +173,7 @@ def test_property_damaged_chunk_files_never_give_a_wrong_result(tmp_path_factory
     path.write_bytes(bytes(raw))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        read = batch._read_chunk(path, 3)
+        read = batch._read_chunk(path, SANE_METRICS.index)
     if read is None:
         assert any(issubclass(w.category, ChunkWarning) and path.name in str(w.message)
                    for w in caught)

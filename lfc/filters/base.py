@@ -25,7 +25,8 @@ import numpy as np
 
 from lfc._files import cache_folder, content_key, kept
 from lfc._jit import inline
-from lfc._validate import ParameterTypeError, check_number, conforms, kind
+from lfc._validate import (ParameterTypeError, check_number, conforms, engine_number,
+                           kind)
 from lfc.model import LFCParams
 from lfc.relays import RelaySettings
 
@@ -198,6 +199,7 @@ class Options:
             if not conforms(value, hints[f.name]):
                 raise ParameterTypeError(f"{f.name} must be {kind(hints[f.name])}, got "
                                          f"{value!r} ({type(value).__name__})")
+            object.__setattr__(self, f.name, engine_number(f.name, value, hints[f.name]))
 
     @classmethod
     def from_columns(cls, row: dict) -> dict:  # pragma: no cover - abstract

@@ -635,6 +635,11 @@ def sweep(notebook: str | Path, grid: dict[str, list], out: Path | None = None,
     each notebook runs in its own kernel process, so threads suffice, and a
     forked process pool would deadlock on the kernel managers' threads).
 
+    ``out`` belongs to one notebook (``out/sweep.json`` names it and every point
+    swept into it): a sweep of another notebook into it is refused; a sweep of the
+    same notebook adds its points, and ``sweep.csv`` holds every finished point of
+    the folder (the earlier ones are not run again).
+
     Each run writes into ``out/<run_id>/`` (executed notebook, figures,
     ``metrics.json``) and a ``done.json`` marker last, holding the run's key (the
     notebook, the point and the code: :func:`run_key`), so an interrupted sweep
@@ -651,9 +656,12 @@ def sweep(notebook: str | Path, grid: dict[str, list], out: Path | None = None,
     known = validate_parameters(notebook, grid)
     if "testbed" in grid.get("plant", []) or known.get("plant", {}).get("default") == '"testbed"':
         _prepare_testbed()
+    if out is not None and not str(out).strip():
+        raise ValueError("out must name a folder, got an empty path")
     out = Path(out or ROOT / "build" / "sweeps" / notebook.stem).resolve()
     points = [dict(zip(grid, combo)) for combo in itertools.product(*grid.values())]
-    keys = {run_id(p): run_key(notebook, {"check_claims": False, **p}) for p in points}
+    earlier = _claim_folder(out, notebook, points)
+    keys = {run_id(p): run_key(notebook, {"check_claims": False, **p}) for p in earlier}
     todo = [(p, out / run_id(p)) for p in points
             if not _finished(out / run_id(p), keys[run_id(p)])]
     workers = jobs or os.cpu_count() or 1
@@ -669,11 +677,35 @@ def sweep(notebook: str | Path, grid: dict[str, list], out: Path | None = None,
     failures = [r for r in _progress(futures, f"sweep {notebook.stem}") if r]
     if executor is None:
         pool.shutdown()
-    table = collect(out, points, keys)
+    table = collect(out, earlier, keys)
     write_atomic(out / "sweep.csv", table.to_csv(index=False))
     if failures:
         raise RuntimeError(f"{len(failures)} run(s) failed: " + "; ".join(failures))
     return table
+
+
+def _claim_folder(out: Path, notebook: Path, points: list[dict]) -> list[dict]:
+    """Every point of ``out``'s sweep (``sweep.json``): the earlier sweeps' into it,
+    then ``points``' new ones, written back.  ``ValueError`` if ``out`` holds another
+    notebook's sweep."""
+    manifest = out / "sweep.json"
+    earlier: list[dict] = []
+    if manifest.exists():
+        try:
+            held = json.loads(manifest.read_text())
+            name, earlier = held["notebook"], list(held["points"])
+        except (OSError, ValueError, KeyError, TypeError, RecursionError) as err:
+            raise ValueError(f"out={str(out)!r}: its sweep.json is unreadable ({err}); remove "
+                             f"it, or choose another folder") from None
+        if name != notebook.name:
+            raise ValueError(f"out={str(out)!r} holds a sweep of {name}, not of "
+                             f"{notebook.name}: choose another folder")
+    seen = {run_id(p) for p in earlier}
+    every = earlier + [p for p in points if run_id(p) not in seen]
+    out.mkdir(parents=True, exist_ok=True)
+    write_atomic(manifest, json.dumps({"notebook": notebook.name, "points": every},
+                                      default=str))
+    return every
 
 
 def _sweep_one(notebook: Path, folder: Path, params: dict, point: dict, key: str) -> str:
@@ -686,26 +718,40 @@ def _sweep_one(notebook: Path, folder: Path, params: dict, point: dict, key: str
             execute(notebook, folder / notebook.name, params)
         except _papermill().PapermillExecutionError as err:
             return f"{run_id(point)}: {err.ename}: {err.evalue}"
-        write_atomic(folder / "done.json", json.dumps({"point": point, "key": key}))
+        write_atomic(folder / "done.json", json.dumps({"point": point, "key": key,
+                                                        "metrics": _sha256(folder)}))
     return ""
+
+
+def _sha256(folder: Path) -> str:
+    """SHA-256 of a run's ``metrics.json``: ``done.json`` seals the run's results
+    with it, so a metrics file swapped from another run, emptied or edited is not
+    read back."""
+    return hashlib.sha256((folder / "metrics.json").read_bytes()).hexdigest()
 
 
 def _finished(folder: Path, key: str) -> bool:
     """Whether a sweep run finished with the run's ``key`` (:func:`run_key`): its
-    ``done.json`` (written last) holding that key, and a readable ``metrics.json``.
-    A damaged run, or one of another notebook or other code, is reported and run
-    again."""
+    ``done.json`` (written last) holding that key and the SHA-256 of its
+    ``metrics.json``, a mapping of at least one panel to its metrics.  A damaged
+    run (a metrics file changed, swapped from another run or emptied), or one of
+    another notebook or other code, is reported and run again."""
     if not (folder / "done.json").exists():
         return False
     why = "done.json or metrics.json unreadable"
     try:
         done = json.loads((folder / "done.json").read_text())
         metrics = json.loads((folder / "metrics.json").read_text())
-        if isinstance(metrics, dict) and all(isinstance(m, dict) for m in metrics.values()):
-            if isinstance(done, dict) and done.get("key") == key:
-                return True
+        if not (isinstance(done, dict) and done.get("key") == key):
             why = "made by another notebook, other parameters or other code"
-    except (OSError, ValueError):
+        elif done.get("metrics") != _sha256(folder):
+            why = "metrics.json is not the one this run wrote"
+        elif (isinstance(metrics, dict) and metrics
+              and all(isinstance(m, dict) for m in metrics.values())):
+            return True
+        else:
+            why = "metrics.json holds no panel's metrics"
+    except (OSError, ValueError, RecursionError):
         pass
     warnings.warn(f"sweep run {folder} is stale or damaged ({why}); running it again",
                   stacklevel=3)

@@ -1,0 +1,213 @@
+"""Every stored result is read back only for the request it answers (issue
+"Sealed", item 1): batch chunks, stored values (built certificates, fits, ANDES
+runs: :func:`lfc._files.read_stored`) and sweep runs, each swapped, copied from
+another request, truncated, emptied or nested too deep, is recomputed with a
+warning naming the file, never read back as a result."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import lfc
+import probe
+from lfc import batch
+from lfc._files import kept, read_stored, write_stored
+from lfc.batch import ChunkWarning
+from lfc.repro import runner
+
+P = lfc.LFCParams()
+
+
+def _table() -> pd.DataFrame:
+    """Two rows: 0.1 pu (no trip) and 2.0 pu (trips ROCOF) sinusoids on P_c."""
+    return pd.DataFrame({"waveform": "sinusoid", "channel": "pc", "amplitude": [0.1, 2.0],
+                         "freq_hz": 1.0, "start": 0.1, "alpha": np.nan, "Ts": 0.25})
+
+
+def _chunks(folder: Path) -> list[Path]:
+    return sorted(folder.glob("chunk_*.csv"))
+
+
+def test_swapped_batch_chunks_are_recomputed_not_read_for_each_others_rows(tmp_path):
+    """The issue's case: two rows in chunks of one, the two files swapped — the
+    0.1 pu row was reported tripped and the 2.0 pu row not.  Now each file is
+    sealed with its chunk's key and rows: both are recomputed, with a warning."""
+    first = lfc.simulate_many(P, _table(), duration=1.0, chunk_size=1, out=tmp_path)
+    assert list(first.tripped) == [False, True]
+    a, b = _chunks(tmp_path)
+    text_a, text_b = a.read_text(), b.read_text()
+    a.write_text(text_b)
+    b.write_text(text_a)
+    with pytest.warns(ChunkWarning, match="written for another request"):
+        again = lfc.simulate_many(P, _table(), duration=1.0, chunk_size=1, out=tmp_path)
+    pd.testing.assert_frame_equal(again, first)
+
+
+def test_a_chunk_of_another_runs_settings_is_recomputed(tmp_path):
+    """A chunk of a ``duration=0.3`` run copied over the same chunk of a
+    ``duration=1.0`` run (the 2.0 pu row read ``tripped=False``): recomputed."""
+    short, long_ = tmp_path / "short", tmp_path / "long"
+    lfc.simulate_many(P, _table(), duration=0.3, chunk_size=1, out=short)
+    first = lfc.simulate_many(P, _table(), duration=1.0, chunk_size=1, out=long_)
+    shutil.copyfile(_chunks(short)[1], _chunks(long_)[1])
+    with pytest.warns(ChunkWarning, match="written for another request"):
+        again = lfc.simulate_many(P, _table(), duration=1.0, chunk_size=1, out=long_)
+    assert bool(again.tripped.iloc[1])
+    pd.testing.assert_frame_equal(again, first)
+
+
+@pytest.mark.parametrize("damage", ["emptied", "truncated", "header only"])
+def test_an_emptied_or_truncated_chunk_is_recomputed(tmp_path, damage):
+    first = lfc.simulate_many(P, _table(), duration=1.0, chunk_size=1, out=tmp_path)
+    path = _chunks(tmp_path)[1]
+    text = path.read_text()
+    path.write_text({"emptied": "", "truncated": text[:len(text) // 2],
+                     "header only": text.partition("\n")[0] + "\n"}[damage])
+    with pytest.warns(ChunkWarning, match=path.name):
+        again = lfc.simulate_many(P, _table(), duration=1.0, chunk_size=1, out=tmp_path)
+    pd.testing.assert_frame_equal(again, first)
+
+
+def test_a_chunk_stored_for_other_row_labels_is_not_read_for_these(tmp_path):
+    metrics = lfc.simulate_many(P, _table(), duration=0.5)[list(lfc.batch.METRIC_KEYS)]
+    path = tmp_path / "chunk.csv"
+    batch._write_chunk(path, metrics)
+    assert batch._read_chunk(path, metrics.index) is not None
+    with pytest.warns(ChunkWarning, match="stored for other rows"):
+        assert batch._read_chunk(path, pd.Index([5, 6])) is None
+
+
+@pytest.mark.parametrize("damage", ["swapped", "copied", "truncated", "emptied", "deep",
+                                    "not an object"])
+def test_a_stored_value_is_read_back_only_under_the_name_it_was_written_for(tmp_path, damage):
+    """:func:`lfc._files.read_stored`, which built certificates, fits and ANDES runs
+    share: each file is sealed with the name it was written under (a key of its
+    request), so one swapped with or copied from another name is not read back;
+    a truncated, emptied or 200,000-deep file neither (a warning, then None), and
+    nothing raises."""
+    one, two = tmp_path / "key-one.json", tmp_path / "key-two.json"
+    write_stored(one, {"margin": 0.0}, dict)
+    write_stored(two, {"margin": 0.3}, dict)
+    assert read_stored(one, dict) == {"margin": 0.0}
+    if damage == "swapped":
+        a, b = one.read_text(), two.read_text()
+        one.write_text(b)
+        two.write_text(a)
+    elif damage == "copied":
+        shutil.copyfile(two, one)
+    elif damage == "truncated":
+        one.write_text(one.read_text()[:-20])
+    elif damage == "emptied":
+        one.write_text("")
+    elif damage == "deep":
+        one.write_text("[" * 200_000 + "]" * 200_000)
+    else:
+        one.write_text(json.dumps([1, 2]))
+    with pytest.warns(RuntimeWarning, match="key-one.json"):
+        assert read_stored(one, dict) is None
+
+
+def test_swapped_built_certificates_are_built_again_not_used_for_each_other(tmp_path,
+                                                                             monkeypatch):
+    """The issue's case: two coupled certificates (``margin=0.0`` and ``0.3``) stored
+    in one cache, their files swapped: a new process asking for ``margin=0.3`` used
+    the untightened one.  Through :func:`lfc._files.kept` (what ``built_once``'s
+    store calls), the swapped files are built again, each for its own request."""
+    from lfc.filters.coupled import CoupledFilter
+    grid = lfc.MultiAreaParams.two_area()
+    made = {m: CoupledFilter(grid, lfc.RelaySettings(), margin=m) for m in (0.0, 0.3)}
+    paths = {m: tmp_path / f"built-{m}.json" for m in made}
+    for m, path in paths.items():
+        kept(path, lambda m=m: made[m], 0.0, 1e9)
+    a, b = paths[0.0].read_text(), paths[0.3].read_text()
+    paths[0.0].write_text(b)
+    paths[0.3].write_text(a)
+    with pytest.warns(RuntimeWarning, match="written for another request"):
+        read = kept(paths[0.3], lambda: made[0.3], 0.0, 1e9)
+    assert read is made[0.3]                          # built again, not the other's
+    np.testing.assert_array_equal(kept(paths[0.3], lambda: None, 0.0, 1e9).data,
+                                  made[0.3].data)     # and stored for its own request
+
+
+@pytest.mark.long(30)
+def test_a_sweeps_metrics_swapped_or_emptied_are_run_again(tmp_path):
+    """The issue's case: a sweep's two ``metrics.json`` swapped gave each point the
+    other's peaks (exit 0); one replaced by ``{}`` dropped its rows.  ``done.json``
+    seals each run's metrics by their SHA-256: both are run again, with a warning,
+    and the table is the clean run's."""
+    out = tmp_path / "sweep"
+    grid = {"alpha": [3.0, 20.0], "duration": [2.0]}
+    table = runner.sweep(probe.NOTEBOOK, grid, out)
+    a, b = (out / runner.run_id({"alpha": v, "duration": 2.0}) / "metrics.json"
+            for v in (3.0, 20.0))
+    text_a, text_b = a.read_text(), b.read_text()
+    a.write_text(text_b)
+    b.write_text(text_a)
+    with pytest.warns(UserWarning, match="metrics.json is not the one this run wrote"):
+        pd.testing.assert_frame_equal(runner.sweep(probe.NOTEBOOK, grid, out), table)
+    a.write_text("{}")
+    with pytest.warns(UserWarning, match="stale or damaged"):
+        pd.testing.assert_frame_equal(runner.sweep(probe.NOTEBOOK, grid, out), table)
+
+
+@pytest.mark.long(30)
+def test_a_sweep_folder_belongs_to_one_notebook_and_adds_points(tmp_path):
+    """A second sweep of the same notebook into the folder adds its points (the
+    table holds both, the first not run again); another notebook's sweep into it
+    is refused, naming both; an empty ``out`` is refused."""
+    out = tmp_path / "sweep"
+    runner.sweep(probe.NOTEBOOK, {"alpha": [3.0], "duration": [2.0]}, out)
+    done = next(out.glob("*/done.json")).stat().st_mtime_ns
+    both = runner.sweep(probe.NOTEBOOK, {"alpha": [20.0], "duration": [2.0]}, out)
+    assert sorted(set(both.alpha)) == [3.0, 20.0]
+    assert len(pd.read_csv(out / "sweep.csv")) == len(both) == 4
+    assert min(p.stat().st_mtime_ns for p in out.glob("*/done.json")) == done
+    other = tmp_path / "other.ipynb"
+    shutil.copyfile(probe.NOTEBOOK, other)
+    with pytest.raises(ValueError, match="holds a sweep of probe.ipynb, not of other.ipynb"):
+        runner.sweep(other, {"alpha": [3.0], "duration": [2.0]}, out)
+    with pytest.raises(ValueError, match="out must name a folder"):
+        runner.sweep(probe.NOTEBOOK, {"alpha": [3.0]}, "")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert runner.sweep(probe.NOTEBOOK, {"alpha": [3.0], "duration": [2.0]}, out).equals(
+            both)
+
+
+# -- one numeric gate (item 2): what the validators accept, the engine runs -----------------
+
+def test_fraction_and_numpy_settings_become_floats_before_the_engine_sees_them():
+    """A ``Fraction`` relay setting compiled for minutes and then failed inside numba;
+    a ``Fraction`` ``confidence`` or ``control_period`` and a ``float32`` noise level
+    likewise.  Every accepted number is a float from construction on, and the run
+    equals the one with the floats."""
+    from dataclasses import fields
+    from fractions import Fraction
+    relays = lfc.RelaySettings(of2=Fraction(103, 100), rocof_limit=Fraction(1, 2))
+    assert all(type(getattr(relays, f.name)) is float for f in fields(relays))
+    assert relays == lfc.RelaySettings(of2=1.03, rocof_limit=0.5)
+    f = lfc.SafetyFilter(P, method="certified", noise_std=(Fraction(1, 10_000), np.float32(1e-3)),
+                         confidence=Fraction(9999, 10_000), control_period=Fraction(1, 100))
+    o = f.options
+    assert type(o.confidence) is float and type(o.control_period) is float
+    assert all(type(v) is float for v in o.noise_std)
+    attack = lfc.Sinusoid(2.0, 1.0, start=0.1)
+    with_fraction = lfc.simulate(P, duration=1.0, relays=relays, pc_attack=attack).metrics()
+    with_float = lfc.simulate(P, duration=1.0, relays=lfc.RelaySettings(of2=1.03, rocof_limit=0.5),
+                              pc_attack=attack).metrics()
+    assert with_fraction == with_float
+
+
+def test_a_float32_duration_is_a_multiple_of_dt_and_a_huge_integer_is_refused_naming_it():
+    """``duration=np.float32(0.5)`` was called "not a multiple of dt" (float32
+    arithmetic); an integer too large for a float ended in ``OverflowError``."""
+    assert not lfc.simulate(P, duration=np.float32(0.5)).metrics()["tripped"]
+    with pytest.raises(ValueError, match="confidence = 1000.* is too large for a float"):
+        lfc.SafetyFilter(P, method="certified", confidence=10 ** 400)
