@@ -211,3 +211,37 @@ def test_a_float32_duration_is_a_multiple_of_dt_and_a_huge_integer_is_refused_na
     assert not lfc.simulate(P, duration=np.float32(0.5)).metrics()["tripped"]
     with pytest.raises(ValueError, match="confidence = 1000.* is too large for a float"):
         lfc.SafetyFilter(P, method="certified", confidence=10 ** 400)
+
+
+@pytest.mark.parametrize("kwargs, error, message", [
+    ({"duration": float("inf")}, ValueError, "duration must be finite"),
+    ({"control_period": 0}, ValueError, "control_period must be a finite number > 0"),
+    ({"control_period": -0.01}, ValueError, "control_period must be a finite number > 0"),
+    ({"control_period": "x"}, TypeError, "control_period must be a number"),
+    ({"duration": 1e9}, ValueError, "more than a table holds"),
+])
+def test_a_piecewise_attack_table_refuses_what_it_cannot_build(kwargs, error, message):
+    """These ended in ``OverflowError``, ``ZeroDivisionError``, negative dimensions, a
+    bare ``TypeError`` and a 745 GiB ``MemoryError``; each is refused, named, before
+    any allocation."""
+    from lfc.experiments.redteam import piecewise_attack_table
+    with pytest.raises(error, match=message):
+        piecewise_attack_table(**{"n": 2, "amplitude": 1.0, "seed": 0, "duration": 5.0,
+                                  **kwargs})
+
+
+def test_a_contract_without_relays_and_a_sweep_plot_without_a_name_are_refused(tmp_path):
+    """``contract_design(grid, None)`` ended in ``AttributeError``; ``plot-sweep --out
+    ''`` wrote ``./.png``; a table without ``panel`` ended in ``KeyError``."""
+    from lfc.repro.cli import main
+    from lfc.filters.contract import contract_design
+    with pytest.raises(TypeError, match="relays must be a RelaySettings, got None"):
+        contract_design(lfc.MultiAreaParams.two_area(), None)
+    table = tmp_path / "sweep.csv"
+    pd.DataFrame({"alpha": [1.0, 2.0], "max_abs_rocof_meas": [0.1, 0.2]}).to_csv(table)
+    assert main(["plot-sweep", str(table), "-x", "alpha", "-y", "max_abs_rocof_meas"]) == 2
+    table.write_text(pd.DataFrame({"alpha": [1.0], "max_abs_rocof_meas": [0.1],
+                                   "panel": ["a"]}).to_csv(index=False))
+    assert main(["plot-sweep", str(table), "-x", "alpha", "-y", "max_abs_rocof_meas",
+                 "--out", ""]) == 2
+    assert not list(tmp_path.glob(".png")) and not Path(".png").exists()

@@ -29,6 +29,7 @@ anywhere in a box around the design model (M, D, τ_G, τ_T, R within
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -168,6 +169,7 @@ def severity(results, relays: RelaySettings) -> np.ndarray:
                       np.asarray(results["max_abs_dw_meas"], float) / relays.F)
 
 
+MAX_TABLE_VALUES = 10**8   # attack values in one piecewise table (0.8 GB)
 EDGE = 0.05   # a trip verdict with an area's severity within ±5 % of 1 is "at the edge"
 
 
@@ -424,10 +426,17 @@ def piecewise_attack_table(*, n: int, amplitude: float, duration: float, seed: i
     check_seed("seed", seed)
     check_positive("amplitude", amplitude)
     check_number("duration", duration)
-    if not duration > ATTACK_START:
-        raise ValueError(f"duration must be > ATTACK_START ({ATTACK_START} s), got {duration!r}")
-    rng = np.random.default_rng(seed)
+    check_positive("control_period", control_period)
+    if not ATTACK_START < duration < math.inf:
+        raise ValueError(f"duration must be finite and > ATTACK_START ({ATTACK_START} s), got "
+                         f"{duration!r}")
     steps = int(round((duration - ATTACK_START) / control_period))
+    if steps * n > MAX_TABLE_VALUES:
+        raise ValueError(f"duration / control_period x n = {steps * n:.3g} attack values, more "
+                         f"than a table holds ({MAX_TABLE_VALUES:.0e}, about "
+                         f"{8 * MAX_TABLE_VALUES / 2**30:.0f} GiB); lower duration or n, or "
+                         f"raise control_period")
+    rng = np.random.default_rng(seed)
     values = np.empty((steps, n))
     for j in range(n):
         k = 0

@@ -74,7 +74,7 @@ from typing import ClassVar
 import numpy as np
 
 from lfc._jit import inline
-from lfc._validate import check_nonnegative, check_positive
+from lfc._validate import ParameterTypeError, check_nonnegative, check_number, check_positive
 from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, MAX_ABS_INPUT, Backend, Options,
                               built_once, given, hold_invalid, option, valid_input)
 from lfc.filters.certified import NUMERIC_MARGIN
@@ -254,8 +254,11 @@ def _design(params: MultiAreaParams | LFCParams, relays: RelaySettings, control_
     """:func:`contract_design`, built (shared by every caller, its arrays read-only)."""
     check_positive("control_period", control_period)
     check_nonnegative("load_bound", load_bound)
+    check_number("margin", margin)
     if not 0.0 <= margin < 1.0:
         raise ValueError(f"margin must be in [0, 1), got {margin!r}")
+    if not isinstance(relays, RelaySettings):
+        raise ParameterTypeError(f"relays must be a RelaySettings, got {relays!r:.80}")
     grid = as_grid(params)
     A, Bu, Bl, _ = held_grid(grid, "a command within any box can drive it away, so no "
                                    "contract certifies it")

@@ -396,6 +396,8 @@ def _plot_sweep(args) -> int:
     from lfc.repro.plotting import save_figure, sweep_figure
     if not args.table.is_file():
         raise ValueError(f"sweep table not found: {args.table}")
+    if args.out is not None and not str(args.out).strip(" ."):
+        raise ValueError(f"--out must name a file (without suffix), got {str(args.out)!r}")
     fig = sweep_figure(pd.read_csv(args.table), args.x, args.y, args.by)
     out = args.out or args.table.parent / f"sweep_{args.y}_vs_{args.x}"
     save_figure(fig, out.parent, out.name)

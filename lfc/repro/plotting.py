@@ -573,10 +573,10 @@ def sweep_figure(table, x: str, y: str, by: str | None = None,
     against the parameter ``x``, one line per panel and value of ``by``; the relay
     setting dashed where ``y`` is a peak |ROCOF| or |Δω| (``relays``, default the
     paper's).  ``ValueError`` names a column the table does not have."""
-    for role, col in (("x", x), ("y", y), ("by", by)):
+    for role, col in (("x", x), ("y", y), ("by", by), ("the table's panel", "panel")):
         if col is not None and col not in table.columns:
             raise ValueError(f"{role}={col!r} is not a column of the sweep table; it has "
-                             f"{sorted(table.columns)}")
+                             f"{sorted(table.columns)} (python -m lfc sweep writes it)")
     relays = relays or RelaySettings()
     fig, ax = plt.subplots(figsize=(8, 4.5), layout="constrained")
     groups = ["panel"] + ([by] if by and by != "panel" else [])
