@@ -325,7 +325,8 @@ def run_chunk(params: LFCParams, scenarios: pd.DataFrame, duration: float,
     for row in scenarios.to_dict("records"):
         signal = scenario_signal(row, duration)
         channel = row["channel"]
-        noise = tuple(float(row.get(c, 0.0)) for c in NOISE)
+        noise = tuple(0.0 if pd.isna(v) else float(v)         # NaN: no noise, as checked
+                      for v in (row.get(c, 0.0) for c in NOISE))
         sc.add(plant=_plant(params, row),
                filters={0: _filter(params, relays, row, control_period, built)},
                estimator="kalman" if any(noise) else None, noise_std=noise,

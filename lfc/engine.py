@@ -671,7 +671,12 @@ def scenario_signals(pc_attack, wref_attack, load, tc: np.ndarray, t: np.ndarray
         if signal is None:                                    # kind NONE: zero, no samples
             offsets[c, 0] = n
             continue
-        if isinstance(signal, Signal):
+        if (isinstance(signal, Signal) and type(signal).spec is Signal.spec
+                and type(signal).__call__ is Signal.__call__):
+            raise ParameterTypeError(f"{name}: {type(signal).__name__} is a Signal without a "
+                                     f"spec() for the engine, and not a callable of time; give "
+                                     f"it one of the two")
+        if isinstance(signal, Signal) and type(signal).spec is not Signal.spec:
             kinds[c], params[c], times, values = signal.spec()
             if kinds[c] != SAMPLES:                           # a closed form: no samples
                 offsets[c, 0] = n

@@ -10,7 +10,7 @@ lines": delay 0 by default, configurable.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields, field
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -72,8 +72,6 @@ class RelaySettings:
         check_range("uf2", self.uf2, 0.0, 1.0)
         for name in ("of2_delay", "uf2_delay", "rocof_delay"):
             check_range(name, getattr(self, name), 0.0, MAX_DELAY, closed=True)
-        for f in fields(self):        # every setting a float (a Fraction broke numba)
-            object.__setattr__(self, f.name, float(getattr(self, f.name)))
 
     @classmethod
     def ieee1547(cls, category: str = "III", nominal_hz: float = 60.0) -> "RelaySettings":

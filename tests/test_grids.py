@@ -75,7 +75,7 @@ def test_a_cached_fit_with_a_valid_checksum_but_insane_values_is_refit(fit, tmp_
     path = fitting._cache_path(CASE, "grid-fit")
     data = grid_fit._encode(fit)
     damage(data)
-    payload = json.dumps(data, sort_keys=True)
+    payload = json.dumps({"seal": path.name, "value": data}, sort_keys=True)   # sealed
     path.write_text(json.dumps({"payload": payload,
                                 "sha256": hashlib.sha256(payload.encode()).hexdigest()}))
     with pytest.warns(RuntimeWarning, match=f"damaged cache file .*{reason}"):

@@ -487,7 +487,7 @@ def test_small_public_helpers_name_their_bad_argument():
         (lambda: lfc.filters.register(object), TypeError, "backend must be a Backend"),
         (lambda: lfc.SafetyFilter(P).check_period("x"), TypeError, "control_period must be"),
         (lambda: redteam.piecewise_attack_table(n=1, amplitude=1.0, duration=0.5, seed=0),
-         ValueError, "duration must be > ATTACK_START"),
+         ValueError, "duration must be finite and > ATTACK_START"),
         (lambda: redteam.piecewise_attack_table(n=1, amplitude=1.0, duration=2.0, seed=-1),
          ValueError, "seed must be an integer in \\[0, 2\\*\\*32\\)"),
     ]

@@ -183,26 +183,20 @@ def test_a_sweep_folder_belongs_to_one_notebook_and_adds_points(tmp_path):
 
 # -- one numeric gate (item 2): what the validators accept, the engine runs -----------------
 
-def test_fraction_and_numpy_settings_become_floats_before_the_engine_sees_them():
-    """A ``Fraction`` relay setting compiled for minutes and then failed inside numba;
-    a ``Fraction`` ``confidence`` or ``control_period`` and a ``float32`` noise level
-    likewise.  Every accepted number is a float from construction on, and the run
-    equals the one with the floats."""
-    from dataclasses import fields
+def test_fraction_and_numpy_options_become_floats_before_the_engine_sees_them():
+    """A ``Fraction`` ``confidence`` or ``control_period`` and a ``float32`` noise level
+    are floats from the filter's construction on (a Fraction used to fail inside
+    numba after minutes of compiling), and the filter equals the one built from
+    floats."""
     from fractions import Fraction
-    relays = lfc.RelaySettings(of2=Fraction(103, 100), rocof_limit=Fraction(1, 2))
-    assert all(type(getattr(relays, f.name)) is float for f in fields(relays))
-    assert relays == lfc.RelaySettings(of2=1.03, rocof_limit=0.5)
     f = lfc.SafetyFilter(P, method="certified", noise_std=(Fraction(1, 10_000), np.float32(1e-3)),
                          confidence=Fraction(9999, 10_000), control_period=Fraction(1, 100))
     o = f.options
     assert type(o.confidence) is float and type(o.control_period) is float
     assert all(type(v) is float for v in o.noise_std)
-    attack = lfc.Sinusoid(2.0, 1.0, start=0.1)
-    with_fraction = lfc.simulate(P, duration=1.0, relays=relays, pc_attack=attack).metrics()
-    with_float = lfc.simulate(P, duration=1.0, relays=lfc.RelaySettings(of2=1.03, rocof_limit=0.5),
-                              pc_attack=attack).metrics()
-    assert with_fraction == with_float
+    g = lfc.SafetyFilter(P, method="certified", noise_std=(1e-4, float(np.float32(1e-3))),
+                         confidence=0.9999, control_period=0.01)
+    np.testing.assert_array_equal(f.data, g.data)
 
 
 def test_a_float32_duration_is_a_multiple_of_dt_and_a_huge_integer_is_refused_naming_it():
@@ -245,3 +239,36 @@ def test_a_contract_without_relays_and_a_sweep_plot_without_a_name_are_refused(t
     assert main(["plot-sweep", str(table), "-x", "alpha", "-y", "max_abs_rocof_meas",
                  "--out", ""]) == 2
     assert not list(tmp_path.glob(".png")) and not Path(".png").exists()
+
+
+def test_a_nan_noise_column_means_no_noise_as_the_column_check_says():
+    """``noise_w`` NaN passed the column check ("or NaN") and was then refused
+    naming ``noise_std[0]``; it now means no noise on that row, as documented."""
+    table = _table().assign(noise_w=[np.nan, 1e-4], noise_rocof=[np.nan, 1e-3])
+    out = lfc.simulate_many(P, table, duration=0.5, progress=False)
+    clean = lfc.simulate_many(P, _table().iloc[:1], duration=0.5, progress=False)
+    assert out.iloc[0]["max_abs_rocof_meas"] == clean.iloc[0]["max_abs_rocof_meas"]
+
+
+def test_a_400_digit_integer_in_a_sweep_is_refused_naming_the_parameter():
+    """It ended in ``OverflowError`` inside the validation."""
+    with pytest.raises(ValueError, match="parameter 'alpha' has an integer of about 400 digits"):
+        runner.validate_parameters(probe.NOTEBOOK, {"alpha": [10 ** 400]})
+
+
+def test_a_signal_subclass_without_the_engines_hooks_is_named_or_sampled():
+    """A ``Signal`` subclass without ``spec()`` ended in a bare
+    ``NotImplementedError``: one that is a callable of time is sampled like any
+    callable; one that is not is refused naming the channel."""
+    class Bare(lfc.signals.Signal):
+        pass
+
+    class Ramp(lfc.signals.Signal):
+        def __call__(self, t):
+            return 0.1 * np.asarray(t)
+
+    with pytest.raises(TypeError, match="pc_attack: Bare is a Signal without a spec"):
+        lfc.simulate(P, duration=0.5, pc_attack=Bare())
+    sampled = lfc.simulate(P, duration=0.5, pc_attack=Ramp()).metrics()
+    assert sampled == lfc.simulate(P, duration=0.5, pc_attack=lambda t: 0.1 * np.asarray(t)
+                                   ).metrics()

@@ -592,6 +592,12 @@ def validate_parameters(notebook: Path, parameters: dict[str, list]) -> dict:
         if not isinstance(values, (list, tuple)) or not values:
             raise ValueError(f"parameter {name!r} needs a non-empty list of values, "
                              f"got {values!r}")
+        for value in values:
+            for v in value if isinstance(value, list) else [value]:
+                if isinstance(v, int) and not isinstance(v, bool) and abs(v) > 2 ** 1023:
+                    raise ValueError(f"parameter {name!r} has an integer of about "
+                                     f"{int(v.bit_length() * 0.30103)} digits, too large "
+                                     f"for a float")
         seen = [value_key(v) for v in values]
         twice = sorted({repr(v) for v, k in zip(values, seen) if seen.count(k) > 1})
         if twice:
