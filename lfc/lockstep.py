@@ -12,8 +12,6 @@ every step, as in :func:`lfc.simulate`; a single area is a grid of one.
 
 from __future__ import annotations
 
-import copy
-
 import numpy as np
 import pandas as pd
 
@@ -116,10 +114,6 @@ class LinearGrid:
         self.x = xs[steps - 1].copy()
         return bits
 
-    def branch(self) -> LinearGrid:
-        """A copy that advances without touching this one (its records are copied)."""
-        return copy.deepcopy(self)
-
     def trip_rows(self) -> list[pd.DataFrame]:
         """Each area's trips: one row per relay and instant (``relay``, ``t``)."""
         return [pd.DataFrame([(RELAY_NAMES[r], float(self.t[k]))
@@ -135,3 +129,21 @@ class LinearGrid:
     def exports(self) -> np.ndarray:
         """Each area's tie-line export at every step: (n_steps + 1, n_areas)."""
         return self.xs[:, N_AREA_STATES * self.n_a:] @ self.inc.T
+
+    def result(self, single: bool, tc: np.ndarray, ctrl: list[np.ndarray], filters: dict,
+               settings: dict):
+        """The run as :func:`lfc.simulate` reports it: a ``SimResult`` for one area
+        (``single``), else a ``MultiAreaResult``; ``tc`` the control samples, ``ctrl``
+        each area's generator-side rows, ``filters`` each area's filter."""
+        from lfc.model import STATES
+        from lfc.simulate import result
+        from lfc.simulate_multiarea import multiarea_result
+        states, trips = self.states(), self.trip_rows()
+        if single:
+            trace = pd.DataFrame({"t": self.t})
+            for i, name in enumerate(STATES):
+                trace[name] = states[:, 0, i]
+            trace["p_load"] = self.p[:, 0]
+            return result(trace, tc, ctrl[0], trips[0], filters.get(0), settings)
+        return multiarea_result(self.grid, self.t, states, self.p, self.exports(), trips, tc,
+                                ctrl, filters, settings)

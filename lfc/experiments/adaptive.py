@@ -28,22 +28,20 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import pandas as pd
 from scipy.optimize import differential_evolution
 
 from lfc._validate import check_count, check_number, check_positive, check_seed
 from lfc.engine import CTRL_COLUMNS, GeneratorSide, check_area_keys, check_coupled
 from lfc.filters import SafetyFilter
 from lfc.lockstep import LinearGrid
-from lfc.model import STATES, LFCParams
+from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams, as_grid
 from lfc.relays import RelaySettings, relays_or_default
-from lfc.simulate import SimResult, check_timing, result
+from lfc.simulate import SimResult, check_timing
 from lfc.simulate_multiarea import (
     MultiAreaResult,
     area_filter,
     estimate_noise,
-    multiarea_result,
 )
 
 PROBE = 1e3      # pu: a command beyond every interval, which each filter clips to its edge
@@ -241,15 +239,7 @@ def run_adaptive(params: LFCParams | MultiAreaParams, filters, attack: AdaptiveA
                 "noise_std": list(noise_std), "attack": repr(attack),
                 "scc": repr(built), "load": repr(loads), "anti_windup": anti_windup,
                 "feedforward": feedforward, "estimator": repr(estimator)}
-    trip_rows = plant.trip_rows()
-    if single:
-        trace = pd.DataFrame({"t": plant.t})
-        for i, name in enumerate(STATES):
-            trace[name] = plant.states()[:, 0, i]
-        trace["p_load"] = plant.p[:, 0]
-        return result(trace, tc, gens[0].ctrl, trip_rows[0], built[0], settings)
-    return multiarea_result(grid, plant.t, plant.states(), plant.p, plant.exports(), trip_rows,
-                            tc, [gen.ctrl for gen in gens], built, settings)
+    return plant.result(single, tc, [gen.ctrl for gen in gens], built, settings)
 
 
 def _choose(loop: _Loop, j: int, n_ctrl: int, ratio: int, choices: list[np.ndarray],

@@ -46,12 +46,12 @@ from lfc.engine import GeneratorSide, check_area_keys
 from lfc.filters import SafetyFilter
 from lfc.filters.coupled import CoupledFilter
 from lfc.lockstep import LinearGrid
-from lfc.model import STATES, LFCParams
+from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams, as_grid
 from lfc.relays import relays_or_default
 from lfc.run import _testbed_kind
-from lfc.simulate import SimResult, check_timing, result
-from lfc.simulate_multiarea import MultiAreaResult, area_filter, multiarea_result
+from lfc.simulate import SimResult, check_timing
+from lfc.simulate_multiarea import MultiAreaResult, area_filter
 from lfc.wire.attacks import WireAttack
 from lfc.wire.link import Link
 
@@ -274,7 +274,6 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
         raise ValueError("the plant became non-finite: an attack (a bias or a factor so large "
                          "that the plant overflows) or a load signal gives a non-finite value, "
                          "and no filter stood in the way; lfc.simulate refuses the same run")
-    trip_rows = plant.trip_rows()
     settings = {"params": repr(params), "relays": vars(relays), "duration": duration,
                 "dt": dt, "control_period": control_period, "seed": seed,
                 "noise_std": list(noise_std), "protocol": protocol,
@@ -284,16 +283,7 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
                                    getattr(filters[a], "method", "?") for a in range(n_a)),
                 "scc": repr(filters), "load": repr(loads), "anti_windup": anti_windup,
                 "agc": agc, "mode": mode, "feedforward": feedforward}
-    states = plant.states()
-    if single:
-        trace = pd.DataFrame({"t": plant.t})
-        for i, name in enumerate(STATES):
-            trace[name] = states[:, 0, i]
-        trace["p_load"] = plant.p[:, 0]
-        sim = result(trace, tc, gens[0].ctrl, trip_rows[0], scc, settings)
-    else:
-        sim = multiarea_result(grid, plant.t, states, plant.p, plant.exports(), trip_rows, tc,
-                               [gen.ctrl for gen in gens], filters, settings)
+    sim = plant.result(single, tc, [gen.ctrl for gen in gens], filters, settings)
     return WireResult(sim, *link.outcome(n_ctrl), settings)
 
 
