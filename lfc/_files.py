@@ -135,17 +135,26 @@ def cache_folder() -> Path:
     return Path(os.environ.get("LFC_CACHE_DIR") or Path.home() / ".cache" / "lfc-scc")
 
 
+#: The layout of a stored file (:func:`write_stored`).  A file of another layout was
+#: written by another version of the package: it is stale, not damaged, and is
+#: computed again without a warning.
+STORED_FORMAT = "lfc-scc stored 2"
+
+
 def read_stored(path: Path, decode: Callable[[dict], Any],
                 check: Callable[[Any], None] = lambda value: None) -> Any:
-    """The value stored at ``path`` (:func:`write_stored`); None if absent, damaged
-    (its SHA-256), sealed for another request (the file name it was written under,
-    which names its request: a file copied or swapped from another name is not read
-    back) or not sane (``check`` raises ``ValueError``), the last three with a
+    """The value stored at ``path`` (:func:`write_stored`); None if absent, of
+    another layout (:data:`STORED_FORMAT`: another version's file), damaged (its
+    SHA-256), sealed for another request (the file name it was written under, which
+    names its request: a file copied or swapped from another name is not read back)
+    or not sane (``check`` raises ``ValueError``), the last three with a
     ``RuntimeWarning`` naming the file."""
     if not path.exists():
         return None
     try:
         stored = json.loads(path.read_text())
+        if isinstance(stored, dict) and stored.get("format") != STORED_FORMAT:
+            return None                         # another version's layout: stale
         payload = stored["payload"]
         if hashlib.sha256(payload.encode()).hexdigest() != stored["sha256"]:
             raise ValueError("checksum mismatch")
@@ -168,7 +177,7 @@ def write_stored(path: Path, value: Any, encode: Callable[[Any], dict]) -> None:
     SHA-256, atomically; a file that cannot be written is skipped with a
     ``RuntimeWarning``."""
     payload = json.dumps({"seal": path.name, "value": encode(value)}, sort_keys=True)
-    text = json.dumps({"payload": payload,
+    text = json.dumps({"format": STORED_FORMAT, "payload": payload,
                        "sha256": hashlib.sha256(payload.encode()).hexdigest()})
     try:
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -14,7 +14,7 @@ import pandas as pd
 import pytest
 
 import lfc
-from lfc._files import read_stored, write_stored
+from lfc._files import STORED_FORMAT, read_stored, write_stored
 from lfc.multiarea import MultiAreaParams
 from lfc.testbed import GridCase, build_grid, case_design, grid_fit_report
 from lfc.testbed import fit as fitting
@@ -76,7 +76,7 @@ def test_a_cached_fit_with_a_valid_checksum_but_insane_values_is_refit(fit, tmp_
     data = grid_fit._encode(fit)
     damage(data)
     payload = json.dumps({"seal": path.name, "value": data}, sort_keys=True)   # sealed
-    path.write_text(json.dumps({"payload": payload,
+    path.write_text(json.dumps({"format": STORED_FORMAT, "payload": payload,
                                 "sha256": hashlib.sha256(payload.encode()).hexdigest()}))
     with pytest.warns(RuntimeWarning, match=f"damaged cache file .*{reason}"):
         assert read_stored(path, grid_fit._decode,

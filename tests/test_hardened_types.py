@@ -682,10 +682,11 @@ def test_a_grids_result_and_estimate_name_what_is_wrong():
 def test_a_damaged_store_whose_payload_is_not_text_is_computed_again(tmp_path):
     import json
 
-    from lfc._files import read_stored
+    from lfc._files import STORED_FORMAT, read_stored
     path = tmp_path / "stored.json"
     for payload in (1, None):
-        path.write_text(json.dumps({"payload": payload, "sha256": "x"}))
+        path.write_text(json.dumps({"format": STORED_FORMAT, "payload": payload,
+                                    "sha256": "x"}))
         with pytest.warns(RuntimeWarning, match="damaged cache file"):
             assert read_stored(path, lambda d: d) is None
 
