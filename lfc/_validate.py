@@ -8,10 +8,12 @@ constant.  A value of the wrong type (a string where a number belongs) raises
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import math
 from numbers import Integral, Real
 from types import UnionType
-from typing import Any, Union, get_args, get_origin
+from typing import Any, Union, get_args, get_origin, get_type_hints
 
 import numpy as np
 
@@ -63,6 +65,28 @@ def engine_number(name: str, value: Any, hint: Any) -> Any:
         return tuple(_float(f"{name}[{i}]", v) if _is_number(v) else v
                      for i, v in enumerate(value))
     return value
+
+
+def in_engine_types(params: Any) -> Any:
+    """A frozen dataclass of parameters (``RelaySettings``, ``LFCParams``) with every
+    field annotated ``float`` in the engine's types (:func:`engine_number`): the
+    same object when they already are, else a copy (built, so validated, again).
+    Where a dataclass enters a run, so that a ``Fraction`` or a numpy scalar its
+    checks accept never reaches numba as a Python object."""
+    hints = _hints(type(params))
+    changes = {}
+    for f in dataclasses.fields(params):
+        value = getattr(params, f.name)
+        if type(value) is not float and f.name in hints:
+            converted = engine_number(f.name, value, hints[f.name])
+            if converted is not value:
+                changes[f.name] = converted
+    return dataclasses.replace(params, **changes) if changes else params
+
+
+@functools.lru_cache(maxsize=None)
+def _hints(cls: type) -> dict:
+    return get_type_hints(cls)
 
 
 def _float_hint(hint: Any) -> bool | None:

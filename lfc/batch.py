@@ -30,6 +30,7 @@ import os
 import warnings
 from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import fields, replace
+from numbers import Integral, Real
 from pathlib import Path
 
 import numpy as np
@@ -38,7 +39,8 @@ from tqdm.auto import tqdm
 
 from lfc._files import code_digest, write_atomic
 from lfc._pool import completed
-from lfc._validate import ParameterTypeError, check_count, check_flag, check_folder, is_sequence
+from lfc._validate import (ParameterTypeError, _finite, check_count, check_flag, check_folder,
+                           in_engine_types, is_sequence)
 from lfc.engine import METRICS, Scenarios
 from lfc.estimation import STD
 from lfc.filters import (CONFLICT_RULES, METHODS, OUTSIDE_RULES, PREDICTIONS, SafetyFilter,
@@ -100,10 +102,12 @@ def scenario_signal(row: pd.Series, duration: float) -> Signal | None:
     return None
 
 
-def check_scenarios(scenarios: pd.DataFrame) -> None:
-    """Raise ``ValueError`` naming the column and row of any invalid entry."""
+def check_scenarios(scenarios: pd.DataFrame) -> pd.DataFrame:
+    """Raise ``ValueError`` naming the column and row of any invalid entry; return
+    ``scenarios`` with its numeric columns as floats (:func:`_check_numbers`)."""
     if not isinstance(scenarios, pd.DataFrame):
-        raise ValueError(f"scenarios must be a pandas DataFrame, got {type(scenarios).__name__}")
+        raise ParameterTypeError(f"scenarios must be a pandas DataFrame, got "
+                                 f"{type(scenarios).__name__}")
     twice = scenarios.columns[scenarios.columns.duplicated()].unique().tolist()
     if twice:
         raise ValueError(f"scenarios has column(s) {twice} more than once; give each once")
@@ -122,7 +126,7 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
             raise ValueError(f"column {col!r} is not a scenario column; did you mean "
                              f"{close[0]!r}? (scenario columns: {', '.join(INPUTS)}; a column "
                              f"not close to one of them is carried through as a label)")
-    _check_numbers(scenarios)
+    scenarios = _check_numbers(scenarios)
     for col, allowed in (("waveform", WAVEFORMS), ("channel", CHANNELS)):
         bad = ~scenarios[col].isin(allowed)
         if bad.any():
@@ -259,6 +263,7 @@ def check_scenarios(scenarios: pd.DataFrame) -> None:
         raise ValueError(f"column 'alpha' must be > 0 or NaN (no SCC); row "
                          f"{scenarios.index[bad][0]!r} has {scenarios['alpha'][bad].iloc[0]!r}")
     _check_unused(scenarios)
+    return scenarios
 
 
 # the metric columns' dtypes where not float, for an empty table (as a full one has them)
@@ -274,18 +279,35 @@ NUMERIC = ("amplitude", "freq_hz", "start", "stop", "sample_period", *PLANT, *NO
                           if f.name in options_of(m).COLUMNS and "float" in str(f.type)))
 
 
-def _check_numbers(scenarios: pd.DataFrame) -> None:
-    """A string or a bool in a numeric column is refused (pandas would coerce
-    "3" to 3 and True to 1: a typed table says what it means)."""
+def _check_numbers(scenarios: pd.DataFrame) -> pd.DataFrame:
+    """``scenarios`` with its numeric columns in the engine's types: a string or a
+    bool there is refused (pandas would coerce "3" to 3 and True to 1: a typed table
+    says what it means); a ``Fraction``, a numpy scalar or a categorical column of
+    numbers becomes floats; an integer too large for a float is refused naming it."""
+    converted = {}
     for col in NUMERIC:
         if col not in scenarios.columns or scenarios[col].dtype.kind in "iuf":
             continue
-        bad = scenarios[col].map(lambda v: isinstance(v, (str, bytes, bool, np.bool_)))
+        values = scenarios[col].astype(object)
+        bad = values.map(lambda v: isinstance(v, (str, bytes, bool, np.bool_)))
         if bad.any():
-            value = scenarios[col][bad].iloc[0]
+            value = values[bad].iloc[0]
             raise ParameterTypeError(f"column {col!r} must hold numbers (or NaN); row "
-                                     f"{scenarios.index[bad][0]!r} has {value!r} "
+                                     f"{scenarios.index[bad][0]!r} has {value!r:.60} "
                                      f"({type(value).__name__})")
+        too_large = values.map(lambda v: isinstance(v, Integral) and not _finite(v))
+        if too_large.any():
+            raise ValueError(f"column {col!r} has an integer too large for a float on row "
+                             f"{scenarios.index[too_large][0]!r}")
+        if values.map(lambda v: v is None or isinstance(v, Real)).all():
+            converted[col] = values.map(lambda v: np.nan if v is None else float(v)
+                                        ).astype(float)
+    return scenarios.assign(**converted) if converted else scenarios
+
+
+def _plain(value: object) -> object:
+    """A numpy scalar as its Python value (for messages: ``7``, not ``np.int64(7)``)."""
+    return value.item() if isinstance(value, np.generic) else value
 
 
 def _check_unused(scenarios: pd.DataFrame) -> None:
@@ -302,12 +324,14 @@ def _check_unused(scenarios: pd.DataFrame) -> None:
         neutral = NEUTRAL.get(col, False)
         values = scenarios[col]
         set_ = values.notna() & (values != neutral if neutral is not None else True)
-        bad = set_ & ~(has_scc & method.isin(users))
+        bad = (set_ & ~(has_scc & method.isin(users))).to_numpy()
         if bad.any():
-            row = scenarios.index[bad][0]
-            whose = ("has no SCC (alpha NaN)" if not has_scc[row]
-                     else f"is method {method[row]!r}")
-            raise ValueError(f"column {col!r} is set ({values[row]!r}) on row {row!r}, which "
+            at = int(np.flatnonzero(bad)[0])       # by position: row labels may repeat
+            row = _plain(scenarios.index[at])
+            whose = ("has no SCC (alpha NaN)" if not has_scc.iloc[at]
+                     else f"is method {method.iloc[at]!r}")
+            raise ValueError(f"column {col!r} is set ({_plain(values.iloc[at])!r}) on row "
+                             f"{row!r}, which "
                              f"{whose}: only method(s) {users} read it; leave it NaN"
                              f"{'' if neutral is None else f' or {neutral!r}'} there")
 
@@ -447,7 +471,7 @@ def simulate_table(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
         metrics are 0 without SCC; ``first_trip_relay`` None and
         ``first_trip_t`` NaN without a trip).
     """
-    check_scenarios(scenarios)
+    scenarios = check_scenarios(scenarios)
     check_timing(duration, dt, control_period)
     if executor is not None and not isinstance(executor, Executor):
         raise ParameterTypeError(f"executor must be a concurrent.futures.Executor or None, "
@@ -467,7 +491,7 @@ def simulate_table(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
                       stacklevel=3)
     if out is not None:
         check_folder("out", out)
-    relays = relays_or_default(relays)
+    relays = in_engine_types(relays_or_default(relays))
     args = (params, duration, relays, dt, control_period, lanes)
     chunks = [scenarios.iloc[i:i + chunk_size] for i in range(0, len(scenarios), chunk_size)]
     folder = Path(out) if out is not None else None

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from lfc import _numba_cache
 from lfc._jit import choose, inline, kernel
 from lfc._validate import ParameterTypeError, check_flag, check_index, check_seed
 from lfc.estimation import (KalmanFilter, check_noise_std, kf_correct, kf_predict,
@@ -45,6 +46,8 @@ from lfc.model import LFCParams
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams, as_grid, discretize_grid
 from lfc.relays import TIME_TOL, RelaySettings, relay_sample
 from lfc.signals import GRID, N_PARAMS, NONE, SAMPLES, STEP, Signal, value_at
+
+_numba_cache.install()   # a damaged cache file of a compiled function: compiled again
 
 PC, WREF, LOAD, ACE = range(4)      # signal channels (ACE: an attack on the area control error)
 N_CHANNELS = 4
@@ -626,7 +629,8 @@ def make_estimator(estimator: object, params: LFCParams, control_period: float,
             raise ValueError(f"estimator.period ({estimator.period}) must equal "
                              f"control_period ({control_period})")
         return estimator
-    raise ValueError(f"estimator must be None, 'kalman' or a KalmanFilter, got {estimator!r}")
+    error = ValueError if isinstance(estimator, str) else ParameterTypeError
+    raise error(f"estimator must be None, 'kalman' or a KalmanFilter, got {estimator!r:.80}")
 
 
 def sample_signal(signal, t: np.ndarray, name: str) -> np.ndarray:
@@ -744,7 +748,8 @@ def check_attacks(attacks: dict | None, n_areas: int) -> dict:
     attacks = check_area_keys(attacks, n_areas, "attacks")
     for a, channels in attacks.items():
         if not isinstance(channels, dict) or set(channels) - set(CHANNELS):
-            raise ValueError(f"attacks[{a}] must be a dict with keys among {CHANNELS}, "
+            error = ValueError if isinstance(channels, dict) else ParameterTypeError
+            raise error(f"attacks[{a}] must be a dict with keys among {CHANNELS}, "
                              f"got {channels!r}")
     return attacks
 

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import warnings
 
+from lfc._validate import ParameterTypeError
 from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams
 
@@ -52,8 +53,8 @@ def _testbed_kind(plant) -> str | None:
     return None
 
 
-def _bad_plant(plant) -> ValueError:
-    return ValueError(f"plant must be {PLANTS}, got {type(plant).__name__}")
+def _bad_plant(plant) -> ParameterTypeError:
+    return ParameterTypeError(f"plant must be {PLANTS}, got {type(plant).__name__}")
 
 
 def simulate(plant, *, duration: float, design=None, **kwargs):
@@ -181,7 +182,8 @@ def simulate_multiarea(params: MultiAreaParams, **kwargs):
     """Deprecated: :func:`simulate` of a ``MultiAreaParams`` plant."""
     _deprecated("simulate_multiarea", "simulate")
     if not isinstance(params, MultiAreaParams):
-        raise ValueError(f"params must be a MultiAreaParams, got {type(params).__name__}")
+        raise ParameterTypeError(f"params must be a MultiAreaParams, got "
+                                 f"{type(params).__name__}")
     return simulate(params, **kwargs)
 
 
@@ -189,6 +191,7 @@ def simulate_multiarea_batch(params: MultiAreaParams, scenarios, **kwargs):
     """Deprecated: :func:`simulate_many` of a ``MultiAreaParams`` plant."""
     _deprecated("simulate_multiarea_batch", "simulate_many")
     if not isinstance(params, MultiAreaParams):
-        raise ValueError(f"params must be a MultiAreaParams, got {type(params).__name__}")
+        raise ParameterTypeError(f"params must be a MultiAreaParams, got "
+                                 f"{type(params).__name__}")
     return simulate_many(params, scenarios, **kwargs)
 

@@ -19,8 +19,8 @@ import numpy as np
 import pandas as pd
 
 from lfc._validate import (ParameterTypeError, check_flag, check_folder, check_multiple,
-                           check_positive)
-from lfc.engine import CTRL_COLUMNS, Scenarios, sample_signal
+                           check_positive, in_engine_types)
+from lfc.engine import CTRL_COLUMNS, N_CTRL, Scenarios, sample_signal
 from lfc.filters import SafetyFilter, binding_names
 from lfc.filters.base import (ACTIVE, ALARM_BITS, INFEASIBLE, INVALID, MAX_ABS_INPUT, OUTSIDE,
                               SOLVER_ERROR)
@@ -126,18 +126,29 @@ class SimResult:
         return out
 
 
-MAX_STEPS = 10**7   # plant steps in one run (2.8 h at 1 ms): its trace takes about a gigabyte
+MAX_STEPS = 10**7   # plant steps in one single-area run (2.8 h at 1 ms)
+#: values a run's trace may hold: a single area's at MAX_STEPS (5 states and an
+#: area's trip column per step, N_CTRL columns per 10 ms control period): about a
+#: gigabyte with the frames built from it.  A grid's longest run is shorter.
+MAX_TRACE_VALUES = MAX_STEPS * (5 + 1 + N_CTRL / 10)
 
 
-def check_timing(duration: float, dt: float, control_period: float) -> int:
+def check_timing(duration: float, dt: float, control_period: float, n_areas: int = 1,
+                 n_states: int = 5) -> int:
     """Validate a run's timing (s): ``duration`` and ``control_period`` whole
-    multiples of ``dt``; return plant steps per control period."""
+    multiples of ``dt``, and a trace (``n_states`` values and ``n_areas`` trip
+    columns per plant step, ``N_CTRL`` columns per area and control period) of at
+    most ``MAX_TRACE_VALUES`` values, checked before anything is allocated; return
+    plant steps per control period."""
     for name, value in (("duration", duration), ("dt", dt), ("control_period", control_period)):
         check_positive(name, value)
-    if duration > MAX_STEPS * dt:
+    per_step = n_states + n_areas + n_areas * N_CTRL * dt / max(control_period, dt)
+    longest = MAX_TRACE_VALUES / per_step * dt           # s
+    if duration > longest:
         raise ValueError(f"duration / dt = {duration / dt:.3g} plant steps is more than one "
-                         f"run holds ({MAX_STEPS:.0e}); lower duration (at most "
-                         f"{MAX_STEPS * dt:g} s at dt = {dt} s) or raise dt")
+                         f"run holds: its trace ({n_areas} area(s), {n_states} states) would "
+                         f"take about {duration / dt * per_step * 8 / 1e9:.3g} GB; lower "
+                         f"duration (at most {longest:.6g} s at dt = {dt} s) or raise dt")
     if duration < dt * (1 - 1e-9):
         raise ValueError(f"duration must be at least one plant step (dt = {dt} s), "
                          f"got {duration!r}")
@@ -212,7 +223,7 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
     check_timing(duration, dt, control_period)
     if scc is not None and not isinstance(scc, SafetyFilter):
         raise ParameterTypeError(f"scc must be a SafetyFilter or None, got {scc!r}")
-    relays = relays_or_default(relays)
+    relays = in_engine_types(relays_or_default(relays))
     check_flag("load_feedforward", load_feedforward)   # the engine calls it feedforward
     if load_feedforward and (scc is None or estimator is not None):
         raise ValueError("load_feedforward=True gives the filter the true load in place of "

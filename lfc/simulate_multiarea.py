@@ -67,7 +67,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lfc._validate import check_count, check_folder, check_index
+from lfc._validate import (ParameterTypeError, check_count, check_folder, check_index,
+                           in_engine_types)
 from lfc.batch import metrics_frame
 from lfc.estimation import check_noise_std
 from lfc.engine import METRICS, Scenarios, check_area_keys, sample_signal
@@ -273,10 +274,11 @@ def simulate_grid_linear(params: MultiAreaParams, *, duration: float,
     -------
     MultiAreaResult
     """
-    check_timing(duration, dt, control_period)
     if not isinstance(params, MultiAreaParams):
-        raise ValueError(f"params must be a MultiAreaParams, got {type(params).__name__}")
-    relays = relays_or_default(relays)
+        raise ParameterTypeError(f"params must be a MultiAreaParams, got "
+                                 f"{type(params).__name__}")
+    check_timing(duration, dt, control_period, params.n_areas, params.n_states)
+    relays = in_engine_types(relays_or_default(relays))
     filters = check_area_keys(filters, params.n_areas, "filters")
     estimate = estimate_noise(estimator, noise_std)
     built = {a: area_filter(params, a, f, relays, control_period, estimate)
@@ -364,15 +366,17 @@ def simulate_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
     check_timing(duration, dt, control_period)
     check_count("jobs", jobs)
     if not isinstance(scenarios, (list, tuple)) or not scenarios:
-        raise ValueError(f"scenarios must be a non-empty list of dicts, got {scenarios!r}")
+        error = ValueError if isinstance(scenarios, (list, tuple)) else ParameterTypeError
+        raise error(f"scenarios must be a non-empty list of dicts, got {scenarios!r:.80}")
     keys = {"attacks", "loads", "filters", "estimator", "noise_std", "seed", "feedforward",
             "relay_noise", "anti_windup"}
-    relays = relays_or_default(relays)
+    relays = in_engine_types(relays_or_default(relays))
     cache: dict = {}
     rows = []
     for k, s in enumerate(scenarios):
         if not isinstance(s, dict) or set(s) - keys:
-            raise ValueError(f"scenarios[{k}] must be a dict with keys among {sorted(keys)}, "
+            error = ValueError if isinstance(s, dict) else ParameterTypeError
+            raise error(f"scenarios[{k}] must be a dict with keys among {sorted(keys)}, "
                              f"got {s!r}")
         filters = check_area_keys(s.get("filters"), params.n_areas, f"scenarios[{k}].filters")
         built = {}

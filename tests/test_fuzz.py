@@ -13,6 +13,9 @@ draws new examples.
 from __future__ import annotations
 
 import math
+import warnings
+from decimal import Decimal
+from fractions import Fraction
 
 import numpy as np
 import pandas as pd
@@ -195,3 +198,107 @@ def test_fuzz_scenario_table_columns(name, value):
     if res is not None:
         assert np.isfinite(res.max_abs_dw_meas).all() and np.isfinite(res.max_abs_rocof_meas).all()
         assert (res.tripped == res.first_trip_t.notna()).all()
+
+
+# -- exotic numbers (issue "Sealed"): what the validators accept, the engine runs ------------
+EXOTIC = st.sampled_from([Fraction(1, 20), Fraction(103, 100), Fraction(16, 100), 10**400,
+                          -10**400, 2**63, np.float32(0.05), np.float16(0.5), np.int8(1),
+                          np.uint64(3), Decimal("0.05")])
+
+
+@settings(max_examples=tiers.examples(40))
+@given(name=st.sampled_from(list(RelaySettings.__dataclass_fields__)), value=EXOTIC)
+def test_fuzz_relay_settings_of_exotic_numbers_run_or_are_refused_naming_them(name, value):
+    """A ``Fraction``, a numpy scalar or an integer that the relay checks accept
+    reaches numba as a float (a Fraction once failed after minutes of compiling
+    with a ``TypingError``); one they refuse is named."""
+    relays = outcome(lambda: RelaySettings(**{name: value}), name)
+    if relays is not None:
+        consistent(lfc.simulate(P, duration=0.5, relays=relays, scc=SafetyFilter(P, relays),
+                                pc_attack=lfc.Step(0.5, start=0.1)))
+
+
+@settings(max_examples=tiers.examples(40))
+@given(method=st.sampled_from(["paper", "certified"]), data=st.data(), value=EXOTIC)
+def test_fuzz_filter_options_of_exotic_numbers_run_or_are_refused_naming_them(method, data,
+                                                                              value):
+    names = PAPER_OPTIONS if method == "paper" else CERTIFIED_OPTIONS
+    name = data.draw(st.sampled_from([n for n in names if n not in
+                                      ("solver", "outside_rule", "conflict", "prediction",
+                                       "load_kind", "noise_std")]))
+    scc = outcome(lambda: SafetyFilter(P, method=method, **{name: value}), name)
+    if scc is not None:
+        period = scc.options.control_period if method == "certified" else 0.01
+        run = outcome(lambda: lfc.simulate(P, duration=0.5, scc=scc, control_period=period,
+                                           pc_attack=lfc.Step(0.5, start=0.1)), name)
+        if run is not None:
+            consistent(run)
+
+
+@settings(max_examples=tiers.examples(40))
+@given(name=st.sampled_from(["amplitude", "freq_hz", "start", "alpha", "Ts", "M", "droop",
+                             "uncertainty", "margin"]), value=EXOTIC)
+def test_fuzz_scenario_columns_of_exotic_numbers_run_or_are_refused_naming_them(name, value):
+    """A column of ``Fraction``s or numpy scalars (object dtype) runs as floats; an
+    integer too large for a float is refused naming the column."""
+    table = pd.DataFrame({"waveform": ["sinusoid", "square"], "channel": "pc",
+                          "amplitude": 0.5, "freq_hz": 0.5, "start": 0.2, "alpha": 20.0,
+                          "Ts": 0.25, "method": ["paper", "certified"]})
+    table[name] = pd.Series([value, value], dtype=object)
+    res = outcome(lambda: lfc.simulate_many(P, table, duration=0.5, progress=False), name)
+    if res is not None:
+        assert np.isfinite(res.max_abs_rocof_meas).all()
+        as_floats = table.assign(**{name: [float(value)] * 2})
+        again = lfc.simulate_many(P, as_floats, duration=0.5, progress=False)
+        pd.testing.assert_series_equal(res.max_abs_rocof_meas, again.max_abs_rocof_meas)
+
+
+# -- stored-artifact tampering ---------------------------------------------------------------
+@settings(max_examples=tiers.examples(60))
+@given(kind=st.sampled_from(["truncate", "flip", "swap", "insert"]), at=st.floats(0, 1),
+       byte=st.integers(0, 255))
+def test_fuzz_a_tampered_stored_file_is_never_read_back_as_another_value(tmp_path_factory,
+                                                                        kind, at, byte):
+    """:func:`lfc._files.read_stored` returns the value written under that name or
+    None (recomputed), whatever is done to the file: cut, a byte changed or
+    inserted, or the file of another request copied over it."""
+    from lfc._files import read_stored, write_stored
+    folder = tmp_path_factory.mktemp("stored")
+    one, two = folder / "key-one.json", folder / "key-two.json"
+    write_stored(one, {"margin": 0.0, "rows": [1, 2, 3]}, dict)
+    write_stored(two, {"margin": 0.3, "rows": [3, 2, 1]}, dict)
+    data = bytearray(one.read_bytes())
+    k = min(int(at * len(data)), len(data) - 1)
+    if kind == "truncate":
+        data = data[:k]
+    elif kind == "flip":
+        data[k] = byte
+    elif kind == "insert":
+        data[k:k] = bytes([byte])
+    else:
+        data = bytearray(two.read_bytes())
+    one.write_bytes(bytes(data))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        value = read_stored(one, dict)
+    assert value in (None, {"margin": 0.0, "rows": [1, 2, 3]})
+
+
+# -- size limits -----------------------------------------------------------------------------
+@settings(max_examples=tiers.examples(60))
+@given(n_areas=st.integers(1, 12), duration=st.floats(1.0, 2e4), dt=st.sampled_from([1e-3, 1e-2]))
+def test_fuzz_a_runs_size_is_checked_by_its_states_before_anything_is_allocated(n_areas,
+                                                                                 duration, dt):
+    """``check_timing`` scales the longest run by the grid's size: a run it accepts
+    traces at most ``MAX_TRACE_VALUES`` values; one it refuses says how many GB."""
+    from lfc.engine import N_CTRL
+    from lfc.simulate import MAX_TRACE_VALUES, check_timing
+    n_states = 5 * n_areas + max(n_areas - 1, 0)
+    duration = round(duration / dt) * dt
+    try:
+        check_timing(duration, dt, 10 * dt, n_areas, n_states)
+    except ValueError as err:
+        assert "GB" in str(err) or "multiple" in str(err), err
+        return
+    steps = duration / dt
+    assert steps * (n_states + n_areas + n_areas * N_CTRL / 10) <= MAX_TRACE_VALUES * (1 + 1e-9)

@@ -6,6 +6,7 @@ warning naming the file, never read back as a result."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import shutil
 import warnings
@@ -112,6 +113,22 @@ def test_a_stored_value_is_read_back_only_under_the_name_it_was_written_for(tmp_
         one.write_text(json.dumps([1, 2]))
     with pytest.warns(RuntimeWarning, match="key-one.json"):
         assert read_stored(one, dict) is None
+
+
+def test_a_file_of_another_versions_layout_is_stale_computed_again_without_a_warning(
+        tmp_path):
+    """A cache that outlives an upgrade (CI keeps ``~/.cache``) holds files of the
+    layout before the seals: stale, not damaged — they are computed again, and no
+    notebook shows a warning for them."""
+    path = tmp_path / "key.json"
+    payload = json.dumps({"margin": 0.3})                   # the unsealed layout
+    path.write_text(json.dumps({"payload": payload,
+                                "sha256": hashlib.sha256(payload.encode()).hexdigest()}))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert read_stored(path, dict) is None
+    write_stored(path, {"margin": 0.3}, dict)
+    assert read_stored(path, dict) == {"margin": 0.3}
 
 
 def test_swapped_built_certificates_are_built_again_not_used_for_each_other(tmp_path,
@@ -272,3 +289,127 @@ def test_a_signal_subclass_without_the_engines_hooks_is_named_or_sampled():
     sampled = lfc.simulate(P, duration=0.5, pc_attack=Ramp()).metrics()
     assert sampled == lfc.simulate(P, duration=0.5, pc_attack=lambda t: 0.1 * np.asarray(t)
                                    ).metrics()
+
+
+@pytest.mark.parametrize("plant", ["single", "grid"])
+def test_a_fraction_relay_setting_runs_as_its_float(plant):
+    """A ``Fraction`` relay setting compiled for minutes, then failed with a numba
+    ``TypingError``: relays enter every run (and every filter) as floats, and the
+    run equals the one with the float settings."""
+    from fractions import Fraction
+    exact = lfc.RelaySettings(rocof_limit=Fraction(1, 20), of2=Fraction(103, 100))
+    floats = lfc.RelaySettings(rocof_limit=0.05, of2=1.03)
+    params = P if plant == "single" else lfc.MultiAreaParams.two_area()
+    attack = lfc.Sinusoid(2.0, 1.0, start=0.1)
+    if plant == "single":
+        runs = [lfc.simulate(P, duration=1.0, relays=r, pc_attack=attack,
+                             scc=lfc.SafetyFilter(P, r, method="certified"))
+                for r in (exact, floats)]
+        assert runs[0].settings["relays"] == runs[1].settings["relays"]
+    else:
+        runs = [lfc.simulate(params, duration=1.0, relays=r, attacks={0: {"pc": attack}})
+                for r in (exact, floats)]
+    assert runs[0].metrics() == runs[1].metrics()
+    assert all(type(v) is float for v in lfc.SafetyFilter(P, exact).relays.__dict__.values())
+
+
+def test_a_scenario_table_of_fractions_or_categories_runs_as_floats_and_repeated_labels_are_named():
+    """A column of ``Fraction``s was refused as "not finite", a categorical one went
+    through pandas, an integer too large for a float ended in ``OverflowError``, and a
+    filter option on a filterless row of a table with repeated row labels ended in
+    pandas' "truth value of a Series is ambiguous"."""
+    from fractions import Fraction
+    plain = lfc.simulate_many(P, _table(), duration=1.0, progress=False)
+    exotic = _table().assign(amplitude=pd.Series([Fraction(1, 10), Fraction(2)], dtype=object),
+                             waveform=pd.Categorical(["sinusoid", "sinusoid"]),
+                             freq_hz=pd.Categorical([1.0, 1.0]))
+    again = lfc.simulate_many(P, exotic, duration=1.0, progress=False)
+    assert list(again.tripped) == list(plain.tripped) == [False, True]
+    np.testing.assert_array_equal(again.max_abs_rocof_meas, plain.max_abs_rocof_meas)
+    with pytest.raises(ValueError, match="column 'amplitude' has an integer too large for a "
+                                         "float on row 1"):
+        lfc.simulate_many(P, _table().assign(amplitude=pd.Series([0.1, 10 ** 400],
+                                                                 dtype=object)),
+                          duration=1.0, progress=False)
+    twice = _table().assign(method="certified", uncertainty=[0.1, np.nan]).set_axis([7, 7])
+    with pytest.raises(ValueError, match="column 'uncertainty' is set .* on row 7, which has "
+                                         "no SCC"):
+        lfc.simulate_many(P, twice, duration=1.0, progress=False)
+
+
+def test_a_400_digit_integer_as_a_papermill_parameter_or_a_wire_stop_is_named():
+    """Both ended in ``OverflowError``: a notebook's injected parameter is checked
+    against its default's kind (a float default: a finite number; an integer one:
+    below 2**63), and a wire attack's ``stop`` of 10**400 is "never"."""
+    from lfc.repro.notebook import check_type
+    from lfc.wire.attacks import WireAttack
+    with pytest.raises(TypeError, match="parameter 'duration' must be a finite number"):
+        check_type("duration", 10 ** 400, 10.0)
+    with pytest.raises(ValueError, match=r"parameter 'seed' = 1000.* is too large"):
+        check_type("seed", 10 ** 400, 0)
+    attack = WireAttack([{"op": "drop", "start": 1.0, "stop": 10 ** 400}])
+    assert attack.command(0, 2.0, 0.01, {"pc": 0.1}) is None        # dropped: never stops
+    with pytest.raises(ValueError, match=r"attack\[0\]: need 0 <= start < stop"):
+        WireAttack([{"op": "drop", "start": 10 ** 400}])
+
+
+def test_a_damaged_numba_cache_file_is_compiled_again_with_a_warning(tmp_path, monkeypatch):
+    """A cache file cut short raised ``UnpicklingError`` on every later call of the
+    function: the package's own files are now a miss (numba compiles and rewrites
+    them), with a warning naming the file; other packages' files are numba's."""
+    from numba.core import caching
+
+    from lfc import _numba_cache
+    _numba_cache.install()
+    monkeypatch.setattr(_numba_cache, "_PACKAGE", tmp_path)
+    cache = caching.IndexDataCacheFile(str(tmp_path), "engine._run-1.py311", b"stamp")
+    cache.save("key", {"code": 1})
+    assert cache.load("key") == {"code": 1}
+    data = next(tmp_path.glob("*.nbc"))
+    data.write_bytes(data.read_bytes()[:5])
+    with pytest.warns(RuntimeWarning, match="damaged numba cache file of engine._run-1"):
+        assert cache.load("key") is None
+    cache.save("key", {"code": 2})                                  # rewritten
+    assert cache.load("key") == {"code": 2}
+    index = next(tmp_path.glob("*.nbi"))
+    index.write_bytes(index.read_bytes()[:-3])
+    with pytest.warns(RuntimeWarning, match="damaged numba cache file"):
+        assert cache.load("key") is None
+    monkeypatch.setattr(_numba_cache, "_PACKAGE", tmp_path / "elsewhere")
+    with pytest.raises(Exception):
+        cache.load("key")
+
+
+def test_the_longest_run_is_scaled_by_the_grids_size_and_checked_before_allocating():
+    """A six-area chain at the single area's longest run ended in ``MemoryError``:
+    the limit is on the trace's values, with the estimate in the message."""
+    from lfc.simulate import MAX_STEPS, check_timing
+    check_timing(MAX_STEPS * 1e-3, 1e-3, 0.01)                      # one area: as before
+    with pytest.raises(ValueError, match=r"\(6 area\(s\), 35 states\) would take about "
+                                         r"[0-9.]+ GB; lower duration \(at most 1[0-9.]+ s"):
+        check_timing(MAX_STEPS * 1e-3, 1e-3, 0.01, 6, 35)
+    with pytest.raises(ValueError, match=r"3 area\(s\), 18 states"):
+        lfc.simulate(lfc.MultiAreaParams.three_area(), duration=MAX_STEPS * 1e-3)
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: lfc.simulate("x", duration=1.0), "plant must be"),
+    (lambda: lfc.simulate(P, duration=1.0, estimator=3), "estimator must be None"),
+    (lambda: lfc.SafetyFilter(P, method=3), "method must be one of"),
+    (lambda: lfc.simulate_many(P, "x", duration=1.0), "scenarios must be a pandas DataFrame"),
+    (lambda: lfc.simulate_many(lfc.MultiAreaParams.two_area(), "x", duration=1.0),
+     "scenarios must be a non-empty list of dicts"),
+    (lambda: lfc.simulate_many(lfc.MultiAreaParams.two_area(), [1], duration=1.0),
+     r"scenarios\[0\] must be a dict"),
+    (lambda: lfc.simulate(lfc.MultiAreaParams.two_area(), duration=1.0, attacks={0: 3}),
+     r"attacks\[0\] must be a dict"),
+])
+def test_a_wrong_type_is_a_type_error_as_documented(call, message):
+    """These raised a plain ``ValueError`` where the docs promise ``TypeError`` for a
+    wrong type (``ParameterTypeError`` is both, so ``except ValueError`` still catches
+    it); a right type with a wrong value stays a ``ValueError``."""
+    with pytest.raises(TypeError, match=message):
+        call()
+    with pytest.raises(ValueError, match="method must be one of") as err:
+        lfc.SafetyFilter(P, method="nope")
+    assert not isinstance(err.value, TypeError)

@@ -30,7 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import differential_evolution
 
-from lfc._validate import check_count, check_number, check_positive, check_seed
+from lfc._validate import (ParameterTypeError, check_count, check_number, check_positive,
+                           check_seed, in_engine_types)
 from lfc.engine import CTRL_COLUMNS, GeneratorSide, check_area_keys, check_coupled
 from lfc.filters import SafetyFilter
 from lfc.lockstep import LinearGrid
@@ -178,12 +179,13 @@ def run_adaptive(params: LFCParams | MultiAreaParams, filters, attack: AdaptiveA
         raise ValueError(f"attack must be an AdaptiveAttack, got {attack!r}")
     check_positive("duration", duration)
     check_seed("seed", seed)
-    relays = relays_or_default(relays)
-    ratio = check_timing(duration, dt, control_period)
+    relays = in_engine_types(relays_or_default(relays))
     single = isinstance(params, LFCParams)
     if not single and not isinstance(params, MultiAreaParams):
-        raise ValueError(f"params must be an LFCParams or a MultiAreaParams, got "
+        raise ParameterTypeError(f"params must be an LFCParams or a MultiAreaParams, got "
                          f"{type(params).__name__}")
+    ratio = (check_timing(duration, dt, control_period) if single else
+             check_timing(duration, dt, control_period, params.n_areas, params.n_states))
     design = params if design is None else design
     if type(design) is not type(params):
         raise ValueError(f"design must be of the plant's type ({type(params).__name__}), got "
@@ -281,7 +283,7 @@ def adaptive_search(params: LFCParams | MultiAreaParams, filters, *, duration: f
     check_count("maxiter", maxiter)
     check_count("popsize", popsize)
     scenario = dict(scenario or {})
-    relays = relays_or_default(scenario.get("relays"))
+    relays = in_engine_types(relays_or_default(scenario.get("relays")))
     cache: dict[tuple, dict] = {}
 
     def run(theta: np.ndarray) -> dict:

@@ -28,7 +28,7 @@ from dataclasses import fields
 import numpy as np
 
 from lfc._validate import (ParameterTypeError, as_float, check_array, check_number,
-                           check_positive)
+                           check_positive, in_engine_types)
 from lfc.filters.base import (ALARM_BITS, ALARM_FLAGS, MEMORY, Backend, FilterInfo, Options,
                               binding_names, flag)
 from lfc.filters.certified import CertifiedFilter, CertifiedOptions
@@ -72,7 +72,8 @@ def available() -> tuple[str, ...]:
 
 def _backend(method: str) -> type[Backend]:
     if not isinstance(method, str) or method not in REGISTRY:
-        raise ValueError(f"method must be one of {available()}, got {method!r}")
+        error = ValueError if isinstance(method, str) else ParameterTypeError
+        raise error(f"method must be one of {available()}, got {method!r:.80}")
     return REGISTRY[method]
 
 
@@ -144,7 +145,7 @@ class SafetyFilter:
                                  f"{method!r} (give method={owners[0]!r}; {method!r} takes "
                                  f"{', '.join(f.name for f in fields(backend.Options))})")
         self.params = params
-        self.relays = relays_or_default(relays)
+        self.relays = in_engine_types(relays_or_default(relays))
         self.backend = backend(params, self.relays, backend.Options.build(method, options))
         self.method = method
         if self.backend.jit:

@@ -1116,7 +1116,8 @@ class CoupledFilter:
 
     def __init__(self, params: MultiAreaParams, relays: RelaySettings, **options) -> None:
         if not isinstance(params, MultiAreaParams):
-            raise ValueError(f"params must be a MultiAreaParams, got {type(params).__name__}")
+            raise ParameterTypeError(f"params must be a MultiAreaParams, got "
+                                     f"{type(params).__name__}")
         if not isinstance(relays, RelaySettings):
             raise ParameterTypeError(f"relays must be a RelaySettings, got {relays!r}")
         self.params, self.relays = params, relays

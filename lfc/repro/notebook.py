@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import ast
 import json
-import math
 import re
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -96,7 +95,7 @@ def check_type(name: str, value: object, default: object, hint: str = "") -> Non
     number for a float, a string for a string, a non-empty list of the first
     element's kind for a list; None as a default allows anything.  ``hint`` is
     added to the message."""
-    from lfc._validate import ParameterTypeError, conforms, kind
+    from lfc._validate import ParameterTypeError, _finite, conforms, kind
     if default is None:
         return
     if isinstance(default, (list, tuple)):
@@ -107,11 +106,15 @@ def check_type(name: str, value: object, default: object, hint: str = "") -> Non
             check_type(name, v, default[0], hint)
         return
     expected = type(default)
-    ok = conforms(value, expected) and (expected is not float or math.isfinite(value))
+    ok = conforms(value, expected) and (expected is not float or _finite(value))
     words = "a finite number" if expected is float else kind(expected)
     if not ok:
         raise ParameterTypeError(f"parameter {name!r} must be {words} like its default "
-                                 f"{default!r}, got {value!r} ({type(value).__name__}){hint}")
+                                 f"{default!r}, got {value!r:.60} ({type(value).__name__})"
+                                 f"{hint}")
+    if expected is int and abs(value) >= 2 ** 63:
+        raise ValueError(f"parameter {name!r} = {value!r:.40}... is too large "
+                         f"(|value| < 2**63)")
 
 
 def notebook_parameters(namespace: dict) -> dict:

@@ -38,7 +38,7 @@ from __future__ import annotations
 import math
 
 from lfc import signals
-from lfc._validate import check_finite, check_integer, check_number
+from lfc._validate import as_float, check_finite, check_integer, check_number
 from lfc.wire.registers import COMMAND, REPORT
 
 OPS = ("add", "scale", "bias", "delay", "replay", "drop")
@@ -148,9 +148,10 @@ class WireAttack:
         for key in ("start", "stop", "record"):
             if key in op:
                 check_number(f"attack[{k}].{key}", op[key])
-        out = dict(op, start=float(op.get("start", 0.0)), stop=float(op.get("stop", math.inf)))
+        out = dict(op, start=as_float(op.get("start", 0.0)),     # 10**400: inf, no overflow
+                   stop=as_float(op.get("stop", math.inf)))
         if not out["stop"] > out["start"] >= 0.0:
-            raise ValueError(f"attack[{k}]: need 0 <= start < stop, got {op!r}")
+            raise ValueError(f"attack[{k}]: need 0 <= start < stop, got {op!r:.200}")
         if kind == "add":
             out["signal"] = signal_from_spec(op.get("signal"))
         elif kind in ("scale", "bias"):
@@ -159,7 +160,7 @@ class WireAttack:
         elif kind == "delay":
             out["periods"] = check_integer(f"attack[{k}].periods", op.get("periods"), 1)
         elif kind == "replay":
-            if not 0.0 <= float(op.get("record", -1.0)) < out["start"]:
+            if not 0.0 <= as_float(op.get("record", -1.0)) < out["start"]:
                 raise ValueError(f"attack[{k}].record must lie in [0, start), got "
                                  f"{op.get('record')!r}")
         return out

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from lfc._validate import check_seed
+from lfc._validate import check_seed, in_engine_types
 from lfc.engine import GeneratorSide, check_area_keys
 from lfc.filters import SafetyFilter
 from lfc.filters.coupled import CoupledFilter
@@ -209,8 +209,8 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
     if not single and agc == "centre":
         raise ValueError("agc='centre' is for one area: a grid's AGC integrates its area's "
                          "tie-line export, metered at the generator side (agc='generator')")
-    ratio = check_timing(duration, dt, control_period)
-    relays = relays_or_default(relays)
+    ratio = check_timing(duration, dt, control_period, n_a, grid.n_states)
+    relays = in_engine_types(relays_or_default(relays))
     period = ratio * dt
     attacks = attack if isinstance(attack, dict) else {0: attack}
     check_area_keys(attacks, n_a, "attack")
