@@ -35,7 +35,7 @@ def _is_integer(value: object) -> bool:
     return isinstance(value, Integral) and not isinstance(value, bool)
 
 
-def _finite(value: float) -> bool:
+def is_finite(value: float) -> bool:
     """``math.isfinite``, false for an integer too large for a float (10**400)."""
     try:
         return math.isfinite(value)
@@ -129,21 +129,21 @@ def check_number(name: str, value: object) -> None:
 def check_positive(name: str, value: float) -> None:
     """Raise unless ``value`` is a finite number > 0."""
     check_number(name, value)
-    if not (_finite(value) and value > 0):
+    if not (is_finite(value) and value > 0):
         raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
 
 
 def check_nonnegative(name: str, value: float) -> None:
     """Raise unless ``value`` is a finite number >= 0."""
     check_number(name, value)
-    if not (_finite(value) and value >= 0):
+    if not (is_finite(value) and value >= 0):
         raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
 
 
 def check_finite(name: str, value: float) -> None:
     """Raise unless ``value`` is a finite number."""
     check_number(name, value)
-    if not _finite(value):
+    if not is_finite(value):
         raise ValueError(f"{name} must be a finite number, got {value!r}")
 
 

@@ -39,8 +39,8 @@ from tqdm.auto import tqdm
 
 from lfc._files import code_digest, write_atomic
 from lfc._pool import completed
-from lfc._validate import (ParameterTypeError, _finite, check_count, check_flag, check_folder,
-                           in_engine_types, is_sequence)
+from lfc._validate import (ParameterTypeError, check_count, check_flag, check_folder,
+                           in_engine_types, is_finite, is_sequence)
 from lfc.engine import METRICS, Scenarios
 from lfc.estimation import STD
 from lfc.filters import (CONFLICT_RULES, METHODS, OUTSIDE_RULES, PREDICTIONS, SafetyFilter,
@@ -295,7 +295,7 @@ def _check_numbers(scenarios: pd.DataFrame) -> pd.DataFrame:
             raise ParameterTypeError(f"column {col!r} must hold numbers (or NaN); row "
                                      f"{scenarios.index[bad][0]!r} has {value!r:.60} "
                                      f"({type(value).__name__})")
-        too_large = values.map(lambda v: isinstance(v, Integral) and not _finite(v))
+        too_large = values.map(lambda v: isinstance(v, Integral) and not is_finite(v))
         if too_large.any():
             raise ValueError(f"column {col!r} has an integer too large for a float on row "
                              f"{scenarios.index[too_large][0]!r}")

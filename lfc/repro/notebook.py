@@ -95,7 +95,7 @@ def check_type(name: str, value: object, default: object, hint: str = "") -> Non
     number for a float, a string for a string, a non-empty list of the first
     element's kind for a list; None as a default allows anything.  ``hint`` is
     added to the message."""
-    from lfc._validate import ParameterTypeError, _finite, conforms, kind
+    from lfc._validate import ParameterTypeError, conforms, is_finite, kind
     if default is None:
         return
     if isinstance(default, (list, tuple)):
@@ -106,7 +106,7 @@ def check_type(name: str, value: object, default: object, hint: str = "") -> Non
             check_type(name, v, default[0], hint)
         return
     expected = type(default)
-    ok = conforms(value, expected) and (expected is not float or _finite(value))
+    ok = conforms(value, expected) and (expected is not float or is_finite(value))
     words = "a finite number" if expected is float else kind(expected)
     if not ok:
         raise ParameterTypeError(f"parameter {name!r} must be {words} like its default "
