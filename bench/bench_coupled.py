@@ -44,7 +44,7 @@ import lfc
 from lfc import MultiAreaParams
 from lfc._jit import maxnum, minnum
 from lfc.filters.base import clear_built
-from lfc.filters.certified import _pair
+from lfc.filters.bounds import pair
 from lfc.filters.contract import contract_design
 from lfc.filters.coupled import CoupledFilter, row_intervals
 from lfc.simulate_multiarea import area_filter
@@ -112,7 +112,7 @@ def row(name: str, grid: MultiAreaParams) -> None:
     contract_call = batch_call(area_filter(grid, 0, "contract", relays, 0.01))
     b = filt.cert.budget
     print(f"| {name} | {built:.1f} s | {len(filt.cert.times)} / {filt.cert.n_rows} | "
-          f"{_pair(b['load'])} | {_pair(b['between samples'])} | {1e6 * per_call:.1f} µs | "
+          f"{pair(b['load'])} | {pair(b['between samples'])} | {1e6 * per_call:.1f} µs | "
           f"{ref} | "
           f"±{share.half_width.min():.3g} pu, {share.rate.min():.3g} pu/s | {designed:.1f} s | "
           f"{1e9 * contract_call:.0f} ns |", flush=True)

@@ -336,6 +336,24 @@ def _check_unused(scenarios: pd.DataFrame) -> None:
                              f"{'' if neutral is None else f' or {neutral!r}'} there")
 
 
+def row_scenario(params: LFCParams, relays: RelaySettings, row: dict, duration: float,
+                 control_period: float, built: dict) -> dict:
+    """One checked table row as the keywords of :meth:`lfc.engine.Scenarios.add`
+    (its plant, filter, estimator, noise, seed, flags and signal); ``built``
+    holds the filters already built for these ``params`` and ``relays``."""
+    signal = scenario_signal(row, duration)
+    channel = row["channel"]
+    noise = tuple(0.0 if pd.isna(v) else float(v)             # NaN: no noise, as checked
+                  for v in (row.get(c, 0.0) for c in NOISE))
+    return dict(plant=_plant(params, row),
+                filters={0: _filter(params, relays, row, control_period, built)},
+                estimator="kalman" if any(noise) else None, noise_std=noise,
+                seed=int(row.get("seed", 0)), relay_noise=bool(row.get("relay_noise", False)),
+                anti_windup=bool(row.get("anti_windup", False)),
+                attacks={0: {channel: signal}} if channel != "load" else None,
+                loads={0: signal} if channel == "load" else None)
+
+
 def run_chunk(params: LFCParams, scenarios: pd.DataFrame, duration: float,
               relays: RelaySettings, dt: float, control_period: float,
               lanes: bool = True) -> pd.DataFrame:
@@ -347,19 +365,38 @@ def run_chunk(params: LFCParams, scenarios: pd.DataFrame, duration: float,
                    relays=relays)
     built: dict = {}     # this chunk's filters by their options (built_once keys by repr: slower)
     for row in scenarios.to_dict("records"):
-        signal = scenario_signal(row, duration)
-        channel = row["channel"]
-        noise = tuple(0.0 if pd.isna(v) else float(v)         # NaN: no noise, as checked
-                      for v in (row.get(c, 0.0) for c in NOISE))
-        sc.add(plant=_plant(params, row),
-               filters={0: _filter(params, relays, row, control_period, built)},
-               estimator="kalman" if any(noise) else None, noise_std=noise,
-               seed=int(row.get("seed", 0)), relay_noise=bool(row.get("relay_noise", False)),
-               anti_windup=bool(row.get("anti_windup", False)),
-               attacks={0: {channel: signal}} if channel != "load" else None,
-               loads={0: signal} if channel == "load" else None)
+        sc.add(**row_scenario(params, relays, row, duration, control_period, built))
     run = sc.run(lanes=lanes)
     return metrics_frame(run.metrics[:, 0], sc.n_ctrl, scenarios.index)
+
+
+def table_results(params: LFCParams, scenarios: pd.DataFrame, *, duration: float,
+                  relays: RelaySettings | None = None, dt: float = 1e-3,
+                  control_period: float = 0.01, progress: bool = True) -> list:
+    """Every row of a scenario table run as :func:`lfc.simulate` runs it, with its
+    trace: one :class:`~lfc.simulate.SimResult` per row, in the table's order,
+    whose ``metrics()`` are the row :func:`simulate_table` gives (the same
+    numbers).  ``simulate_many(params, table, keep="results")``."""
+    from lfc.simulate import simulate_area
+    scenarios = check_scenarios(scenarios)
+    check_timing(duration, dt, control_period)
+    check_flag("progress", progress)
+    relays = in_engine_types(relays_or_default(relays))
+    scenarios = scenarios.drop(columns=[c for c in METRIC_KEYS if c in scenarios.columns])
+    built: dict = {}
+    out = []
+    for row in tqdm(scenarios.to_dict("records"), desc="simulate_many", unit="scenario",
+                    disable=not progress):
+        kw = row_scenario(params, relays, row, duration, control_period, built)
+        attack = (kw["attacks"] or {0: {}})[0]
+        out.append(simulate_area(kw["plant"], duration=duration, dt=dt,
+                                 control_period=control_period, relays=relays,
+                                 pc_attack=attack.get("pc"), wref_attack=attack.get("wref"),
+                                 load=(kw["loads"] or {0: None})[0], scc=kw["filters"][0],
+                                 estimator=kw["estimator"], noise_std=kw["noise_std"],
+                                 seed=kw["seed"], relay_noise=kw["relay_noise"],
+                                 anti_windup=kw["anti_windup"]))
+    return out
 
 
 def metrics_frame(metrics: np.ndarray, n_ctrl: int, index) -> pd.DataFrame:

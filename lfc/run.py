@@ -116,8 +116,14 @@ def simulate(plant, *, duration: float, design=None, **kwargs):
     raise _bad_plant(plant)
 
 
-def simulate_many(plant, scenarios, *, duration: float, design=None, **kwargs):
-    """Simulate many scenarios; metrics only on the linear plants.
+#: what :func:`simulate_many` returns: the metrics table, or one result per scenario
+KEEP = ("metrics", "results")
+
+
+def simulate_many(plant, scenarios, *, duration: float, design=None, keep: str = "metrics",
+                  **kwargs):
+    """Simulate many scenarios: the metrics table for every plant, or one result
+    (with its trace) per scenario.
 
     Parameters
     ----------
@@ -130,32 +136,51 @@ def simulate_many(plant, scenarios, *, duration: float, design=None, **kwargs):
         Simulated time (s), > 0.
     design : MultiAreaParams, optional
         ``GridCase`` only (default the model fitted to the case).
+    keep : {"metrics", "results"}
+        ``"metrics"`` (default): the metrics table; ``"results"``: a list of one
+        :class:`SimResult` or :class:`MultiAreaResult` per scenario, in their
+        order, whose ``metrics()`` are the table's rows.
     **kwargs
-        For an area: ``relays``, ``dt``, ``control_period``, ``executor``,
-        ``chunk_size``, ``out``, ``progress``; for a grid: ``relays``, ``dt``,
-        ``control_period``, ``jobs``; for a ``GridCase``: ``jobs``, ``progress``
-        and keywords every scenario shares.
+        For an area: ``relays``, ``dt``, ``control_period``, ``progress``, and with
+        ``keep="metrics"`` ``executor``, ``chunk_size``, ``out``, ``lanes``; for a
+        grid: ``relays``, ``dt``, ``control_period``, ``jobs`` and keywords every
+        scenario shares (``loads=``, ``anti_windup=``, ...); for a ``GridCase``
+        also ``progress``.
 
     Returns
     -------
-    DataFrame or list of MultiAreaResult
-        An area: ``scenarios`` with the metric columns added; a grid: one row
-        per scenario and area; a ``GridCase``: one result per scenario.
+    DataFrame or list
+        An area: ``scenarios`` with the metric columns added; a grid (linear or
+        ANDES): one row per scenario and area (``scenario``, ``area`` and the
+        metrics).  With ``keep="results"``, the results.
     """
+    if keep not in KEEP:
+        raise ValueError(f"keep must be one of {KEEP}, got {keep!r:.40}")
     if design is not None and _testbed_kind(plant) is None:
         raise ValueError("design is for ANDES cases only")
     if isinstance(plant, LFCParams):
-        from lfc.batch import simulate_table
-        return simulate_table(plant, scenarios, duration=duration, **kwargs)
+        from lfc.batch import simulate_table, table_results
+        if keep == "metrics":
+            return simulate_table(plant, scenarios, duration=duration, **kwargs)
+        _only_for_metrics(kwargs, ("executor", "chunk_size", "out", "lanes"))
+        return table_results(plant, scenarios, duration=duration, **kwargs)
     if isinstance(plant, MultiAreaParams):
-        from lfc.simulate_multiarea import simulate_grid_table
-        return simulate_grid_table(plant, scenarios, duration=duration, **kwargs)
+        from lfc.simulate_multiarea import (SCENARIO_KEYS, check_grid_scenarios, grid_results,
+                                            simulate_grid_table)
+        shared = {k: kwargs.pop(k) for k in SCENARIO_KEYS if k in kwargs}
+        if shared:                                   # keywords every scenario shares
+            check_grid_scenarios(scenarios)
+            scenarios = [{**shared, **s} for s in scenarios]
+        run = simulate_grid_table if keep == "metrics" else grid_results
+        return run(plant, scenarios, duration=duration, **kwargs)
     kind = _testbed_kind(plant)
     if kind == "grid":
+        from lfc.simulate_multiarea import results_table
         from lfc.testbed.grid_fit import grid_design
         from lfc.testbed.grid_plant import simulate_andes_grid_table
-        return simulate_andes_grid_table(design if design is not None else grid_design(plant),
-                                   scenarios, duration=duration, case=plant, **kwargs)
+        results = simulate_andes_grid_table(design if design is not None else grid_design(plant),
+                                            scenarios, duration=duration, case=plant, **kwargs)
+        return results if keep == "results" else results_table(results)
     if kind == "microgrid":
         raise ValueError("simulate_many does not run the ANDES microgrid (one scenario per "
                          "call: simulate(MicrogridCase(), ...))")
@@ -163,6 +188,13 @@ def simulate_many(plant, scenarios, *, duration: float, design=None, **kwargs):
         raise ValueError("simulate_many does not run an AndesPlant of your own (one scenario "
                          "per call: simulate(plant, design=..., ...))")
     raise _bad_plant(plant)
+
+
+def _only_for_metrics(kwargs: dict, names: tuple[str, ...]) -> None:
+    given = [n for n in names if n in kwargs]
+    if given:
+        raise ValueError(f"{given[0]} is for keep='metrics' (the metrics table, in chunks and "
+                         f"processes); keep='results' runs each row with its trace")
 
 
 # -- the names of release 0.3, for one release --------------------------------------------

@@ -74,27 +74,18 @@ from lfc.estimation import check_noise_std
 from lfc.engine import METRICS, Scenarios, check_area_keys, sample_signal
 from lfc.filters import SafetyFilter
 from lfc.filters.base import built_once
+from lfc.filters.bounds import tie_step_bound
 from lfc.filters.contract import contract_design
 from lfc.filters.coupled import CoupledFilter
 from lfc.model import STATES
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams
 from lfc.relays import RELAY_NAMES, RelaySettings, relays_or_default
-from lfc.simulate import SimResult, check_timing, result
+from lfc.simulate import METRIC_KEYS, SimResult, check_timing, result
 
-__all__ = ["MultiAreaResult", "area_filter", "multiarea_result", "simulate_grid_linear",
-           "simulate_grid_table",
-           "tie_step_bound"]
+__all__ = ["MultiAreaResult", "area_filter", "grid_results", "multiarea_result",
+           "results_table", "simulate_grid_linear", "simulate_grid_table"]
 FILTER_KINDS = ("paper", "certified", "coupled", "contract")
 PAPER_ALPHA = 20.0   # 1/s: "paper" as notebook 08 runs it (notebook 09 also runs α = 3)
-
-
-def tie_step_bound(params: MultiAreaParams, area: int, relays: RelaySettings,
-                   control_period: float) -> float:
-    """How far area ``area``'s tie-line export can move in one control period
-    (pu) while every area's frequency deviation stays within the relay band
-    ``F``: ``control_period * sum_j T_ij * 2 F``."""
-    rate = sum(coef for i, j, coef in params.tie if area in (i, j)) * 2 * relays.F
-    return float(control_period * rate)
 
 
 def area_filter(params: MultiAreaParams, area: int,
@@ -104,7 +95,7 @@ def area_filter(params: MultiAreaParams, area: int,
     """The filter of ``area``: ``"paper"`` (the paper's SCC at α = 20 and its
     default reading, on the area's model; build a :class:`SafetyFilter` for
     another α), ``"certified"`` (the certified
-    filter of the area's model with ``load_bound`` = :func:`tie_step_bound` and
+    filter of the area's model with ``load_bound`` = :func:`lfc.filters.bounds.tie_step_bound` and
     the grid's ``command_range`` as its actuator limits ``u_min``, ``u_max``: a
     model fitted to ANDES describes it only there; none on the linear presets),
     ``"coupled"`` (the grid's coupled certificate with its default options,
@@ -337,6 +328,52 @@ def multiarea_result(params: MultiAreaParams, t: np.ndarray, states: np.ndarray,
     return MultiAreaResult(tuple(areas), pd.DataFrame(columns), settings)
 
 
+#: the keys of a grid scenario (the keywords of :func:`simulate_grid_linear` it sets)
+SCENARIO_KEYS = ("attacks", "loads", "filters", "estimator", "noise_std", "seed", "feedforward",
+                 "relay_noise", "anti_windup")
+
+
+def check_grid_scenarios(scenarios: object) -> None:
+    """``TypeError`` unless ``scenarios`` is a list of dicts, ``ValueError`` if it is
+    empty or a dict has a key not among ``SCENARIO_KEYS``."""
+    if not isinstance(scenarios, (list, tuple)) or not scenarios:
+        error = ValueError if isinstance(scenarios, (list, tuple)) else ParameterTypeError
+        raise error(f"scenarios must be a non-empty list of dicts, got {scenarios!r:.80}")
+    for k, s in enumerate(scenarios):
+        if not isinstance(s, dict) or set(s) - set(SCENARIO_KEYS):
+            error = ValueError if isinstance(s, dict) else ParameterTypeError
+            raise error(f"scenarios[{k}] must be a dict with keys among "
+                        f"{sorted(SCENARIO_KEYS)}, got {s!r:.200}")
+
+
+def grid_results(params: MultiAreaParams, scenarios: list[dict], *, duration: float,
+                 relays: RelaySettings | None = None, dt: float = 1e-3,
+                 control_period: float = 0.01, jobs: int = 2) -> list[MultiAreaResult]:
+    """Each scenario (a dict of ``SCENARIO_KEYS``) run by :func:`simulate_grid_linear`
+    with its trace, in ``jobs`` threads (the compiled loop runs without the GIL);
+    the results in the scenarios' order, whose ``metrics()`` are the rows
+    :func:`simulate_grid_table` gives.  ``simulate_many(grid, scenarios,
+    keep="results")``."""
+    check_timing(duration, dt, control_period, params.n_areas, params.n_states)
+    check_count("jobs", jobs)
+    check_grid_scenarios(scenarios)
+
+    def run(s: dict) -> MultiAreaResult:
+        return simulate_grid_linear(params, duration=duration, relays=relays, dt=dt,
+                                    control_period=control_period, **s)
+
+    with ThreadPoolExecutor(max_workers=min(jobs, len(scenarios))) as pool:
+        return list(pool.map(run, scenarios))
+
+
+def results_table(results: list[MultiAreaResult]) -> pd.DataFrame:
+    """The metrics of grid results as :func:`simulate_grid_table` returns them: one
+    row per scenario and area, ``scenario``, ``area`` and ``METRIC_KEYS``."""
+    return pd.DataFrame([{"scenario": i, "area": a, **m} for i, r in enumerate(results)
+                         for a, m in r.metrics().items()],
+                        columns=["scenario", "area", *METRIC_KEYS])
+
+
 def simulate_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
                              duration: float, relays: RelaySettings | None = None,
                              dt: float = 1e-3, control_period: float = 0.01,
@@ -365,19 +402,11 @@ def simulate_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
     """
     check_timing(duration, dt, control_period)
     check_count("jobs", jobs)
-    if not isinstance(scenarios, (list, tuple)) or not scenarios:
-        error = ValueError if isinstance(scenarios, (list, tuple)) else ParameterTypeError
-        raise error(f"scenarios must be a non-empty list of dicts, got {scenarios!r:.80}")
-    keys = {"attacks", "loads", "filters", "estimator", "noise_std", "seed", "feedforward",
-            "relay_noise", "anti_windup"}
+    check_grid_scenarios(scenarios)
     relays = in_engine_types(relays_or_default(relays))
     cache: dict = {}
     rows = []
     for k, s in enumerate(scenarios):
-        if not isinstance(s, dict) or set(s) - keys:
-            error = ValueError if isinstance(s, dict) else ParameterTypeError
-            raise error(f"scenarios[{k}] must be a dict with keys among {sorted(keys)}, "
-                             f"got {s!r}")
         filters = check_area_keys(s.get("filters"), params.n_areas, f"scenarios[{k}].filters")
         built = {}
         estimate = estimate_noise(s.get("estimator"), s.get("noise_std", (0.0, 0.0)))

@@ -167,7 +167,7 @@ def multiarea(plant: str = "linear", **options) -> tuple[dict, dict]:
     on ANDES the certified filters' runs on the fitted model itself, and each area's
     ``load_bound``).  ``options``: more keywords of every ANDES run (``step``)."""
     from lfc.experiments.deviations import multiarea_records
-    from lfc.simulate_multiarea import tie_step_bound
+    from lfc.filters.bounds import tie_step_bound
     p = defaults("multiarea")
     relays = lfc.RelaySettings()
     amplitude = MULTIAREA_AMPLITUDE[plant] if p["amplitude"] is None else p["amplitude"]
@@ -184,7 +184,7 @@ def multiarea(plant: str = "linear", **options) -> tuple[dict, dict]:
             return {name: lfc.simulate(params, **kw, **common) for name, kw in scenarios.items()}
         return dict(zip(scenarios, lfc.simulate_many(case, list(scenarios.values()),
                                                      design=params, jobs=1, progress=False,
-                                                     **common, **options)))
+                                                     keep="results", **common, **options)))
 
     def paper_scc(alpha: float) -> dict:
         return {a: lfc.SafetyFilter(area, relays, alpha=alpha)

@@ -16,7 +16,8 @@ import tiers
 
 import lfc
 from lfc import MultiAreaParams
-from lfc.simulate_multiarea import simulate_grid_linear, simulate_grid_table, tie_step_bound
+from lfc.filters.bounds import tie_step_bound
+from lfc.simulate_multiarea import simulate_grid_linear, simulate_grid_table
 
 RELAYS = lfc.RelaySettings()
 INSTANTS = (2.0, 3.37, 5.0, 7.71)   # s, while the attacks run (they start at 1 s)

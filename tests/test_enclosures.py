@@ -22,7 +22,8 @@ from hypothesis import strategies as st
 
 import lfc
 from lfc import LFCParams, MultiAreaParams
-from lfc.filters.certified import CertifiedSet, _error_bound, _expm_at, box_plants
+from lfc.filters.bounds import expm_at
+from lfc.filters.certified import CertifiedSet, _error_bound, box_plants
 from lfc.filters.coupled import CoupledFilter, _load_error_steps, output_rows, reduced_model
 from lfc.filters.responses import load_gains, period_step_gain, rate_gains, responses
 from lfc.model import lfc_matrices, output_matrix
@@ -163,7 +164,7 @@ def test_the_estimates_error_bound_contains_a_five_times_finer_grid(k):
     best = np.zeros(2)
     L = np.linalg.cholesky(cov)
     for i in range(0, len(t), 50_000):
-        E = _expm_at(A, t[i:i + 50_000])
+        E = expm_at(A, t[i:i + 50_000])
         w = np.concatenate([C @ E, (C @ (np.eye(5)[None] - E) @ q_p)[..., None]], axis=2)
         best = np.maximum(best, 3.0 * np.linalg.norm(w @ L, axis=2).max(axis=0))
     _contains(bound, best, 1e-4)

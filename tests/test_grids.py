@@ -139,7 +139,8 @@ def test_batch_equals_one_by_one_and_shares_the_runs_of_filters_that_never_act(
             clock = tmp_path / f"andes-clock-{n_runs}-{jobs}"
             monkeypatch.setenv("LFC_ANDES_CLOCK", str(clock))
             batch = lfc.simulate_many(CASE, scenarios, design=fit.params, duration=2.0,
-                                      jobs=jobs, anti_windup=True, progress=False)
+                                      jobs=jobs, anti_windup=True, progress=False,
+                                      keep="results")
             monkeypatch.delenv("LFC_ANDES_CLOCK")
             assert len(clock.read_text().split()) == n_runs, jobs
             for one, r in zip(ones, batch):

@@ -12,7 +12,8 @@ from hypothesis import strategies as st
 import lfc
 from lfc.experiments.redteam import coordinated_search, severity
 from lfc.multiarea import MultiAreaParams, discretize_grid, multiarea_matrices
-from lfc.simulate_multiarea import area_filter, tie_step_bound
+from lfc.filters.bounds import tie_step_bound
+from lfc.simulate_multiarea import area_filter
 
 RELAYS = lfc.RelaySettings()
 TWO = MultiAreaParams.two_area()

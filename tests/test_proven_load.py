@@ -67,10 +67,11 @@ def test_the_loads_move_of_the_terminal_state_is_its_sup_on_a_fine_grid(plant):
     of a load's move, at each plant's own terminal set) against ``sup_s ||E e^{As}
     q_p||_P`` on a 1 ms grid over 60 s: the value at ``s = 0`` (``P`` a Lyapunov
     matrix), twice that for a load not given."""
-    from lfc.filters.certified import CertifiedSet, _expm_at, load_moves_terminal
+    from lfc.filters.bounds import expm_at
+    from lfc.filters.certified import CertifiedSet, load_moves_terminal
     block = CertifiedSet(plant, RELAYS).blocks[0]
     A, B = lfc_matrices(plant)
-    z = _expm_at(A, np.arange(0.0, 60.0, 1e-3)) @ np.linalg.solve(A, B[:, 1]) @ block.E.T
+    z = expm_at(A, np.arange(0.0, 60.0, 1e-3)) @ np.linalg.solve(A, B[:, 1]) @ block.E.T
     sup = np.sqrt(np.einsum("ti,ij,tj->t", z, block.P, z)).max()
     given = load_moves_terminal(A, B[:, 1], block.E, block.P, load_given=True)
     assert given == pytest.approx(sup, rel=1e-9)

@@ -30,6 +30,51 @@ def test_simulate_many_dispatches_on_the_plant():
         .metrics()["max_abs_rocof_meas"]
 
 
+def _same(table: pd.DataFrame, results: list, areas: bool) -> None:
+    """``results``' metrics are ``table``'s rows, value for value (a grid's mean
+    modification to 1e-12: the table sums it in the kernel, a result from its trace)."""
+    rows = table.to_dict("records")
+    mine = [{"scenario": i, "area": a, **m} for i, r in enumerate(results)
+            for a, m in r.metrics().items()] if areas else [r.metrics() for r in results]
+    assert len(rows) == len(mine)
+    for row, m in zip(rows, mine):
+        for key, value in m.items():
+            if isinstance(value, float) and not pd.isna(value):
+                assert row[key] == pytest.approx(value, rel=1e-12, abs=1e-15), key
+            else:
+                assert row[key] == value or (pd.isna(row[key]) and pd.isna(value)), key
+
+
+def test_simulate_many_keeps_the_metrics_table_or_the_results_for_every_plant():
+    """Issue "One": one return for every plant — the metrics table by default, one
+    result per scenario with ``keep="results"``, whose ``metrics()`` are the table's
+    rows (a single area's table with noise and a certified filter; a grid's scenarios
+    with keywords they share)."""
+    table = pd.DataFrame({"waveform": ["sinusoid", "step", "sinusoid"],
+                          "channel": ["pc", "load", "pc"], "amplitude": [0.1, 0.05, 2.0],
+                          "freq_hz": [1.0, 0.0, 1.0], "start": 0.5,
+                          "alpha": [np.nan, 20.0, np.nan], "Ts": 0.25,
+                          "method": ["paper", "certified", "paper"],
+                          "noise_w": [0.0, 1e-4, 0.0], "noise_rocof": [0.0, 1e-3, 0.0],
+                          "seed": [0, 3, 0]})
+    metrics = lfc.simulate_many(P, table, duration=3.0, progress=False)
+    results = lfc.simulate_many(P, table, duration=3.0, progress=False, keep="results")
+    assert all(isinstance(r, lfc.SimResult) for r in results) and results[2].metrics()["tripped"]
+    _same(metrics, results, areas=False)
+    scenarios = [{}, {"filters": {0: "certified", 1: "certified"}}]
+    shared = {"attacks": {0: {"pc": lfc.Sinusoid(1.0, 0.5, start=1.0)}}, "anti_windup": True}
+    grid = lfc.simulate_many(TWO, scenarios, duration=5.0, **shared)
+    runs = lfc.simulate_many(TWO, scenarios, duration=5.0, keep="results", **shared)
+    assert list(grid.columns[:2]) == ["scenario", "area"] and len(grid) == 4
+    _same(grid, runs, areas=True)
+    one = lfc.simulate(TWO, duration=5.0, **shared)
+    assert runs[0].metrics() == one.metrics()
+    with pytest.raises(ValueError, match="keep must be one of"):
+        lfc.simulate_many(TWO, scenarios, duration=5.0, keep="traces")
+    with pytest.raises(ValueError, match="chunk_size is for keep='metrics'"):
+        lfc.simulate_many(P, table, duration=3.0, keep="results", chunk_size=2)
+
+
 @pytest.mark.parametrize("plant", ["kundur", None, 3.0])
 def test_an_unknown_plant_is_a_clear_error(plant):
     with pytest.raises(ValueError, match="plant must be an LFCParams, a MultiAreaParams, an "

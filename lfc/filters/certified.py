@@ -11,8 +11,8 @@ control-invariant set with a *hold* backup law:
   + C x_eq`` with ``x_eq = q_u u + q_p p``.  It is checked at samples up to
   the horizon (8 s), each limit tightened by ``D2 delta^2 / 8``, a proven bound
   on how far the output can move between two samples ``delta`` apart (``D2``
-  bounds ``|y''|``: see :func:`_intersample`); the samples are as sparse as a
-  chosen tightening allows (``tightening``, :func:`_merge_intervals`: 1 ms
+  bounds ``|y''|``: see :func:`intersample`); the samples are as sparse as a
+  chosen tightening allows (``tightening``, :func:`merge_intervals`: 1 ms
   apart where the fast modes move, up to 0.1 s and more once they have
   decayed); after the horizon the deviation from the held
   command's equilibrium must lie in an ellipsoid ``e'Pe <= rho^2`` that the
@@ -144,6 +144,7 @@ from lfc.estimation import KalmanFilter, check_noise_std, measurement_std
 from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, OUTSIDE, Backend, Options,
                               applied_flags, built_once, check_limits, given, hold_invalid,
                               option, valid_input)
+from lfc.filters.bounds import curvature_gains, expm_at, intersample, merge_intervals, pair
 from lfc.filters.responses import L1_HORIZON, load_gains, peak_norm, period_step_gain
 from lfc.model import LFCParams, lfc_matrices, output_matrix
 from lfc.relays import RelaySettings
@@ -378,7 +379,7 @@ class CertifiedSet:
             kappa_r = -norm.ppf(o.trips_per_hour / (2 * 3600 * o.relay_rate))
             limits = limits - kappa_r * np.asarray(o.noise_std, float)
         fine = grid(o.horizon)
-        gains = [_curvature_gains(lfc_matrices(p)[0], output_matrix(), fine) for p in self.plants]
+        gains = [curvature_gains(lfc_matrices(p)[0], output_matrix(), fine) for p in self.plants]
         self.times = _design_grid(params, fine, gains, limits, o.tightening)
         self.blocks = [_PlantBlock(p, self.times, fine, g, limits, self.load_bound,
                                    o.load_kind, cov, self.kappa,
@@ -404,7 +405,7 @@ def _design_grid(params: LFCParams, fine: np.ndarray, gains: list[np.ndarray],
                  limits: np.ndarray, tightening: float) -> np.ndarray:
     """The certificate's sample times: the coarsest subset of the graded grid
     ``fine`` on which every plant's outputs move at most ``tightening`` times
-    their limits between samples (:func:`_merge_intervals`), for the design
+    their limits between samples (:func:`merge_intervals`), for the design
     model's derivative bound (on every 4th sample of ``fine`` after 0.05 s).
     Only the spacing comes from here: each plant's inter-sample bound is then
     proven on these times (:class:`_PlantBlock`)."""
@@ -412,11 +413,11 @@ def _design_grid(params: LFCParams, fine: np.ndarray, gains: list[np.ndarray],
     C = output_matrix()
     q = -np.linalg.solve(A, B)
     ref = fine[(fine <= 0.05) | (np.arange(len(fine)) % 4 == 0)]
-    E = _expm_at(A, ref)
+    E = expm_at(A, ref)
     rest = np.eye(5)[None] - E
     V = _derivative_bound(A, B, C, C @ E, C @ rest @ q[:, 0], C @ rest @ q[:, 1], limits, q)
     envelope = np.max([g @ V for g in gains], axis=0) / limits
-    return fine[_merge_intervals(fine, envelope, tightening)]
+    return fine[merge_intervals(fine, envelope, tightening)]
 
 
 class _PlantBlock:
@@ -441,14 +442,14 @@ class _PlantBlock:
             most = float(np.min(limits / gain))
             steps = gains_of_kind["steps"]
             hint = (f"; load_kind='steps' (one step, a ramp or any monotone change) takes "
-                    f"{_pair(steps)} per pu and allows < {float(np.min(limits / steps)):.4g} pu"
+                    f"{pair(steps)} per pu and allows < {float(np.min(limits / steps)):.4g} pu"
                     if load_kind == "band" else "")
             raise ValueError(f"load_bound={load:g} pu is too large: with load_kind="
-                             f"{load_kind!r} it takes {load:g} x {_pair(gain)} of the limits "
-                             f"{_pair(limits)} (frequency pu, ROCOF pu/s) of plant {plant!r}; "
+                             f"{load_kind!r} it takes {load:g} x {pair(gain)} of the limits "
+                             f"{pair(limits)} (frequency pu, ROCOF pu/s) of plant {plant!r}; "
                              f"it must be < {most:.4g} pu before any other tightening "
                              f"(largest_load_bound gives the most that can be built){hint}")
-        E = _expm_at(A, times)                            # (n, 5, 5)
+        E = expm_at(A, times)                            # (n, 5, 5)
         G = C @ E                                         # y(t_k) = G x + hu u + hl p
         rest = np.eye(5)[None] - E
         hu, hl = C @ rest @ q[:, 0], C @ rest @ q[:, 1]
@@ -457,7 +458,7 @@ class _PlantBlock:
                              "the horizon (a plant far from the design); shorten horizon")
         sub = (times <= 0.05) | (np.arange(len(times)) % 3 == 0)   # fewer rows: a superset
         V = _derivative_bound(A, B, C, G[sub], hu[sub], hl[sub], limits, q)
-        tau = _intersample(gains, V, fine, times)          # (n, 2) per sample
+        tau = intersample(gains, V, fine, times)          # (n, 2) per sample
         t_max, tau0 = tau.max(axis=0), tau[0]
         self.tau = float(np.max(t_max / limits))
         if cov is not None:                    # the state and load estimates' error
@@ -484,9 +485,9 @@ class _PlantBlock:
         # most its total variation times the step response's peak over one period
         again = recheck[0] * period_step_gain(A, B[:, 1], C, recheck[1])
         if np.any(again > load * gain):   # recheck <= load: only by the gains' roundings
-            raise ValueError(f"recheck_bound={recheck[0]:g} pu takes {_pair(again)} of the "
+            raise ValueError(f"recheck_bound={recheck[0]:g} pu takes {pair(again)} of the "
                              f"limits in one period, more than load_bound={load:g} pu takes "
-                             f"({_pair(load * gain)}): a command certified now would fail "
+                             f"({pair(load * gain)}): a command certified now would fail "
                              f"its own re-check; raise load_bound or lower recheck_bound")
         held = held - again
         self.budget = {"limits": limits, "load": load * gain, "estimate": est,
@@ -568,7 +569,7 @@ class _PlantBlock:
 
     def _budget(self) -> str:
         """Each tightening of the limits, for an error message (pu; pu/s)."""
-        return ", ".join(f"{name} {_pair(v)}" for name, v in self.budget.items())
+        return ", ".join(f"{name} {pair(v)}" for name, v in self.budget.items())
 
     def pack(self) -> np.ndarray:
         """Header, then per output (frequency, ROCOF) its rows column by column
@@ -670,72 +671,6 @@ def rate_bound(M: np.ndarray, a_ub: np.ndarray, b_ub: np.ndarray,
                                  f"params and relays for extreme values")
             V[i] = max(V[i], -res.fun)
     return V
-
-
-def _curvature_gains(A: np.ndarray, C: np.ndarray, times: np.ndarray) -> np.ndarray:
-    """``K_k`` (per interval of ``times``, the first from 0; shape (n, 2, 5)) with
-    ``|y''| <= K_k V`` on the interval whenever ``|x'(0)| <= V`` entrywise.
-
-    Held input: ``y''(t) = C A e^{At} v`` with ``v = x'(0)``, and on
-    ``[t_k, t_k + d]``, ``|C A e^{At} v| <= |C A e^{A t_k}| e^{|A| d} |v|``
-    entrywise (``|e^{As}| <= e^{|A| s}``)."""
-    starts = np.concatenate([[0.0], times[:-1]])
-    growth = _expm_at(np.abs(A), times - starts)          # e^{|A| d}
-    return np.abs(C @ A @ _expm_at(A, starts)) @ growth
-
-
-def _merge_intervals(times: np.ndarray, curvature: np.ndarray, tightening: float
-                     ) -> np.ndarray:
-    """The coarsest subset of ``times`` whose steps ``d`` keep ``D2 d^2 / 8``
-    within ``tightening`` (``curvature``: ``D2`` over each interval of ``times``
-    divided by the limit, (n, 2)): consecutive intervals are merged greedily,
-    ``D2`` over a merged step being the largest of its parts'."""
-    keep, start, worst = [], 0.0, 0.0
-    for k, t in enumerate(times):
-        worst = max(worst, float(np.max(curvature[k])))
-        if k + 1 < len(times):
-            nxt = max(worst, float(np.max(curvature[k + 1])))
-            if nxt * (times[k + 1] - start) ** 2 / 8 <= tightening:
-                continue
-        keep.append(k)
-        start, worst = t, 0.0
-    return np.array(keep)
-
-
-def _intersample(gains: np.ndarray, V: np.ndarray, fine: np.ndarray,
-                 times: np.ndarray) -> np.ndarray:
-    """How far each output can move between two samples (pu, pu/s).
-
-    For the interval ending at sample k (the first starts at the current state),
-    of length d: ``D2 d^2 / 8``, ``D2`` the largest of :func:`_curvature_gains`
-    ``@ V`` over the intervals of the finer grid ``fine`` it spans (``times`` is
-    a subset of ``fine``).  Returns, per sample and output (n, 2), the larger
-    of its two intervals' bounds (row 0 also bounds the first interval).  If an
-    output's extreme between two samples is interior, ``y' = 0`` there and it
-    is at most ``d / 2`` from one of them: ``|y| <= max(|y_k|, |y_k+1|) +
-    D2 d^2 / 8``."""
-    d2_fine = gains @ V                                     # (n_fine, 2)
-    ends = np.searchsorted(fine, times - 1e-12) + 1         # fine[ends - 1] == times
-    d2 = np.maximum.reduceat(d2_fine, np.concatenate([[0], ends[:-1]]), axis=0)
-    steps = np.diff(np.concatenate([[0.0], times]))
-    tau = d2 * steps[:, None] ** 2 / 8
-    return np.maximum(tau, np.vstack([tau[1:], tau[-1:]]))
-
-
-def _expm_at(A: np.ndarray, times: np.ndarray) -> np.ndarray:
-    """``e^{A t}`` for every ``t`` of ``times``: shape (len(times), n, n); by the
-    eigendecomposition when ``A``'s eigenvectors are well conditioned, else
-    ``expm`` at each distinct time."""
-    w, V = np.linalg.eig(A)
-    if np.linalg.cond(V) < 1e6:
-        return np.real(np.einsum("ij,tj,jk->tik", V, np.exp(np.outer(times, w)),
-                                 np.linalg.inv(V)))
-    distinct, back = np.unique(times, return_inverse=True)
-    return np.array([expm(A * t) for t in distinct])[back]
-
-
-def _pair(v) -> str:
-    return f"({v[0]:.3g}, {v[1]:.3g})"
 
 
 def largest_load_bound(params: LFCParams, relays: RelaySettings, *, tol: float = 1e-3,

@@ -15,7 +15,7 @@ this period, the others hold last period's).  A vector of commands is
 *certified* at a state if holding it for ever keeps every area's outputs inside
 its relay limits in continuous time: checked at samples up to the horizon, each
 limit tightened by a proven bound on how far an output moves between samples
-(:func:`lfc.filters.certified._intersample` on the coupled model), and after the
+(:func:`lfc.filters.bounds.intersample` on the coupled model), and after the
 horizon by an invariant ellipsoid of the coupled model around the vector's
 equilibrium (a Lyapunov one, or one shaped by a semidefinite program where the
 Lyapunov one leaves no room: ``terminal``, :func:`shaped_terminal`).  Every condition is affine in ``u_k`` (the ellipsoid a convex
@@ -104,8 +104,8 @@ from lfc._validate import (ParameterTypeError, as_float, check_array, check_inde
 from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, MAX_ABS_INPUT, OUTSIDE,
                               applied_flags, built_once, check_limits, hold_invalid,
                               valid_input)
-from lfc.filters.certified import (NUMERIC_MARGIN, _curvature_gains, _expm_at,
-                                   _intersample, _merge_intervals, _pair, grid, rate_bound)
+from lfc.filters.bounds import curvature_gains, expm_at, intersample, merge_intervals, pair
+from lfc.filters.certified import NUMERIC_MARGIN, grid, rate_bound
 from lfc.filters.responses import load_gains, period_step_gain
 from lfc.estimation import (LOAD_STD, check_noise_std, kf_correct, kf_predict, measurement_std,
                             steady_state_kalman)
@@ -426,18 +426,18 @@ class CoupledSet:
                              "control_period")
         held = limits - o.recheck_bound * again
         fine = grid(o.horizon)
-        gains = _curvature_gains(A, C, fine)                          # (fine, outputs, n_r)
-        E_ref = _expm_at(A, fine[(fine <= 0.05) | (np.arange(len(fine)) % 4 == 0)])
+        gains = curvature_gains(A, C, fine)                          # (fine, outputs, n_r)
+        E_ref = expm_at(A, fine[(fine <= 0.05) | (np.arange(len(fine)) % 4 == 0)])
         V = _rate(A, C, E_ref, limits)
-        self.times = times = fine[_merge_intervals(fine, (gains @ V) / limits, o.tightening)]
-        E = _expm_at(A, times)
+        self.times = times = fine[merge_intervals(fine, (gains @ V) / limits, o.tightening)]
+        E = expm_at(A, times)
         G = C @ E                                                    # y(t_k) = G z + Hu u + Hl p
         rest = np.eye(n_r)[None] - E
         Hu, Hl = C @ rest @ qu, C @ rest @ ql
         # the inter-sample bound, proven on these times for the states the rows allow
         sub = (times <= 0.05) | (np.arange(len(times)) % 3 == 0)
         V = _rate(A, C, E[sub], limits)
-        tau = _intersample(gains, V, fine, times)                     # (n, outputs)
+        tau = intersample(gains, V, fine, times)                     # (n, outputs)
         t_max, tau0 = tau.max(axis=0), tau[0]
         # the estimate's error e = (e_z, e_p) moves row k's output by G_k e_z + Hl_k e_p
         self.kalman = (GridKalman(params, o.control_period, o.noise_std)
@@ -593,7 +593,7 @@ class CoupledSet:
         self.W = R[N_AREA_STATES * n_a:, N_AREA_STATES * n_a:].T   # the reachable flows' basis
 
     def _describe(self) -> str:
-        return ", ".join(f"{name} {_pair(v)}" for name, v in self.budget.items())
+        return ", ".join(f"{name} {pair(v)}" for name, v in self.budget.items())
 
 
 def shaped_terminal(A: np.ndarray, C: np.ndarray, loads: np.ndarray,
@@ -781,9 +781,9 @@ def _load_error_steps(kalman: GridKalman, A: np.ndarray, Bl: np.ndarray, period:
     # interpolation by at most ds^2 / 8 sup ||A^3 e^{As} Bl_j||: on 1,000 instants,
     # times e^{||A|| u} (||e^{A(s + u)} x|| <= e^{||A|| u} ||e^{As} x||)
     s = np.linspace(0.0, period, BENDS)
-    v = (A @ _expm_at(A, s) @ Bl).transpose(1, 0, 2).reshape(n_r, -1)   # (n_r, BENDS n_a)
+    v = (A @ expm_at(A, s) @ Bl).transpose(1, 0, 2).reshape(n_r, -1)   # (n_r, BENDS n_a)
     fine = np.linspace(0.0, period, 1001)
-    third = float(np.max(np.linalg.norm(A @ A @ A @ _expm_at(A, fine) @ Bl, axis=1)))
+    third = float(np.max(np.linalg.norm(A @ A @ A @ expm_at(A, fine) @ Bl, axis=1)))
     third *= math.exp(float(np.linalg.norm(A, 2)) * fine[1])
     jumps = []
     for d in np.linspace(0.0, period, offsets):
