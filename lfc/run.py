@@ -35,7 +35,7 @@ PLANTS = ("an LFCParams, a MultiAreaParams, an lfc.testbed.MicrogridCase, an "
 ANDES_PLANT = ("build", "attach", "measure", "extra", "protect", "actuate", "set_load")
 
 
-def _testbed_kind(plant) -> str | None:
+def testbed_kind(plant) -> str | None:
     """``"microgrid"`` or ``"grid"`` for a testbed case, ``"andes"`` for an
     ANDES plant (:class:`lfc.testbed.loop.AndesPlant`), else None (ANDES is only
     imported when one is given)."""
@@ -80,7 +80,7 @@ def simulate(plant, *, duration: float, design=None, **kwargs):
     -------
     SimResult or MultiAreaResult
     """
-    if design is not None and _testbed_kind(plant) is None:
+    if design is not None and testbed_kind(plant) is None:
         raise ValueError("design is for ANDES cases only; a linear plant is its own design "
                          "model (give a filter built on another model to study mismatch)")
     if isinstance(plant, LFCParams):
@@ -89,7 +89,7 @@ def simulate(plant, *, duration: float, design=None, **kwargs):
     if isinstance(plant, MultiAreaParams):
         from lfc.simulate_multiarea import simulate_grid_linear
         return simulate_grid_linear(plant, duration=duration, **kwargs)
-    kind = _testbed_kind(plant)
+    kind = testbed_kind(plant)
     from lfc.engine import check_load_measured
     if kind == "microgrid":
         check_load_measured({None: kwargs.get("scc")}, kwargs.get("estimator"),
@@ -156,7 +156,7 @@ def simulate_many(plant, scenarios, *, duration: float, design=None, keep: str =
     """
     if keep not in KEEP:
         raise ValueError(f"keep must be one of {KEEP}, got {keep!r:.40}")
-    if design is not None and _testbed_kind(plant) is None:
+    if design is not None and testbed_kind(plant) is None:
         raise ValueError("design is for ANDES cases only")
     if isinstance(plant, LFCParams):
         from lfc.batch import simulate_table, table_results
@@ -173,7 +173,7 @@ def simulate_many(plant, scenarios, *, duration: float, design=None, keep: str =
             scenarios = [{**shared, **s} for s in scenarios]
         run = simulate_grid_table if keep == "metrics" else grid_results
         return run(plant, scenarios, duration=duration, **kwargs)
-    kind = _testbed_kind(plant)
+    kind = testbed_kind(plant)
     if kind == "grid":
         from lfc.simulate_multiarea import results_table
         from lfc.testbed.grid_fit import grid_design

@@ -40,6 +40,10 @@ _FLAG_BITS = dict(zip(ALARM_FLAGS, (ACTIVE, INFEASIBLE, OUTSIDE, INVALID, SOLVER
 _BINDING = (("frequency", BIND_FREQ), ("rocof", BIND_ROCOF), ("certified", BIND_CERT),
             ("u_min", BIND_UMIN), ("u_max", BIND_UMAX))
 MEMORY = 3  # floats of memory per scenario, for every method
+#: every method's code in the compiled dispatchers (:func:`lfc.filters.dispatch.decide`,
+#: the engine's grid-wide branch for ``"coupled"``), the one table of them; ``"python"``:
+#: a filter that is not compiled, called back from compiled code
+METHOD_IDS = {"paper": 0, "certified": 1, "coupled": 2, "contract": 3, "python": 99}
 CONSTRAINTS = ("frequency", "rocof")   # the barrier constraints, in the order of the outputs
 MAX_ABS_INPUT = 1e6  # pu, pu/s: a state, command or load beyond is a corrupted message
 
@@ -223,11 +227,51 @@ class Options:
                 if f.default is MISSING or getattr(self, f.name) != f.default}
 
 
+class Layout:
+    """The named fields of a packed float64 array, in order: a name alone is one
+    number, ``(name, size)`` a block of ``size``; every offset is computed here,
+    none written by hand.  A filter's compiled ``decide`` reads its data at the
+    offsets of its module's layout (module constants: numba reads them as
+    compile-time numbers); :meth:`unpack` names what an array holds.
+
+    >>> Layout("alpha", ("P", 10), "u_max").offsets()
+    (0, 1, 11)
+    """
+
+    def __init__(self, *fields: str | tuple[str, int]) -> None:
+        self.fields = tuple((f, 1) if isinstance(f, str) else (str(f[0]), int(f[1]))
+                            for f in fields)
+        names = [name for name, _ in self.fields]
+        if len(set(names)) != len(names) or any(size < 1 for _, size in self.fields):
+            raise ValueError(f"a layout's fields need distinct names and sizes >= 1, got "
+                             f"{self.fields}")
+        starts = np.concatenate([[0], np.cumsum([size for _, size in self.fields])])
+        self.start = dict(zip(names, (int(k) for k in starts[:-1])))
+        self.size = int(starts[-1])
+
+    def offsets(self) -> tuple[int, ...]:
+        """Every field's first index, in order."""
+        return tuple(self.start.values())
+
+    def unpack(self, data: np.ndarray, at: int = 0) -> dict[str, float | np.ndarray]:
+        """The fields of ``data[at:at + size]`` by name: a number, or an array for a
+        block."""
+        out: dict[str, float | np.ndarray] = {}
+        for name, size in self.fields:
+            k = at + self.start[name]
+            out[name] = float(data[k]) if size == 1 else np.asarray(data[k:k + size])
+        return out
+
+    def __repr__(self) -> str:
+        return "Layout(" + ", ".join(n if s == 1 else f"({n!r}, {s})"
+                                     for n, s in self.fields) + ")"
+
+
 class Backend:
     """A filter method: options, compiled data, memory, and how to explain a call.
 
     Subclasses set ``name``, ``Options`` (their :class:`Options` dataclass) and
-    ``method_id`` (the compiled dispatcher's code, :mod:`lfc.filters.dispatch`;
+    ``method_id`` (the compiled dispatcher's code, ``METHOD_IDS[name]``;
     a backend with ``jit = False`` is called back from compiled code instead and
     needs none), build ``data`` (float64, read by their compiled ``decide``) in
     ``__init__``, and implement :meth:`reason` and :meth:`details`.  The

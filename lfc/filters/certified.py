@@ -141,9 +141,9 @@ from lfc._jit import inline, maxnum, minnum
 from lfc._validate import (check_nonnegative, check_pair, check_positive, check_range,
                            is_sequence)
 from lfc.estimation import KalmanFilter, check_noise_std, measurement_std
-from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, OUTSIDE, Backend, Options,
-                              applied_flags, built_once, check_limits, given, hold_invalid,
-                              option, valid_input)
+from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, OUTSIDE, Backend, Layout, METHOD_IDS,
+                              Options, applied_flags, built_once, check_limits, given,
+                              hold_invalid, option, valid_input)
 from lfc.filters.bounds import curvature_gains, expm_at, intersample, merge_intervals, pair
 from lfc.filters.responses import L1_HORIZON, load_gains, peak_norm, period_step_gain
 from lfc.model import LFCParams, lfc_matrices, output_matrix
@@ -155,14 +155,25 @@ BOX = ("M", "D", "tau_g", "tau_t", "droop")  # the parameters an uncertainty box
 LOAD_KINDS = ("band", "steps")   # what load_bound bounds (module docstring)
 LP_LOAD = 1.0          # pu: load range of _derivative_bound's programs (V does not depend on it)
 NUMERIC_MARGIN = 1e-6  # relative tightening that absorbs floating-point differences
-# layout of the data array decide() reads: a header, then one block per plant
-U_MIN, U_MAX, N_PLANTS, N_ROWS, F_LIM, R_LIM, LOAD_ROOM, HEAD = range(8)
-(EQ_PER_P, EQ_HALF, EQ_HALF_HELD, RHO, RHO_HELD, A_QUAD, Y0_F, Y0_R, Y0_F_HELD, Y0_R_HELD,
- BLOCK_HEAD) = range(11)
-# per output, m rows in each of N_COLS columns: a, b (new), a, b (held), the five of G, l
-COL_A, COL_A_HELD, COL_G, COL_L, N_COLS = 0, 2, 4, 9, 10
-# the terminal ellipsoid after the rows: E (5x5), el (5), eu (5), P (5x5)
-ELL_E, ELL_EL, ELL_EU, ELL_P, ELL_SIZE = 0, 25, 30, 35, 60
+#: the data array decide() reads: a header, then one block per plant (the design model
+#: and the box's corners), each a head, then per output (frequency, ROCOF) ``m`` rows in
+#: each of its columns, then the terminal ellipsoid
+LAYOUT = Layout("u_min", "u_max", "n_plants", "n_rows", "f_lim", "r_lim", "load_room")
+U_MIN, U_MAX, N_PLANTS, N_ROWS, F_LIM, R_LIM, LOAD_ROOM = LAYOUT.offsets()
+HEAD = LAYOUT.size
+BLOCK = Layout("eq_per_p", "eq_half", "eq_half_held", "rho", "rho_held", "a_quad", "y0_f",
+               "y0_r", "y0_f_held", "y0_r_held")
+(EQ_PER_P, EQ_HALF, EQ_HALF_HELD, RHO, RHO_HELD, A_QUAD, Y0_F, Y0_R, Y0_F_HELD,
+ Y0_R_HELD) = BLOCK.offsets()
+BLOCK_HEAD = BLOCK.size
+#: a row's columns: a, b (new), a, b (held), the five of G, l
+COLUMNS = Layout(("ab", 2), ("ab_held", 2), ("G", 5), "l")
+COL_A, COL_A_HELD, COL_G, COL_L = COLUMNS.offsets()
+N_COLS = COLUMNS.size
+#: the terminal ellipsoid after the rows: E (5x5), el (5), eu (5), P (5x5)
+ELLIPSOID = Layout(("E", 25), ("el", 5), ("eu", 5), ("P", 25))
+ELL_E, ELL_EL, ELL_EU, ELL_P = ELLIPSOID.offsets()
+ELL_SIZE = ELLIPSOID.size
 
 
 def box_plants(params: LFCParams, uncertainty: float | dict) -> list[LFCParams]:
@@ -728,7 +739,7 @@ class CertifiedFilter(Backend):
     :class:`CertifiedOptions`: clip to the certified interval of
     :class:`CertifiedSet`, or hold the last certified command."""
 
-    name, method_id, Options = "certified", 1, CertifiedOptions
+    name, method_id, Options = "certified", METHOD_IDS["certified"], CertifiedOptions
 
     def __init__(self, params: LFCParams, relays: RelaySettings,
                  options: CertifiedOptions) -> None:

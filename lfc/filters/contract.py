@@ -75,8 +75,9 @@ import numpy as np
 
 from lfc._jit import inline
 from lfc._validate import ParameterTypeError, check_nonnegative, check_number, check_positive
-from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, MAX_ABS_INPUT, Backend, Options,
-                              built_once, given, hold_invalid, option, valid_input)
+from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, MAX_ABS_INPUT, Backend, Layout,
+                              METHOD_IDS, Options, built_once, given, hold_invalid, option,
+                              valid_input)
 from lfc.filters.certified import NUMERIC_MARGIN
 from lfc.filters.coupled import held_grid, output_rows
 from lfc.filters.responses import load_gains, rate_gains
@@ -84,7 +85,9 @@ from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams, as_grid
 from lfc.relays import RelaySettings
 
-HALF, STEP, F_LIM, R_LIM = range(4)   # layout of the data array decide() reads
+#: the data array decide() reads: the box's half-width and step (pu), the relay limits
+LAYOUT = Layout("half", "step", "f_lim", "r_lim")
+HALF, STEP, F_LIM, R_LIM = LAYOUT.offsets()
 
 
 @dataclass(frozen=True)
@@ -350,7 +353,7 @@ class ContractFilter(Backend):
     :class:`ContractOptions`): clip the command to ``[-a, a]`` and to within
     ``r T`` of the last one."""
 
-    name, method_id, Options = "contract", 3, ContractOptions
+    name, method_id, Options = "contract", METHOD_IDS["contract"], ContractOptions
 
     def __init__(self, params: LFCParams, relays: RelaySettings,
                  options: ContractOptions) -> None:

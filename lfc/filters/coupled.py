@@ -101,23 +101,27 @@ from scipy.linalg import expm, solve_continuous_lyapunov
 from lfc._jit import inline, jit, maxnum, minnum
 from lfc._validate import (ParameterTypeError, as_float, check_array, check_index,
                            check_nonnegative, check_number, check_positive, check_range)
-from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, MAX_ABS_INPUT, OUTSIDE,
-                              applied_flags, built_once, check_limits, hold_invalid,
-                              valid_input)
+from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, MAX_ABS_INPUT, OUTSIDE, Layout,
+                              METHOD_IDS, applied_flags, built_once, check_limits,
+                              hold_invalid, valid_input)
 from lfc.filters.bounds import curvature_gains, expm_at, intersample, merge_intervals, pair
 from lfc.filters.certified import NUMERIC_MARGIN, grid, rate_bound
 from lfc.filters.responses import load_gains, period_step_gain
 from lfc.estimation import (LOAD_STD, check_noise_std, kf_correct, kf_predict, measurement_std,
                             steady_state_kalman)
-from lfc.model import zoh
+from lfc.model import STATES, zoh
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams, discretize_grid, multiarea_matrices
 from lfc.relays import RelaySettings
 
-METHOD_ID = 2          # the engine's code for this filter (lfc.engine.generator_period)
-DW, ROCOF = 3, 4       # an area's measured outputs among its five states
-# header of the data array decide() reads
+METHOD_ID = METHOD_IDS["coupled"]   # the engine's code for it (lfc.engine.generator_period)
+DW, ROCOF = STATES.index("dw_meas"), STATES.index("rocof_meas")   # an area's measured outputs
+#: header of the data array decide() reads
+LAYOUT = Layout("n_s", "n_a", "n_r", "n_rows", "u_min", "u_max", "f_lim", "r_lim", "rho_new",
+                "rho_held", "half_new", "half_held", "y0_f_new", "y0_r_new", "y0_f_held",
+                "y0_r_held", "n_k", "lift")
 (N_S, N_A, N_R, N_ROWS, U_MIN, U_MAX, F_LIM, R_LIM, RHO_NEW, RHO_HELD, HALF_NEW, HALF_HELD,
- Y0_F_NEW, Y0_R_NEW, Y0_F_HELD, Y0_R_HELD, N_K, LIFT, HEAD) = range(19)
+ Y0_F_NEW, Y0_R_NEW, Y0_F_HELD, Y0_R_HELD, N_K, LIFT) = LAYOUT.offsets()
+HEAD = LAYOUT.size
 EXPORT_STD = 1e-4    # pu: the grid Kalman filter's noise model of the metered tie-line exports
 
 

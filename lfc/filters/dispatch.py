@@ -2,7 +2,7 @@
 
 The engine and :class:`lfc.SafetyFilter` both call these, so a filter runs the
 same compiled code whether it is called once, on a batch of states or inside a
-simulation.  A method is a code (``METHOD_IDS``); a filter that is not
+simulation.  A method is a code (``lfc.filters.base.METHOD_IDS``); a filter that is not
 compiled (``solver="cvxpy"``) is registered here and called back through
 ``numba.objmode``.
 """
@@ -15,6 +15,7 @@ import numba as nb
 import numpy as np
 
 from lfc._jit import jit
+from lfc.filters.base import METHOD_IDS
 from lfc.filters.certified import CertifiedFilter
 from lfc.filters.certified import decide as decide_certified
 from lfc.filters.contract import ContractFilter
@@ -23,7 +24,7 @@ from lfc.filters.paper import PaperFilter
 from lfc.filters.paper import decide as decide_paper
 
 PAPER, CERTIFIED, CONTRACT, PYTHON = (PaperFilter.method_id, CertifiedFilter.method_id,
-                                     ContractFilter.method_id, 99)
+                                     ContractFilter.method_id, METHOD_IDS["python"])
 _PYTHON: weakref.WeakValueDictionary = weakref.WeakValueDictionary()  # id -> backend
 
 

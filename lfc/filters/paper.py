@@ -71,8 +71,9 @@ from lfc._jit import inline
 from lfc._validate import check_positive
 from lfc.filters.base import (ACTIVE, BIND_FREQ, BIND_ROCOF, BIND_UMAX, BIND_UMIN, INFEASIBLE,
                               INVALID, KIND_FREQ_HI, KIND_FREQ_LO, KIND_ROCOF_HI,
-                              KIND_ROCOF_LO, OUTSIDE, SOLVER_ERROR, Backend, Options,
-                              check_choice, check_limits, given, option, valid_input)
+                              KIND_ROCOF_LO, OUTSIDE, SOLVER_ERROR, Backend, Layout,
+                              METHOD_IDS, Options, check_choice, check_limits, given, option,
+                              valid_input)
 from lfc.model import LFCParams, discretize, lfc_matrices, output_matrix
 from lfc.relays import RelaySettings
 
@@ -91,9 +92,14 @@ BIND_TOL = 1e-7    # relative tolerance to report a bound as binding
 BOUND_ULPS = 8.0
 EPS = 2.220446049250313e-16
 
-# layout of the data array read by decide()
-ALPHA, U_MIN, U_MAX, RHO, PUSH, CONFLICT, APPLIED = range(7)
-P_, Q_, R_, W_, KG_, WL_, LIM2_, SIZE = 7, 17, 19, 21, 31, 33, 35, 37
+#: the data array decide() reads: the options, then the look-ahead's outputs
+#: ``y = x P + u q + p r`` (P: 5 x 2) and their rates ``C Ad x' = x W + u kg + p wl``,
+#: and the squared relay limits
+LAYOUT = Layout("alpha", "u_min", "u_max", "rho", "push", "conflict", "applied", ("P", 10),
+                ("q", 2), ("r", 2), ("W", 10), ("kg", 2), ("wl", 2), ("limits2", 2))
+ALPHA, U_MIN, U_MAX, RHO, PUSH, CONFLICT, APPLIED, P_, Q_, R_, W_, KG_, WL_, LIM2_ = \
+    LAYOUT.offsets()
+SIZE = LAYOUT.size
 _CONFLICT_CODE = {"slack": 0, "frequency": 1, "rocof": 2}
 
 
@@ -150,7 +156,7 @@ class PaperFilter(Backend):
     options : PaperOptions
     """
 
-    name, method_id, Options = "paper", 0, PaperOptions
+    name, method_id, Options = "paper", METHOD_IDS["paper"], PaperOptions
 
     def __init__(self, params: LFCParams, relays: RelaySettings, options: PaperOptions) -> None:
         super().__init__(params, relays, options)

@@ -41,8 +41,8 @@ def _legs(port: int, area: int) -> dict[str, tuple[str, str, int, int]]:
 
 
 def _protocol(protocol: str):
-    from lfc.wire.run import _transport
-    return _transport(protocol)
+    from lfc.wire.run import transport
+    return transport(protocol)
 
 
 def write_pcap(frames: list[tuple[float, str, bytes, int]], path: str | Path,

@@ -49,7 +49,7 @@ from lfc.lockstep import LinearGrid
 from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams, as_grid
 from lfc.relays import relays_or_default
-from lfc.run import _testbed_kind
+from lfc.run import testbed_kind
 from lfc.simulate import SimResult, check_timing
 from lfc.simulate_multiarea import MultiAreaResult, area_filter
 from lfc.wire.attacks import WireAttack
@@ -60,7 +60,7 @@ AGC = ("generator", "centre")
 MODES = ("lockstep", "realtime")
 
 
-def _transport(protocol: str):
+def transport(protocol: str):
     """The module of ``protocol``: each has ``Outstation``, ``Codec`` and ``Centre``
     with one interface (:mod:`lfc.wire.modbus`), and the shared ``EventLoop`` and
     ``Relay`` (:mod:`lfc.wire.relay`)."""
@@ -186,7 +186,7 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
     -------
     WireResult
     """
-    testbed = _testbed_kind(params)
+    testbed = testbed_kind(params)
     if not isinstance(params, (LFCParams, MultiAreaParams)) and testbed not in ("microgrid",
                                                                                   "grid"):
         raise ValueError(f"params must be an LFCParams (one area), a MultiAreaParams, a "
@@ -245,7 +245,7 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
             for a in range(n_a)]
     plant = LinearGrid(grid, loads, n_steps, ratio, dt, relays)
 
-    link = Link(n_a, _transport(protocol), policies, np.arange(n_ctrl) * ratio * dt, period,
+    link = Link(n_a, transport(protocol), policies, np.arange(n_ctrl) * ratio * dt, period,
                 None if local else k_freq[0] * period, anti_windup)
 
     def generate(j: int, lateness: float) -> None:
@@ -308,7 +308,7 @@ def _on_andes(case, kind: str, *, duration: float, attack, scc, protocol: str, l
     check_area_keys(attacks, n_a, "attack")
     policies = [WireAttack(attacks.get(a, [])) for a in range(n_a)]
     n_ctrl = int(np.ceil(duration / control_period - 1e-9))
-    link = Link(n_a, _transport(protocol), policies, np.arange(n_ctrl) * control_period,
+    link = Link(n_a, transport(protocol), policies, np.arange(n_ctrl) * control_period,
                 control_period)
     common = dict(duration=duration, relays=relays, noise_std=noise_std, seed=seed,
                   control_period=control_period, anti_windup=anti_windup, case=case,

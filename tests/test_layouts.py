@@ -1,0 +1,114 @@
+"""Issue "One": every filter's packed data has a named layout, its offsets computed
+(``lfc.filters.base.Layout``), none written by hand — and what a filter packs is what its
+layout names."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import lfc
+from lfc.filters import base, certified, contract, coupled, paper
+from lfc.filters.base import Layout
+from lfc.simulate_multiarea import area_filter
+
+P, RELAYS = lfc.LFCParams(), lfc.RelaySettings()
+FILTERS = Path(lfc.__file__).parent / "filters"
+
+
+def test_a_layout_computes_its_offsets_and_names_what_an_array_holds():
+    layout = Layout("alpha", ("P", 10), "u_max")
+    assert layout.offsets() == (0, 1, 11) and layout.size == 12
+    data = np.arange(14.0)
+    fields = layout.unpack(data, at=2)
+    assert fields["alpha"] == 2.0 and fields["u_max"] == 13.0
+    np.testing.assert_array_equal(fields["P"], np.arange(3.0, 13.0))
+    assert repr(layout) == "Layout(alpha, ('P', 10), u_max)"
+    with pytest.raises(ValueError, match="distinct names and sizes >= 1"):
+        Layout("a", "a")
+    with pytest.raises(ValueError, match="distinct names and sizes >= 1"):
+        Layout(("a", 0))
+
+
+def test_no_filter_module_writes_an_offset_by_hand():
+    """No module of ``lfc/filters`` assigns names from ``range(...)`` or from a tuple
+    of integer literals (the old ``P_, Q_, ... = 7, 17, ...``): offsets come from a
+    ``Layout`` (flag bits, powers of two, are not offsets)."""
+    found = []
+    for path in sorted(FILTERS.glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not (isinstance(node, ast.Assign) and isinstance(node.targets[0], ast.Tuple)):
+                continue
+            value = node.value
+            by_range = (isinstance(value, ast.Call) and isinstance(value.func, ast.Name)
+                        and value.func.id == "range")
+            literals = (isinstance(value, ast.Tuple) and len(value.elts) > 1
+                        and all(isinstance(e, ast.Constant) and type(e.value) is int
+                                for e in value.elts)
+                        and not all(e.value > 0 and e.value & (e.value - 1) == 0
+                                    for e in value.elts))
+            if by_range or literals:
+                found.append(f"{path.name}:{node.lineno}")
+    assert found == []
+
+
+def test_the_paper_filters_data_is_what_its_layout_names():
+    f = lfc.SafetyFilter(P, RELAYS, alpha=3.0, Ts=0.25, outside_rule="push", u_min=-2.0)
+    fields = paper.LAYOUT.unpack(f.data)
+    assert len(f.data) == paper.LAYOUT.size
+    assert (fields["alpha"], fields["u_min"], fields["u_max"], fields["push"]) == (
+        3.0, -2.0, np.inf, 1.0)
+    np.testing.assert_array_equal(fields["limits2"],
+                                  np.array([RELAYS.F, RELAYS.rocof_limit]) ** 2)
+
+
+def test_the_certified_filters_data_is_what_its_layouts_name():
+    f = lfc.SafetyFilter(P, RELAYS, method="certified", uncertainty=0.2, u_max=3.0)
+    head = certified.LAYOUT.unpack(f.data)
+    n_plants, n = int(head["n_plants"]), int(head["n_rows"])
+    assert n_plants == len(f.backend.cert.blocks) > 1               # the box's corners too
+    assert (head["u_max"], head["f_lim"], head["r_lim"]) == (3.0, RELAYS.F,
+                                                              RELAYS.rocof_limit)
+    stride = certified.BLOCK.size + certified.COLUMNS.size * n + certified.ELLIPSOID.size
+    assert len(f.data) == certified.LAYOUT.size + n_plants * stride
+    block = certified.BLOCK.unpack(f.data, at=certified.LAYOUT.size)
+    assert block["rho"] == f.backend.cert.blocks[0].rho["new"]
+    ellipsoid = certified.ELLIPSOID.unpack(f.data, at=certified.LAYOUT.size + stride
+                                           - certified.ELLIPSOID.size)
+    np.testing.assert_array_equal(ellipsoid["P"], f.backend.cert.blocks[0].P.ravel())
+
+
+def test_the_grid_filters_data_is_what_their_layouts_name():
+    two = lfc.MultiAreaParams.two_area()
+    box = area_filter(two, 0, "contract", RELAYS, 0.01)
+    fields = contract.LAYOUT.unpack(box.data)
+    assert (fields["f_lim"], fields["r_lim"]) == (RELAYS.F, RELAYS.rocof_limit)
+    assert fields["half"] > 0 and fields["step"] > 0
+    grid = area_filter(two, 0, "coupled", RELAYS, 0.01)
+    head = coupled.LAYOUT.unpack(grid.data)
+    assert (head["n_a"], head["f_lim"], head["r_lim"]) == (2, RELAYS.F, RELAYS.rocof_limit)
+    assert head["n_s"] == two.n_states
+
+
+def test_every_compiled_method_declares_its_layout():
+    for module in (paper, certified, contract, coupled):
+        assert isinstance(module.LAYOUT, base.Layout), module.__name__
+
+
+def test_method_ids_come_from_one_table():
+    """The compiled dispatchers' codes are ``METHOD_IDS``, distinct; no module writes
+    a method's code as a number."""
+    from lfc.filters import REGISTRY
+    codes = {name: backend.method_id for name, backend in REGISTRY.items()}
+    assert codes == {name: base.METHOD_IDS[name] for name in codes}
+    assert coupled.METHOD_ID == coupled.CoupledFilter.method_id == base.METHOD_IDS["coupled"]
+    assert len(set(base.METHOD_IDS.values())) == len(base.METHOD_IDS)
+    for path in sorted(Path(lfc.__file__).parent.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Assign) and isinstance(node.value, ast.Constant) \
+                    and type(node.value.value) is int:
+                names = [t.id for t in node.targets if isinstance(t, ast.Name)]
+                assert not {"method_id", "METHOD_ID"} & set(names), f"{path}:{node.lineno}"
