@@ -72,10 +72,7 @@ from lfc._validate import (ParameterTypeError, check_count, check_folder, check_
 from lfc.batch import metrics_frame
 from lfc.estimation import check_noise_std
 from lfc.engine import METRICS, Scenarios, check_area_keys, sample_signal
-from lfc.filters import SafetyFilter
-from lfc.filters.base import built_once
-from lfc.filters.bounds import tie_step_bound
-from lfc.filters.contract import contract_design
+from lfc.filters import SafetyFilter, build
 from lfc.filters.coupled import CoupledFilter
 from lfc.model import STATES
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams
@@ -84,69 +81,22 @@ from lfc.simulate import METRIC_KEYS, SimResult, check_timing, result
 
 __all__ = ["MultiAreaResult", "area_filter", "grid_results", "multiarea_result",
            "results_table", "simulate_grid_linear", "simulate_grid_table"]
-FILTER_KINDS = ("paper", "certified", "coupled", "contract")
-PAPER_ALPHA = 20.0   # 1/s: "paper" as notebook 08 runs it (notebook 09 also runs α = 3)
 
 
 def area_filter(params: MultiAreaParams, area: int,
                 kind: str | SafetyFilter | CoupledFilter | None, relays: RelaySettings,
                 control_period: float, noise_std: tuple[float, float] | None = None
                 ) -> SafetyFilter | CoupledFilter | None:
-    """The filter of ``area``: ``"paper"`` (the paper's SCC at α = 20 and its
-    default reading, on the area's model; build a :class:`SafetyFilter` for
-    another α), ``"certified"`` (the certified
-    filter of the area's model with ``load_bound`` = :func:`lfc.filters.bounds.tie_step_bound` and
-    the grid's ``command_range`` as its actuator limits ``u_min``, ``u_max``: a
-    model fitted to ANDES describes it only there; none on the linear presets),
-    ``"coupled"`` (the grid's coupled certificate with its default options,
-    :mod:`lfc.filters.coupled`: the same object for every area, which must all
-    have it; with ``noise_std``, the measurement noise of its grid Kalman
-    estimate, ``estimator="kalman"``), ``"contract"`` (the area's box of the
-    grid's :func:`~lfc.filters.contract.contract_design` with its defaults: the
-    decentralized certificate, proven when every area has it), a filter as
-    given, or None."""
+    """The filter of ``area`` as a grid's ``filters`` gives it: a filter as given,
+    None, or one built by name (:func:`lfc.filters.build`: ``"paper"``,
+    ``"certified"`` with the tie-line ``load_bound`` of
+    :func:`lfc.filters.bounds.tie_step_bound` and the grid's command range,
+    ``"contract"``, ``"coupled"``; ``noise_std``: the coupled certificate's
+    estimate noise)."""
     if kind is None or isinstance(kind, (SafetyFilter, CoupledFilter)):
         return kind
-    if kind == "coupled":
-        try:
-            return coupled_filter(params, relays, control_period,
-                                  None if noise_std is None else tuple(noise_std))
-        except ValueError as err:
-            raise ValueError(f"filters[{area}]='coupled' (the default options) cannot be "
-                             f"built: {err}; build a CoupledFilter with other options and give "
-                             f"it to every area (with horizon='auto' its horizon also follows a "
-                             f"legitimate load step: held_after_step)") from err
-    model = params.areas[area]
-    if kind == "contract":
-        share = contract_design(params, relays, control_period=control_period)
-        return SafetyFilter(model, relays, method="contract", control_period=control_period,
-                            half_width=float(share.half_width[area]),
-                            rate=float(share.rate[area]))
-    if kind == "paper":
-        return SafetyFilter(model, relays, alpha=PAPER_ALPHA)
-    if kind == "certified":
-        bound = tie_step_bound(params, area, relays, control_period)
-        span = params.command_range          # where a fitted model describes its plant
-        try:
-            return SafetyFilter(model, relays, method="certified", load_bound=bound,
-                                control_period=control_period, u_min=-span, u_max=span)
-        except ValueError as err:
-            raise ValueError(f"filters[{area}]='certified' cannot be built: its tie-line bound "
-                             f"load_bound={bound:.4g} pu (control_period * sum T_ij * 2 F) is "
-                             f"too large for this area ({err}); lower control_period, or build "
-                             f"a SafetyFilter yourself") from err
-    raise ValueError(f"filters[{area}] must be one of {FILTER_KINDS}, a SafetyFilter or None, "
-                     f"got {kind!r}")
-
-
-def coupled_filter(params: MultiAreaParams, relays: RelaySettings, control_period: float,
-                   noise_std: tuple[float, float] | None = None) -> CoupledFilter:
-    """The coupled certificate of ``params`` with its default options and
-    ``noise_std``: one object per grid, relays, period and noise
-    (:func:`~lfc.filters.base.built_once`), the one every area's filter must be."""
-    return built_once(lambda: CoupledFilter(params, relays, control_period=control_period,
-                                            noise_std=noise_std),
-                      "coupled_filter", params, relays, control_period, noise_std)
+    return build(kind, params, area, relays, control_period=control_period,
+                 noise_std=noise_std)
 
 
 def estimate_noise(estimator: object, noise_std) -> tuple[float, float] | None:

@@ -112,3 +112,28 @@ def test_method_ids_come_from_one_table():
                     and type(node.value.value) is int:
                 names = [t.id for t in node.targets if isinstance(t, ast.Name)]
                 assert not {"method_id", "METHOD_ID"} & set(names), f"{path}:{node.lineno}"
+
+
+def test_build_is_the_one_way_to_build_a_filter_by_name():
+    """``lfc.filters.build(kind, plant, area)``: a registered method with the options its
+    backend takes in a grid (no if/else over the methods), ``"coupled"`` the grid's
+    certificate, once per grid; a grid's ``filters={a: kind}`` builds through it."""
+    from lfc.filters import build
+    from lfc.filters.bounds import tie_step_bound
+    three = lfc.MultiAreaParams.three_area()
+    f = build("certified", three, 2, RELAYS)
+    assert f.params == three.areas[2]
+    assert f.options.load_bound == tie_step_bound(three, 2, RELAYS, 0.01)
+    assert build("certified", P).options.load_bound == 0.0          # one area: its defaults
+    assert build("paper", three, 1).options.alpha == 20.0
+    box = build("contract", three, 0, RELAYS)
+    assert box.options.half_width is not None
+    two = lfc.MultiAreaParams.two_area()
+    assert build("coupled", two, 0) is build("coupled", two, 1)      # one grid, one object
+    with pytest.raises(ValueError, match=r"filters\[0\] must be one of \('paper', "
+                                         r"'certified', 'contract', 'coupled'\)"):
+        build("kalman", two)
+    with pytest.raises(ValueError, match="'coupled' is a grid's certificate"):
+        build("coupled", P)
+    with pytest.raises(TypeError, match="plant must be an LFCParams or a MultiAreaParams"):
+        build("paper", "two_area")

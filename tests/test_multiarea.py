@@ -407,8 +407,8 @@ def test_a_tie_too_stiff_for_an_area_is_a_clear_error():
     the area's certificate takes is 0.0589 pu since its gains are enclosures, no
     longer padded by 1 %."""
     grid = MultiAreaParams.two_area(T=100.0)
-    with pytest.raises(ValueError, match=r"filters\[0\]='certified' cannot be built: its "
-                                         r"tie-line bound load_bound=0.06 pu"):
+    with pytest.raises(ValueError, match=r"filters\[0\]='certified' cannot be built from its "
+                                         r"grid defaults control_period=0.01, load_bound=0.06"):
         lfc.simulate(grid, duration=1.0, filters={0: "certified"})
     lfc.simulate(MultiAreaParams.two_area(T=98.0), duration=1.0, filters={0: "certified"})
 

@@ -37,11 +37,12 @@ from lfc.filters.dispatch import PYTHON, decide, decide_many, register_python
 from lfc.filters.paper import (CONFLICT_RULES, DEFAULT_READING, OUTSIDE_RULES, PREDICTIONS,
                                PaperFilter, PaperOptions)
 from lfc.model import STATES, LFCParams
+from lfc.multiarea import MultiAreaParams
 from lfc.relays import RelaySettings, relays_or_default
 
 __all__ = ["ALARM_BITS", "ALARM_FLAGS", "CONFLICT_RULES", "DEFAULT_READING", "METHODS",
            "OUTSIDE_RULES", "PREDICTIONS", "CertifiedOptions", "ContractOptions", "FilterInfo",
-           "PaperOptions", "SafetyFilter", "alarm_mask", "available", "binding_names",
+           "PaperOptions", "SafetyFilter", "alarm_mask", "available", "binding_names", "build",
            "option_table", "options_of", "register"]
 
 REGISTRY: dict[str, type[Backend]] = {}
@@ -75,6 +76,71 @@ def _backend(method: str) -> type[Backend]:
         error = ValueError if isinstance(method, str) else ParameterTypeError
         raise error(f"method must be one of {available()}, got {method!r:.80}")
     return REGISTRY[method]
+
+
+def build(kind: str, plant: LFCParams | MultiAreaParams, area: int = 0,
+          relays: RelaySettings | None = None, *, control_period: float = 0.01,
+          noise_std: tuple[float, float] | None = None):
+    """The filter named ``kind`` for area ``area`` of ``plant``: the one way to build
+    a filter by name.
+
+    A registered method (:func:`available`) is a :class:`SafetyFilter` on the
+    area's model with the options its backend takes in a grid
+    (``Backend.grid_options``: the certified filter's tie-line ``load_bound`` and
+    the grid's command range, the contract filter's share of the grid's contract;
+    the defaults on a single area) and ``control_period`` where the method has
+    one; ``"coupled"`` is the grid's coupled certificate
+    (:class:`lfc.filters.coupled.CoupledFilter`, its defaults; the same object for
+    every area, which must all have it; ``noise_std``: the noise of its grid
+    Kalman estimate), built once per grid, relays, period and noise.
+
+    Raises
+    ------
+    ValueError
+        An unknown kind (naming the valid ones), or a filter its defaults cannot
+        build on this area (naming them and why).
+    """
+    relays = in_engine_types(relays_or_default(relays))
+    grid = plant if isinstance(plant, MultiAreaParams) else None
+    if grid is None and not isinstance(plant, LFCParams):
+        raise ParameterTypeError(f"plant must be an LFCParams or a MultiAreaParams, got "
+                                 f"{type(plant).__name__}")
+    if kind == "coupled":
+        if grid is None:
+            raise ValueError("'coupled' is a grid's certificate: give a MultiAreaParams")
+        return _coupled(grid, relays, control_period, noise_std, area)
+    if not isinstance(kind, str) or kind not in REGISTRY:
+        error = ValueError if isinstance(kind, str) else ParameterTypeError
+        raise error(f"filters[{area}] must be one of {(*available(), 'coupled')}, a "
+                    f"SafetyFilter or None, got {kind!r:.80}")
+    backend = REGISTRY[kind]
+    options = {**backend.Options.for_period(control_period),
+               **(backend.grid_options(grid, area, relays, control_period) if grid else {})}
+    try:
+        return SafetyFilter(grid.areas[area] if grid else plant, relays, method=kind,
+                            **options)
+    except ValueError as err:
+        given = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v!r}"
+                          for k, v in options.items())
+        raise ValueError(f"filters[{area}]={kind!r} cannot be built from its grid defaults "
+                         f"{given} ({err}); lower control_period, or build a SafetyFilter "
+                         f"yourself") from err
+
+
+def _coupled(grid: MultiAreaParams, relays: RelaySettings, control_period: float,
+             noise_std: tuple[float, float] | None, area: int):
+    from lfc.filters.base import built_once
+    from lfc.filters.coupled import CoupledFilter
+    noise = None if noise_std is None else tuple(noise_std)
+    try:
+        return built_once(lambda: CoupledFilter(grid, relays, control_period=control_period,
+                                                noise_std=noise),
+                          "coupled_filter", grid, relays, control_period, noise)
+    except ValueError as err:
+        raise ValueError(f"filters[{area}]='coupled' (the default options) cannot be "
+                         f"built: {err}; build a CoupledFilter with other options and give "
+                         f"it to every area (with horizon='auto' its horizon also follows a "
+                         f"legitimate load step: held_after_step)") from err
 
 
 def options_of(method: str) -> type[Options]:

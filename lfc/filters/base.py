@@ -296,6 +296,15 @@ class Backend:
         except AttributeError:
             raise AttributeError(f"{type(self).__name__!r} has no attribute {name!r}") from None
 
+    @classmethod
+    def grid_options(cls, grid: Any, area: int, relays: RelaySettings,
+                     control_period: float) -> dict:
+        """The options this method takes at area ``area`` of ``grid`` (a
+        ``MultiAreaParams``) when a grid's filter is named by kind
+        (:func:`lfc.filters.build`): none beyond its defaults unless the method
+        says otherwise."""
+        return {}
+
     def reason(self, flags: int) -> str:  # pragma: no cover - abstract
         raise NotImplementedError
 

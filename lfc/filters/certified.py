@@ -144,7 +144,8 @@ from lfc.estimation import KalmanFilter, check_noise_std, measurement_std
 from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, OUTSIDE, Backend, Layout, METHOD_IDS,
                               Options, applied_flags, built_once, check_limits, given,
                               hold_invalid, option, valid_input)
-from lfc.filters.bounds import curvature_gains, expm_at, intersample, merge_intervals, pair
+from lfc.filters.bounds import (curvature_gains, expm_at, intersample, merge_intervals, pair,
+                                tie_step_bound)
 from lfc.filters.responses import L1_HORIZON, load_gains, peak_norm, period_step_gain
 from lfc.model import LFCParams, lfc_matrices, output_matrix
 from lfc.relays import RelaySettings
@@ -740,6 +741,16 @@ class CertifiedFilter(Backend):
     :class:`CertifiedSet`, or hold the last certified command."""
 
     name, method_id, Options = "certified", METHOD_IDS["certified"], CertifiedOptions
+
+    @classmethod
+    def grid_options(cls, grid, area: int, relays: RelaySettings,
+                     control_period: float) -> dict:
+        """In a grid: ``load_bound`` the tie-line's move in one period
+        (:func:`~lfc.filters.bounds.tie_step_bound`) and the grid's ``command_range``
+        as the actuator limits (where a fitted model describes its plant)."""
+        span = grid.command_range
+        return {"load_bound": tie_step_bound(grid, area, relays, control_period),
+                "u_min": -span, "u_max": span}
 
     def __init__(self, params: LFCParams, relays: RelaySettings,
                  options: CertifiedOptions) -> None:

@@ -311,7 +311,7 @@ class ContractOptions(Options):
     half_width: float | None = option(
         None, "pu", "None or > 0",
         "the box [-a, a] on the command; None: contract_design of the area alone (a grid's "
-        "area gets its share from area_filter)")
+        "area gets its share from lfc.filters.build)")
     rate: float | None = option(
         None, "pu/s", "None or > 0 (with half_width)",
         "the most the command moves per second (r T per control period); None: with "
@@ -354,6 +354,14 @@ class ContractFilter(Backend):
     ``r T`` of the last one."""
 
     name, method_id, Options = "contract", METHOD_IDS["contract"], ContractOptions
+
+    @classmethod
+    def grid_options(cls, grid, area: int, relays: RelaySettings,
+                     control_period: float) -> dict:
+        """In a grid: area ``area``'s box of the grid's :func:`contract_design` with
+        its defaults (the decentralized certificate, proven when every area has it)."""
+        share = contract_design(grid, relays, control_period=control_period)
+        return {"half_width": float(share.half_width[area]), "rate": float(share.rate[area])}
 
     def __init__(self, params: LFCParams, relays: RelaySettings,
                  options: ContractOptions) -> None:

@@ -1,6 +1,6 @@
 """A certificate for a whole grid: every area's filter knows the grid's state.
 
-``area_filter(grid, a, "coupled", ...)`` (:mod:`lfc.simulate_multiarea`; every
+``lfc.filters.build("coupled", grid)`` (a grid's ``filters={a: "coupled"}``; every
 area must have it) builds one :class:`CoupledFilter` for the grid, shared by
 its areas.  It is the certified filter (:mod:`lfc.filters.certified`) on the
 *coupled* model instead of one area's: the state is every area's five states
