@@ -135,9 +135,9 @@ def cache_folder() -> Path:
     return Path(os.environ.get("LFC_CACHE_DIR") or Path.home() / ".cache" / "lfc-scc")
 
 
-#: The layout of a stored file (:func:`write_stored`).  A file of another layout was
-#: written by another version of the package: it is stale, not damaged, and is
-#: computed again without a warning.
+#: The layout of a stored file (:func:`write_stored`).  A file of another layout (another
+#: ``format``, or 0.3's: ``payload`` and ``sha256`` alone) was written by another version
+#: of the package: it is stale, not damaged, and is computed again without a warning.
 STORED_FORMAT = "lfc-scc stored 2"
 
 
@@ -153,8 +153,9 @@ def read_stored(path: Path, decode: Callable[[dict], Any],
         return None
     try:
         stored = json.loads(path.read_text())
-        if isinstance(stored, dict) and stored.get("format") != STORED_FORMAT:
-            return None                         # another version's layout: stale
+        if isinstance(stored, dict) and (stored.get("format", STORED_FORMAT) != STORED_FORMAT
+                                         or set(stored) == {"payload", "sha256"}):
+            return None        # another version's layout (0.3's had no "format"): stale
         payload = stored["payload"]
         if hashlib.sha256(payload.encode()).hexdigest() != stored["sha256"]:
             raise ValueError("checksum mismatch")
