@@ -35,30 +35,19 @@ def _damaged(cache_file: caching.IndexDataCacheFile, err: Exception) -> None:
                   stacklevel=4)
 
 
-def _guard_index(load_index):
-    @functools.wraps(load_index)
-    def guarded(self):
+def _guarded(read, miss):
+    """``read`` (a reader method of numba's cache file) returning ``miss()`` where a
+    file of this package is damaged; numba treats that as a missing file (the
+    index rewritten on save, the function compiled and its data file overwritten)."""
+    @functools.wraps(read)
+    def guarded(self, *args):
         try:
-            return load_index(self)
+            return read(self, *args)
         except DAMAGED as err:
             if not _ours(self):
                 raise
             _damaged(self, err)
-            return {}                   # as numba treats a missing index: rewritten on save
-    guarded.lfc_guarded = True
-    return guarded
-
-
-def _guard_load(load):
-    @functools.wraps(load)
-    def guarded(self, key):
-        try:
-            return load(self, key)
-        except DAMAGED as err:
-            if not _ours(self):
-                raise
-            _damaged(self, err)
-            return None                 # a miss: compiled, and the data file overwritten
+            return miss()
     guarded.lfc_guarded = True
     return guarded
 
@@ -66,7 +55,7 @@ def _guard_load(load):
 def install() -> None:
     """Guard numba's cache file reader (once per process; idempotent)."""
     cls = caching.IndexDataCacheFile
-    if not getattr(cls._load_index, "lfc_guarded", False):
-        cls._load_index = _guard_index(cls._load_index)
-    if not getattr(cls.load, "lfc_guarded", False):
-        cls.load = _guard_load(cls.load)
+    # a damaged index reads as a fresh empty one (save fills it in), damaged data as none
+    for name, miss in (("_load_index", dict), ("load", lambda: None)):
+        if not getattr(getattr(cls, name), "lfc_guarded", False):
+            setattr(cls, name, _guarded(getattr(cls, name), miss))

@@ -30,9 +30,10 @@ import numpy as np
 from lfc._validate import (ParameterTypeError, as_float, check_array, check_number,
                            check_positive, in_engine_types)
 from lfc.filters.base import (ALARM_BITS, ALARM_FLAGS, MEMORY, Backend, FilterInfo, Options,
-                              binding_names, flag)
+                              binding_names, built_once, flag)
 from lfc.filters.certified import CertifiedFilter, CertifiedOptions
 from lfc.filters.contract import ContractFilter, ContractOptions
+from lfc.filters.coupled import CoupledFilter
 from lfc.filters.dispatch import PYTHON, decide, decide_many, register_python
 from lfc.filters.paper import (CONFLICT_RULES, DEFAULT_READING, OUTSIDE_RULES, PREDICTIONS,
                                PaperFilter, PaperOptions)
@@ -128,9 +129,7 @@ def build(kind: str, plant: LFCParams | MultiAreaParams, area: int = 0,
 
 
 def _coupled(grid: MultiAreaParams, relays: RelaySettings, control_period: float,
-             noise_std: tuple[float, float] | None, area: int):
-    from lfc.filters.base import built_once
-    from lfc.filters.coupled import CoupledFilter
+             noise_std: tuple[float, float] | None, area: int) -> CoupledFilter:
     noise = None if noise_std is None else tuple(noise_std)
     try:
         return built_once(lambda: CoupledFilter(grid, relays, control_period=control_period,
