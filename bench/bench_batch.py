@@ -3,8 +3,8 @@
 Prints scenario-steps per second (1 ms plant steps x scenarios, 10 plant steps
 per control period) of ``simulate_many`` on the default process pool (2 cores
 here), each workload with ``lanes=True`` (16 scenarios advanced together in
-SIMD registers, :func:`lfc.engine._run_lanes`) and ``lanes=False`` (one at a
-time, :func:`lfc.engine._run`, the reference; the metrics are the same bit for
+SIMD registers, :func:`lfc.lanes.run_lanes`) and ``lanes=False`` (one at a
+time, :func:`lfc.engine.run_kernel`, the reference; the metrics are the same bit for
 bit, ``tests/test_lanes.py``):
 
 * no filter, 10,000 scenarios x 30 s (the plant, the relays and the AGC);
@@ -19,7 +19,7 @@ multiply-add throughput and the fraction of it each run reaches (``limit``).
 With ``--fill``, instead: how full a block must be for lanes to pay (one core,
 960 scenarios of 8 s, k scenarios per plant, k = 1 ... 16; a block pays for all
 its lanes): lanes (every block, ``LANE_MIN_FILL`` 1) against one at a time, the
-best of two, per filter: the measurement behind ``lfc.engine.LANE_MIN_FILL``.
+best of two, per filter: the measurement behind ``lfc.lanes.LANE_MIN_FILL``.
 
 Run: python bench/bench_batch.py [--fill]
 """
@@ -168,7 +168,7 @@ def _cpu_ghz() -> float:
 
 def fill() -> None:
     """Lanes against one at a time (one core) as the scenarios per plant grow."""
-    from lfc import engine
+    from lfc import scenarios as scenario_tables
     from lfc.batch import run_chunk
     from lfc.relays import RelaySettings
     n, rng = 960, np.random.default_rng(0)
@@ -178,7 +178,7 @@ def fill() -> None:
             table = scenarios(n, method).assign(M=np.repeat(rng.uniform(3.2, 4.8, n // k), k))
             best = {}
             for lanes in (False, True) * 2:
-                engine.LANE_MIN_FILL = 1
+                scenario_tables.LANE_MIN_FILL = 1
                 run_chunk(LFCParams(), table.iloc[:4], 8.0, RelaySettings(), DT, 0.01, lanes)
                 t0 = time.perf_counter()
                 run_chunk(LFCParams(), table, 8.0, RelaySettings(), DT, 0.01, lanes)

@@ -21,7 +21,7 @@ a running maximum over an array is not vectorized by LLVM; with these it is.
 evaluates both.  Written ``a if c else b``, numba makes it a branch; stored where the
 other value was loaded from, LLVM then stores under a mask (``vmaskmovpd``), which an
 AMD Zen 3 executes several times slower than a store.  The engine's lanes
-(``lfc.engine._lane_step``) use it, and write to a second buffer.  What each of the
+(``lfc.lanes._lane_step``) use it, and write to a second buffer.  What each of the
 three saves: ``bench/records/compile.md``.
 
 The cache.  numba keys a cached function on its own source file only, but these

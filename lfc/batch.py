@@ -41,7 +41,7 @@ from lfc._files import code_digest, write_atomic
 from lfc._pool import completed
 from lfc._validate import (ParameterTypeError, check_count, check_flag, check_folder,
                            in_engine_types, is_finite, is_sequence)
-from lfc.engine import METRICS, Scenarios
+from lfc.engine import METRICS
 from lfc.estimation import STD
 from lfc.filters import (CONFLICT_RULES, METHODS, OUTSIDE_RULES, PREDICTIONS, SafetyFilter,
                          options_of)
@@ -49,6 +49,7 @@ from lfc.filters.base import built_once
 from lfc.filters.base import given as holds_value
 from lfc.model import LFCParams
 from lfc.relays import RELAY_NAMES, RelaySettings, relays_or_default
+from lfc.scenarios import Scenarios
 from lfc.signals import Chirp, Ramp, Samples, Signal, Sinusoid, Square, Step
 from lfc.simulate import METRIC_KEYS, check_timing
 
@@ -338,7 +339,7 @@ def _check_unused(scenarios: pd.DataFrame) -> None:
 
 def row_scenario(params: LFCParams, relays: RelaySettings, row: dict, duration: float,
                  control_period: float, built: dict) -> dict:
-    """One checked table row as the keywords of :meth:`lfc.engine.Scenarios.add`
+    """One checked table row as the keywords of :meth:`lfc.scenarios.Scenarios.add`
     (its plant, filter, estimator, noise, seed, flags and signal); ``built``
     holds the filters already built for these ``params`` and ``relays``."""
     signal = scenario_signal(row, duration)
@@ -489,7 +490,7 @@ def simulate_table(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
         Runs the chunks; default a process pool with one worker per core
         (none for a single chunk).
     lanes : bool
-        Run the rows that allow it in SIMD lanes (:meth:`lfc.engine.Scenarios.run`;
+        Run the rows that allow it in SIMD lanes (:meth:`lfc.scenarios.Scenarios.run`;
         the same numbers bit for bit); False runs every row one at a time, the
         reference the benchmark compares against.
     chunk_size : int

@@ -25,13 +25,13 @@ batch can mix them freely.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from lfc import _numba_cache
-from lfc._jit import choose, inline, kernel
-from lfc._validate import ParameterTypeError, check_flag, check_index, check_seed
+from lfc._jit import inline, kernel
+from lfc._validate import ParameterTypeError, check_flag, check_index
 from lfc.estimation import (KalmanFilter, check_noise_std, kf_correct, kf_predict,
                             measurement_std)
 from lfc.filters import SafetyFilter
@@ -43,8 +43,8 @@ from lfc.filters.coupled import decide as decide_coupled
 from lfc.filters.coupled import grid_estimate, rows_scratch
 from lfc.filters.dispatch import decide
 from lfc.model import LFCParams
-from lfc.multiarea import N_AREA_STATES, MultiAreaParams, as_grid, discretize_grid
-from lfc.relays import TIME_TOL, RelaySettings, relay_sample
+from lfc.multiarea import N_AREA_STATES, MultiAreaParams
+from lfc.relays import relay_sample
 from lfc.signals import GRID, N_PARAMS, NONE, SAMPLES, STEP, Signal, value_at
 
 _numba_cache.install()   # a damaged cache file of a compiled function: compiled again
@@ -61,14 +61,131 @@ METRICS = ("first_trip_t", "first_trip_relay", "max_abs_dw_meas", "max_abs_rocof
            "final_abs_dw_meas")
 
 
+class Plants(NamedTuple):
+    """The grid's plants as the kernel reads them (every scenario runs on one)."""
+
+    #: (n_plants, n_s, n_s), (n_plants, n_s, n_a), (n_plants, n_s, n_a): each plant
+    #: discretized (:func:`lfc.multiarea.discretize_grid`: state, command, load)
+    ad: np.ndarray
+    bu: np.ndarray
+    bl: np.ndarray
+    #: (n_a, n_l): each area's sign on each tie-line (:meth:`MultiAreaParams.incidence`)
+    incidence: np.ndarray
+    #: (n_a,): the AGC's gains on frequency and on tie-line export times the control
+    #: period (pu per pu)
+    k_freq: np.ndarray
+    k_tie: np.ndarray
+
+
+class Rows(NamedTuple):
+    """Each scenario's row: its plant, its tables' indices and its signals (N rows)."""
+
+    #: (N,): the scenario's plant (an index into :class:`Plants`)
+    plant_of: np.ndarray
+    #: (N, n_a, 5): each area's Kalman filter (-1: none), noise row (-1: none),
+    #: filter (-1: none), disturbance feed-forward (0/1) and anti-windup (0/1)
+    index: np.ndarray
+    #: (N, n_a, N_CHANNELS), (N, n_a, N_CHANNELS, N_PARAMS), (N, n_a, N_CHANNELS, 2):
+    #: each area's signals (:func:`scenario_signals`)
+    kinds: np.ndarray
+    params: np.ndarray
+    offsets: np.ndarray
+    #: (N, n_a, 3): the std of the relays' own measurement noise on ``(dw_meas,
+    #: rocof_meas)`` (pu, pu/s; drawn at every plant step) and, in ``[i, 0, 2]``, the
+    #: scenario's seed for it
+    relay_noise: np.ndarray
+
+
+class Samples(NamedTuple):
+    """What the rows' signals and noise read."""
+
+    #: every sampled signal's times (s) and values, one after another (``Rows.offsets``)
+    times: np.ndarray
+    values: np.ndarray
+    #: (n_noise, n_ctrl, 2): the controllers' measurement noise rows (pu, pu/s)
+    noise: np.ndarray
+
+
+class Estimators(NamedTuple):
+    """The Kalman filters' matrices, padded to the largest (:func:`scenario_tables`)."""
+
+    a: np.ndarray
+    b: np.ndarray
+    c: np.ndarray
+    gain: np.ndarray
+    #: (n_kf, 3): each one's (states, measurements, inputs)
+    dims: np.ndarray
+
+
+class FilterTables(NamedTuple):
+    """The filters' method codes, their data one after another and each one's offset."""
+
+    methods: np.ndarray
+    data: np.ndarray
+    offsets: np.ndarray
+
+
+class RelayTables(NamedTuple):
+    """The relays' thresholds and delays (:meth:`RelaySettings.arrays`), every area's."""
+
+    limits: np.ndarray
+    delays: np.ndarray
+
+
+class Outputs(NamedTuple):
+    """What the kernel writes: ``metrics`` (N, n_a, len(METRICS)), ``ends`` (N,: the
+    last plant sample kept) and, when the trace arrays have rows (N = 1), every
+    state ``x`` (samples, n_s), control sample ``ctrl`` (n_ctrl, n_a, N_CTRL) and
+    trip ``trips`` (samples, n_a)."""
+
+    metrics: np.ndarray
+    ends: np.ndarray
+    x: np.ndarray
+    ctrl: np.ndarray
+    trips: np.ndarray
+
+
+class Work(NamedTuple):
+    """:func:`run_kernel`'s scratch: the kernel allocates nothing."""
+
+    x: np.ndarray           # (n_s,): the grid's state
+    xn: np.ndarray          # (n_s,): its next value
+    u: np.ndarray           # (n_a,): each area's held command (pu)
+    pl: np.ndarray          # (n_a,): each area's load now (pu)
+    x_hat: np.ndarray       # (5,): the state a filter sees
+    mem: np.ndarray         # (n_a, MEMORY): each area's filter memory
+    gstate: np.ndarray      # (n_a, 1): each area's AGC integrator (pu)
+    kstate: np.ndarray      # (n_a, 2, N_KF): each area's Kalman state (prior, posterior)
+    start: np.ndarray       # (n_a, 3): each relay's timer start (s; NaN: not running)
+    due: np.ndarray         # (n_a, 3): whether each relay's trip is due
+    ym: np.ndarray          # (6 n_a,): the grid's measurements, then innovations (a
+    #                         coupled filter's grid Kalman filter)
+    xe: np.ndarray          # (n_s,): the estimate of the grid's state
+    sums: np.ndarray        # a coupled filter's scratch (rows_scratch entries)
+
+    @classmethod
+    def sized(cls, n_s: int, n_a: int, n_kf: int, n_sums: int) -> Work:
+        """Zeros for a grid of ``n_s`` states and ``n_a`` areas, Kalman filters of up
+        to ``n_kf`` states and ``n_sums`` entries of filter scratch."""
+        return cls(np.zeros(n_s), np.zeros(n_s), np.zeros(n_a), np.zeros(n_a),
+                   np.zeros(N_AREA_STATES), np.zeros((n_a, MEMORY)), np.zeros((n_a, 1)),
+                   np.zeros((n_a, 2, n_kf)), np.zeros((n_a, 3)), np.zeros((n_a, 3)),
+                   np.zeros(6 * n_a), np.zeros(n_s), np.zeros(n_sums))
+
+
 @inline
-def _signal(channel: int, kinds: np.ndarray, params: np.ndarray, offsets: np.ndarray,
+def signal_value(channel: int, kinds: np.ndarray, params: np.ndarray, offsets: np.ndarray,
             st: np.ndarray, sv: np.ndarray, t: float, index: int) -> float:
     """Value of one scenario's signal on ``channel`` at time ``t`` (grid ``index``)."""
     kind = kinds[channel]
     if kind == GRID:
         return sv[offsets[channel, 0] + index]
     return value_at(kind, params, channel, t, st, sv, offsets[channel, 0], offsets[channel, 1])
+
+
+# generator_period's and GeneratorSide's name for it: their code is an input of the
+# committed fits (lfc.testbed.fit.FIT_FUNCTIONS), renamed at the next refit
+_signal = signal_value
 
 
 @inline
@@ -109,7 +226,7 @@ def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise0: flo
     The coupled certificate (``method`` ``COUPLED``, :mod:`lfc.filters.coupled`)
     reads the whole grid instead: ``grid`` is ``(area, x, u, p, ym, xe, ks,
     sums)``, this area's index, the grid's state, every area's latest command and
-    every area's load, then the grid Kalman filter's arrays (:func:`_run`) and
+    every area's load, then the grid Kalman filter's arrays (:class:`Work`) and
     the filter's scratch (one argument: a call with more than 30 is packed by
     Python in a way numba cannot inline).
     ``est`` >= 0 selects the Kalman filter ``(ka, kb, kc, kg)`` with state
@@ -193,13 +310,13 @@ def _load(kind: int, value: float, on: float, off: float, kinds: np.ndarray,
         return value if on <= t < off else 0.0
     if kind == NONE:
         return 0.0
-    return _signal(LOAD, kinds, params, offsets, st, sv, t, index)
+    return signal_value(LOAD, kinds, params, offsets, st, sv, t, index)
 
 
 @inline
 def _watch(met: np.ndarray, t: float, dw: float, rc: float, noisy: bool, r0: float, r1: float,
-           limits: np.ndarray, delays: np.ndarray, start: np.ndarray, due: np.ndarray,
-           peak_dw: float, peak_rc: float) -> tuple:
+           relays: RelayTables, start: np.ndarray, due: np.ndarray, peak_dw: float,
+           peak_rc: float) -> tuple:
     """One area's relays at plant sample time ``t`` (s): the measured ``dw`` (pu)
     and ROCOF (pu/s), read through white noise of std ``r0``, ``r1`` if ``noisy``.
     Records the area's first trip in its metrics ``met`` and returns ``(trip
@@ -207,51 +324,42 @@ def _watch(met: np.ndarray, t: float, dw: float, rc: float, noisy: bool, r0: flo
     if noisy:
         n0 = np.random.standard_normal()
         n1 = np.random.standard_normal()
-        trips = relay_sample(t, dw + r0 * n0, rc + r1 * n1, limits, delays, start, due)
+        trips = relay_sample(t, dw + r0 * n0, rc + r1 * n1, relays.limits, relays.delays, start,
+                             due)
     else:
-        trips = relay_sample(t, dw, rc, limits, delays, start, due)
+        trips = relay_sample(t, dw, rc, relays.limits, relays.delays, start, due)
     if trips and math.isnan(met[0]):
         met[0], met[1] = t, float(_lowest_bit(trips))
     return trips, max(peak_dw, abs(dw)), max(peak_rc, abs(rc))
 
 
 @kernel
-def _run(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarray,
-         bl: np.ndarray, inc: np.ndarray, k_freq: np.ndarray, k_tie: np.ndarray,
-         plant_of: np.ndarray, index: np.ndarray, kinds: np.ndarray, params: np.ndarray,
-         offsets: np.ndarray, st: np.ndarray, sv: np.ndarray, noise: np.ndarray,
-         ka: np.ndarray, kb: np.ndarray, kc: np.ndarray, kg: np.ndarray, kdim: np.ndarray,
-         methods: np.ndarray, fdata: np.ndarray, foff: np.ndarray, limits: np.ndarray,
-         delays: np.ndarray, relay_noise: np.ndarray, stop_on_trip: bool,
-         metrics: np.ndarray, trace_x: np.ndarray, trace_ctrl: np.ndarray,
-         trace_trips: np.ndarray, ends: np.ndarray, x: np.ndarray, xn: np.ndarray,
-         u: np.ndarray, pl: np.ndarray, x_hat: np.ndarray, mem: np.ndarray,
-         gstate: np.ndarray, kstate: np.ndarray, start: np.ndarray, due: np.ndarray,
-         ym: np.ndarray, xe: np.ndarray, sums: np.ndarray) -> None:
-    """Advance every scenario of one grid from equilibrium for ``n_steps`` plant steps.
+def run_kernel(n_steps: int, ratio: int, dt: float, stop_on_trip: bool, plants: Plants,
+               rows: Rows, samples: Samples, estimators: Estimators, filters: FilterTables,
+               relays: RelayTables, out: Outputs, work: Work) -> None:
+    """Advance every scenario of one grid from equilibrium for ``n_steps`` plant steps
+    of ``dt`` (s), the generator sides every ``ratio`` steps.
 
-    The grid has ``n_a = inc.shape[0]`` areas and ``inc.shape[1]`` tie-lines
-    (:mod:`lfc.multiarea`; one area and no line is the single-area model).
-    ``ad``, ``bu``, ``bl`` (plants, n_s, ...) are the discretized plants and
-    ``plant_of`` (N,) each scenario's; ``k_freq``, ``k_tie`` (n_a,) the AGC
-    gains times the control period.  ``index`` (N, n_a, 5): each area's Kalman
-    filter (-1: none), noise row (-1: none), filter (-1: none), disturbance
-    feed-forward (0/1) and anti-windup (0/1); ``relay_noise`` (N, n_a, 3) the std
-    of the relays' own measurement noise on ``(dw_meas, rocof_meas)`` (pu, pu/s;
-    drawn at every plant step) and, in ``[i, 0, 2]``, the scenario's seed for it.  Writes
-    ``metrics`` (N, n_a, len(METRICS)) and, when the trace arrays have rows (N =
-    1), every state (samples, n_s), control sample (n_ctrl, n_a, N_CTRL) and trip
-    (samples, n_a); ``ends`` the last sample kept.  The arrays after ``ends``
-    are scratch space: the kernel allocates nothing (``ym``, 6 n_a: the grid's
-    measurements ``dw_meas, rocof_meas`` of each area and each export, for a
-    coupled filter's grid Kalman filter, then its innovations; ``xe``, n_s: the
-    estimate of the full state; ``sums``: a coupled filter's scratch,
-    :func:`lfc.filters.coupled.rows_scratch` entries).
+    The grid has ``n_a = plants.incidence.shape[0]`` areas and
+    ``plants.incidence.shape[1]`` tie-lines (:mod:`lfc.multiarea`; one area and no
+    line is the single-area model).  Each of the N ``rows`` runs on its plant
+    with its signals, estimator and filter (indices into ``estimators`` and
+    ``filters``); the relays are ``relays`` in every area.  Writes ``out``
+    (:class:`Outputs`; a trace when its trace arrays have rows, N = 1); ``work``
+    is scratch (:class:`Work`).
 
     One area of five states (the single-area model) takes a path that keeps the
     state in registers for a control period; it computes the same sums in the
     same order as the general path.
     """
+    ad, bu, bl, inc, k_freq, k_tie = plants
+    plant_of, index, kinds, params, offsets, relay_noise = rows
+    st, sv, noise = samples
+    ka, kb, kc, kg, kdim = estimators
+    methods, fdata, foff = filters
+    limits, delays = relays
+    metrics, ends, trace_x, trace_ctrl, trace_trips = out
+    x, xn, u, pl, x_hat, mem, gstate, kstate, start, due, ym, xe, sums = work
     n_ctrl = -(-n_steps // ratio)
     n_a, n_l, n_s = inc.shape[0], inc.shape[1], ad.shape[1]
     m = N_AREA_STATES
@@ -291,7 +399,7 @@ def _run(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarray,
             k0 = j * ratio
             t = k0 * dt
             for a in range(n_a):     # every area's load now (the coupled filter reads all)
-                pl[a] = _signal(LOAD, kinds[i, a], params[i, a], offsets[i, a], st, sv, t, k0)
+                pl[a] = signal_value(LOAD, kinds[i, a], params[i, a], offsets[i, a], st, sv, t, k0)
             if method0 == COUPLED and index[i, 0, 0] >= 0:   # what its estimator measures
                 for a in range(n_a):
                     q_a = index[i, a, 1]
@@ -318,7 +426,7 @@ def _run(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarray,
                 tie = 0.0
                 for line in range(n_l):
                     tie += inc[a, line] * x[m * n_a + line]
-                ace = _signal(ACE, kinds_a, params_a, offsets_a, st, sv, t, j)
+                ace = signal_value(ACE, kinds_a, params_a, offsets_a, st, sv, t, j)
                 ua, flags, mod = generator_period(
                     j, t, x_a, pl[a] + tie, noise[q_i, j, 0] if q_i >= 0 else 0.0,
                     noise[q_i, j, 1] if q_i >= 0 else 0.0, kinds_a, params_a, offsets_a, st,
@@ -351,8 +459,7 @@ def _run(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarray,
                         + A[4, 4] * x4 + u4 + Bl[4, 0] * p0
                     x0, x1, x2, x3, x4 = n0, n1, n2, n3, n4
                     trips, peak_dw, peak_rc = _watch(met0, (k + 1) * dt, x3, x4, noisy, r0, r1,
-                                                     limits, delays, start0, due0, peak_dw,
-                                                     peak_rc)
+                                                     relays, start0, due0, peak_dw, peak_rc)
                     if traced:
                         trace_x[k + 1, 0], trace_x[k + 1, 1], trace_x[k + 1, 2] = x0, x1, x2
                         trace_x[k + 1, 3], trace_x[k + 1, 4] = x3, x4
@@ -384,8 +491,8 @@ def _run(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarray,
                     for a in range(n_a):
                         trips, met[a, 2], met[a, 3] = _watch(
                             met[a], (k + 1) * dt, x[m * a + 3], x[m * a + 4],
-                            rn[a, 0] > 0.0 or rn[a, 1] > 0.0, rn[a, 0], rn[a, 1], limits,
-                            delays, start[a], due[a], met[a, 2], met[a, 3])
+                            rn[a, 0] > 0.0 or rn[a, 1] > 0.0, rn[a, 0], rn[a, 1], relays,
+                            start[a], due[a], met[a, 2], met[a, 3])
                         if traced:
                             trace_trips[k + 1, a] = trips
                         if trips and stop_on_trip:
@@ -406,196 +513,6 @@ def _lowest_bit(bits: int) -> int:
     while not (bits >> r) & 1:
         r += 1
     return r
-
-
-# -- lanes: one area's scenarios, LANES at a time, the inner loop over scenarios --------
-LANES = 16      # scenarios advanced together: the inner loop's trip count, known to LLVM
-LANE_MIN_FILL = 10  # scenarios of one plant a block needs to run in lanes (the break-even,
-#                     measured by bench/bench_batch.py --fill); fewer run one at a time
-# the rows of a block's lane array z (row r of lane l at z[r * LANES + l])
-(Z_X, Z_START, Z_DUE, Z_PEAK_DW, Z_PEAK_RC, Z_FIRST_T, Z_FIRST_R, Z_ALIVE, Z_U, Z_LOAD,
- Z_ON, Z_OFF, Z_END) = (0, 5, 8, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20)
-N_Z = 21
-
-
-@inline
-def _lane_steps(k_from: int, k_to: int, dt: float, A: np.ndarray, Bu: np.ndarray,
-                Bl: np.ndarray, z: np.ndarray, w: np.ndarray, limits: np.ndarray,
-                delays: np.ndarray, stop_on_trip: bool) -> None:
-    """Plant steps ``k_from`` to ``k_to`` of the ``LANES`` scenarios in ``z``
-    (:func:`_lane_step`), two at a time: ``z`` to ``w`` and back (``w`` is scratch of
-    ``z``'s size); an odd count ends with the last step's rows copied back to ``z``."""
-    for k in range(k_from, k_to - 1, 2):
-        _lane_step(k, dt, A, Bu, Bl, z, w, limits, delays, stop_on_trip)
-        _lane_step(k + 1, dt, A, Bu, Bl, w, z, limits, delays, stop_on_trip)
-    if (k_to - k_from) % 2 == 1:
-        _lane_step(k_to - 1, dt, A, Bu, Bl, z, w, limits, delays, stop_on_trip)
-        for r in range(z.shape[0]):
-            z[r] = w[r]
-
-
-@inline
-def _lane_step(k: int, dt: float, A: np.ndarray, Bu: np.ndarray, Bl: np.ndarray,
-               z: np.ndarray, w: np.ndarray, limits: np.ndarray, delays: np.ndarray,
-               stop_on_trip: bool) -> None:
-    """Plant step ``k`` of the ``LANES`` scenarios, read from ``z``, every row
-    written to ``w``: the single-area path of :func:`_run` (the plant update and
-    :func:`_watch` without relay noise) written without branches
-    (:func:`lfc._jit.choose`, every operand evaluated), so that LLVM advances the
-    lanes in SIMD registers.  Each lane computes the same sums in the same order
-    as that path, so its numbers are the same bit for bit; a lane whose
-    ``Z_ALIVE`` is 0 (stopped at a trip, or padding) keeps its values.  Writing to
-    another buffer than the one read keeps LLVM from turning the kept values into
-    masked stores (:mod:`lfc._jit`)."""
-    L = LANES
-    lim0, lim1, lim2 = limits[0], limits[1], limits[2]
-    e0, e1, e2 = delays[0] - TIME_TOL, delays[1] - TIME_TOL, delays[2] - TIME_TOL
-    a00, a01, a02, a03, a04 = A[0, 0], A[0, 1], A[0, 2], A[0, 3], A[0, 4]
-    a10, a11, a12, a13, a14 = A[1, 0], A[1, 1], A[1, 2], A[1, 3], A[1, 4]
-    a20, a21, a22, a23, a24 = A[2, 0], A[2, 1], A[2, 2], A[2, 3], A[2, 4]
-    a30, a31, a32, a33, a34 = A[3, 0], A[3, 1], A[3, 2], A[3, 3], A[3, 4]
-    a40, a41, a42, a43, a44 = A[4, 0], A[4, 1], A[4, 2], A[4, 3], A[4, 4]
-    b0, b1, b2, b3, b4 = Bu[0, 0], Bu[1, 0], Bu[2, 0], Bu[3, 0], Bu[4, 0]
-    l0, l1, l2, l3, l4 = Bl[0, 0], Bl[1, 0], Bl[2, 0], Bl[3, 0], Bl[4, 0]
-    nan = math.nan
-    t, tn, done = k * dt, (k + 1) * dt, float(k + 1)
-    for l in range(L):
-        x0, x1, x2 = z[Z_X * L + l], z[(Z_X + 1) * L + l], z[(Z_X + 2) * L + l]
-        x3, x4 = z[(Z_X + 3) * L + l], z[(Z_X + 4) * L + l]
-        ua, load = z[Z_U * L + l], z[Z_LOAD * L + l]
-        on, off = z[Z_ON * L + l], z[Z_OFF * L + l]
-        p0 = choose((on <= t) & (t < off), load, 0.0)
-        u0, u1, u2, u3, u4 = b0 * ua, b1 * ua, b2 * ua, b3 * ua, b4 * ua
-        n0 = a00 * x0 + a01 * x1 + a02 * x2 + a03 * x3 + a04 * x4 + u0 + l0 * p0
-        n1 = a10 * x0 + a11 * x1 + a12 * x2 + a13 * x3 + a14 * x4 + u1 + l1 * p0
-        n2 = a20 * x0 + a21 * x1 + a22 * x2 + a23 * x3 + a24 * x4 + u2 + l2 * p0
-        n3 = a30 * x0 + a31 * x1 + a32 * x2 + a33 * x3 + a34 * x4 + u3 + l3 * p0
-        n4 = a40 * x0 + a41 * x1 + a42 * x2 + a43 * x3 + a44 * x4 + u4 + l4 * p0
-        # the relays (relay_sample): a timer starts when beyond, trips after its delay
-        s0, s1, s2 = z[Z_START * L + l], z[(Z_START + 1) * L + l], z[(Z_START + 2) * L + l]
-        d0, d1, d2 = z[Z_DUE * L + l], z[(Z_DUE + 1) * L + l], z[(Z_DUE + 2) * L + l]
-        r0 = choose(n3 > lim0, choose(s0 == s0, s0, tn), nan)
-        r1 = choose(n3 < lim1, choose(s1 == s1, s1, tn), nan)
-        r2 = choose(abs(n4) > lim2, choose(s2 == s2, s2, tn), nan)
-        now0, now1, now2 = tn - r0 >= e0, tn - r1 >= e1, tn - r2 >= e2
-        trip0, trip1, trip2 = now0 & (d0 == 0.0), now1 & (d1 == 0.0), now2 & (d2 == 0.0)
-        trip = trip0 | trip1 | trip2
-        alive, first_t = z[Z_ALIVE * L + l], z[Z_FIRST_T * L + l]
-        go = alive != 0.0
-        first = go & trip & (first_t != first_t)
-        stop = go & trip & stop_on_trip
-        w[Z_X * L + l] = choose(go, n0, x0)
-        w[(Z_X + 1) * L + l] = choose(go, n1, x1)
-        w[(Z_X + 2) * L + l] = choose(go, n2, x2)
-        w[(Z_X + 3) * L + l] = choose(go, n3, x3)
-        w[(Z_X + 4) * L + l] = choose(go, n4, x4)
-        w[Z_START * L + l] = choose(go, r0, s0)
-        w[(Z_START + 1) * L + l] = choose(go, r1, s1)
-        w[(Z_START + 2) * L + l] = choose(go, r2, s2)
-        w[Z_DUE * L + l] = choose(go, choose(now0, 1.0, 0.0), d0)
-        w[(Z_DUE + 1) * L + l] = choose(go, choose(now1, 1.0, 0.0), d1)
-        w[(Z_DUE + 2) * L + l] = choose(go, choose(now2, 1.0, 0.0), d2)
-        peak_dw, peak_rc = z[Z_PEAK_DW * L + l], z[Z_PEAK_RC * L + l]
-        w[Z_PEAK_DW * L + l] = choose(go, max(peak_dw, abs(n3)), peak_dw)
-        w[Z_PEAK_RC * L + l] = choose(go, max(peak_rc, abs(n4)), peak_rc)
-        w[Z_FIRST_T * L + l] = choose(first, tn, first_t)
-        w[Z_FIRST_R * L + l] = choose(first, choose(trip0, 0.0, choose(trip1, 1.0, 2.0)),
-                                      z[Z_FIRST_R * L + l])
-        w[Z_END * L + l] = choose(stop, done, z[Z_END * L + l])
-        w[Z_ALIVE * L + l] = choose(stop, 0.0, alive)
-        w[Z_U * L + l], w[Z_LOAD * L + l], w[Z_ON * L + l], w[Z_OFF * L + l] = ua, load, on, off
-
-
-@kernel
-def _run_lanes(n_steps: int, ratio: int, dt: float, ad: np.ndarray, bu: np.ndarray,
-               bl: np.ndarray, k_freq: float, k_tie: float, plant_of: np.ndarray,
-               blocks: np.ndarray, index: np.ndarray, kinds: np.ndarray, params: np.ndarray,
-               offsets: np.ndarray, st: np.ndarray, sv: np.ndarray, noise: np.ndarray,
-               ka: np.ndarray, kb: np.ndarray, kc: np.ndarray, kg: np.ndarray,
-               kdim: np.ndarray, methods: np.ndarray, fdata: np.ndarray, foff: np.ndarray,
-               limits: np.ndarray, delays: np.ndarray, stop_on_trip: bool,
-               metrics: np.ndarray, ends: np.ndarray, z: np.ndarray, w: np.ndarray,
-               xs: np.ndarray,
-               x_hat: np.ndarray, mem: np.ndarray, gstate: np.ndarray, kstate: np.ndarray,
-               start: np.ndarray, due: np.ndarray, ctrl: np.ndarray, scratch: np.ndarray
-               ) -> None:
-    """:func:`_run` for single-area scenarios without relay noise whose load is a
-    step or none, ``LANES`` at a time: ``blocks`` (n_blocks, LANES) holds the
-    scenario numbers of each block, all on one plant (-1: an empty lane).  Each
-    control period runs every lane's generator side (:func:`generator_period`,
-    one lane after another), then :func:`_lane_steps` advances all lanes.
-    The metrics and ``ends`` equal :func:`_run`'s bit for bit (``tests/test_lanes.py``).
-    ``z`` (N_Z LANES,), ``mem`` (LANES, MEMORY), ``gstate`` (LANES, 1),
-    ``kstate`` (LANES, 2, N_KF) are the lanes' state, ``w`` (N_Z LANES,) the second
-    buffer of :func:`_lane_steps`, the rest scratch."""
-    L = LANES
-    n_ctrl = -(-n_steps // ratio)
-    empty = x_hat[:0]
-    relay_sample(0.0, 0.0, 0.0, limits, delays, start, due)   # the relays' state at t = 0
-    for b in range(blocks.shape[0]):
-        p_i = plant_of[blocks[b, 0]]
-        A, Bu, Bl = ad[p_i], bu[p_i], bl[p_i]
-        z[:], mem[:], gstate[:], kstate[:] = 0.0, 0.0, 0.0, 0.0
-        for l in range(L):
-            i = blocks[b, l]
-            for r in range(3):
-                z[(Z_START + r) * L + l], z[(Z_DUE + r) * L + l] = start[r], due[r]
-            z[Z_FIRST_T * L + l], z[Z_FIRST_R * L + l] = math.nan, -1.0
-            z[Z_END * L + l] = float(n_steps)
-            z[Z_ON * L + l], z[Z_OFF * L + l] = math.inf, math.inf
-            if i < 0:
-                continue
-            z[Z_ALIVE * L + l] = 1.0
-            if kinds[i, 0, LOAD] == STEP:
-                pa = params[i, 0, LOAD]
-                z[Z_LOAD * L + l], z[Z_ON * L + l], z[Z_OFF * L + l] = pa[0], pa[2], pa[3]
-            met = metrics[i]
-            met[:] = 0.0
-            met[:, 0], met[:, 1] = math.nan, -1.0
-        for j in range(n_ctrl):
-            k0 = j * ratio
-            t = k0 * dt
-            alive = False
-            for l in range(L):
-                i = blocks[b, l]
-                if i < 0 or z[Z_ALIVE * L + l] == 0.0:
-                    continue
-                alive = True
-                e_i, q_i, f_i = index[i, 0, 0], index[i, 0, 1], index[i, 0, 2]
-                ka_i, kb_i, kc_i, kg_i, method, fd = scenario_tables(
-                    e_i, f_i, ka, kb, kc, kg, kdim, methods, fdata, foff, empty)
-                for r in range(5):
-                    xs[r] = z[(Z_X + r) * L + l]
-                scratch[0] = _signal(LOAD, kinds[i, 0], params[i, 0], offsets[i, 0], st, sv,
-                                     t, k0)
-                ace = _signal(ACE, kinds[i, 0], params[i, 0], offsets[i, 0], st, sv, t, j)
-                ua, flags, mod = generator_period(
-                    j, t, xs, scratch[0] + 0.0, noise[q_i, j, 0] if q_i >= 0 else 0.0,
-                    noise[q_i, j, 1] if q_i >= 0 else 0.0, kinds[i, 0], params[i, 0],
-                    offsets[i, 0], st, sv, k_freq, e_i, ka_i, kb_i, kc_i, kg_i, kstate[l],
-                    index[i, 0, 3] == 1, method, fd, mem[l], gstate[l], x_hat, ctrl,
-                    0.0 + ace, k_tie, index[i, 0, 4] == 1,
-                    (0, xs, scratch, scratch, scratch, scratch, kstate[l], scratch))
-                z[Z_U * L + l] = ua
-                met = metrics[i, 0]
-                met[4] += (flags & ACTIVE) != 0
-                met[5] += (flags & ALARM_BITS) != 0
-                met[8] += (flags & OUTSIDE) != 0
-                met[6] = max(met[6], mod)
-                met[7] += mod
-            if not alive:
-                break
-            _lane_steps(k0, min(k0 + ratio, n_steps), dt, A, Bu, Bl, z, w, limits, delays,
-                        stop_on_trip)
-        for l in range(L):
-            i = blocks[b, l]
-            if i < 0:
-                continue
-            met = metrics[i, 0]
-            met[0], met[1] = z[Z_FIRST_T * L + l], z[Z_FIRST_R * L + l]
-            met[2], met[3] = z[Z_PEAK_DW * L + l], z[Z_PEAK_RC * L + l]
-            met[9] = abs(z[(Z_X + 3) * L + l])
-            ends[i] = int(z[Z_END * L + l])
 
 
 # -- the Python side: scenario tables, a run, the testbed's generator side ---------------
@@ -697,38 +614,6 @@ def scenario_signals(pc_attack, wref_attack, load, tc: np.ndarray, t: np.ndarray
     return kinds, params, offsets, np.concatenate(st), np.concatenate(sv)
 
 
-class _Table:
-    """Distinct items (plants, filters, ...) and each scenario's index into them."""
-
-    def __init__(self) -> None:
-        self.items: list = []
-        self._keys: dict = {}
-
-    def index(self, key, make) -> int:
-        """The number of the item ``key`` names, made by ``make()`` the first time
-        (if ``make`` raises, nothing is kept)."""
-        if key not in self._keys:
-            item = make()
-            self._keys[key] = len(self.items)
-            self.items.append(item)
-        return self._keys[key]
-
-
-@dataclass
-class Run:
-    """What :meth:`Scenarios.run` returns: per-scenario and area ``metrics`` (N,
-    n_areas, len(METRICS)) and ``ends`` (N,: last plant sample kept), and for a
-    traced run (N = 1) every state ``x`` (samples, n_states), control sample
-    ``ctrl`` (periods, n_areas, N_CTRL) and relay trip bits ``trips`` (samples,
-    n_areas)."""
-
-    metrics: np.ndarray
-    ends: np.ndarray
-    x: np.ndarray
-    ctrl: np.ndarray
-    trips: np.ndarray
-
-
 CHANNELS = ("pc", "wref", "ace")   # what an attacker may corrupt in an area
 
 
@@ -752,228 +637,6 @@ def check_attacks(attacks: dict | None, n_areas: int) -> dict:
             raise error(f"attacks[{a}] must be a dict with keys among {CHANNELS}, "
                              f"got {channels!r}")
     return attacks
-
-
-class Scenarios:
-    """Scenarios of one grid for the engine: add them one by one, then :meth:`run`.
-
-    Parameters
-    ----------
-    design : LFCParams or MultiAreaParams
-        The design model: a single area (a grid of one area, no tie-line) or an
-        interconnected grid.  It gives the AGC (for one area: the local integral
-        controller, gain ``k_i``), the model of each area's ``"kalman"``
-        estimator (filters carry their own) and the plant of scenarios added
-        without one.
-    duration, dt, control_period : float
-        Simulated time, plant step and controller period (s); checked by the caller.
-    relays : RelaySettings
-        The same settings in every area.
-    """
-
-    def __init__(self, design: LFCParams | MultiAreaParams, *, duration: float, dt: float,
-                 control_period: float, relays: RelaySettings) -> None:
-        if not isinstance(relays, RelaySettings):
-            raise ParameterTypeError(f"relays must be a RelaySettings, got {relays!r}")
-        self.design, self.dt, self.relays = design, float(dt), relays
-        self.grid = as_grid(design)
-        self.ratio = int(round(control_period / dt))
-        self.n_steps = int(round(duration / dt))
-        self.n_ctrl = -(-self.n_steps // self.ratio)
-        self.period = self.ratio * self.dt
-        self.t = np.arange(self.n_steps + 1) * self.dt
-        self.tc = np.arange(self.n_ctrl) * self.period
-        self._plants, self._kf, self._filters = _Table(), _Table(), _Table()
-        self._plant_of: list[int] = []
-        self._rows: list[list[tuple]] = []
-        self._noise: list[np.ndarray] = []
-        self._relay_noise: list[list[tuple]] = []
-        self._sig: list[tuple] = []
-        self._st: list[np.ndarray] = []
-        self._sv: list[np.ndarray] = []
-        self._n_samples = 0
-
-    def add(self, *, plant: LFCParams | MultiAreaParams | None = None,
-            attacks: dict | None = None, loads: dict | None = None,
-            filters: dict | None = None, estimator=None,
-            noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0,
-            feedforward: bool = False, relay_noise: bool = False,
-            anti_windup: bool = False) -> int:
-        """One scenario; returns its row number.
-
-        ``attacks`` (``{area: {"pc" | "wref" | "ace": signal}}``), ``loads``
-        (``{area: signal}``), ``filters`` (``{area: SafetyFilter}``, built),
-        ``estimator``, ``noise_std``, ``seed`` (area ``a > 0`` draws from ``(seed,
-        a)``), ``feedforward`` (the filter is given the area's net disturbance),
-        ``anti_windup`` (:func:`generator_period`) and ``relay_noise`` as in
-        :func:`lfc.simulate` (a grid) and
-        :func:`lfc.simulate`; ``plant`` (default the design model) is the grid
-        the scenario runs on, with the design's areas and tie-lines.
-        """
-        grid = self.grid
-        n = grid.n_areas
-        plant = grid if plant is None else as_grid(plant)
-        if plant.n_areas != n or len(plant.tie) != len(grid.tie):
-            raise ValueError(f"plant must have the design's {n} area(s) and {len(grid.tie)} "
-                             f"tie-line(s), got {plant!r}")
-        p_i = self._plants.index(plant, lambda: discretize_grid(plant, self.dt))
-        attacks = check_attacks(attacks, n)
-        loads = check_area_keys(loads, n, "loads")
-        filters = check_area_keys(filters, n, "filters")
-        noisy = check_noise(noise_std)
-        seed = check_seed("seed", seed)
-        feedforward = check_flag("feedforward", feedforward)
-        anti_windup = check_flag("anti_windup", anti_windup)
-        relay_noise = check_flag("relay_noise", relay_noise)
-        if relay_noise and not noisy:
-            raise ValueError("relay_noise=True needs noise_std > 0 (the relays' measurement "
-                             "noise)")
-        check_coupled(filters, grid, estimator, noise_std)
-        check_load_measured(filters, estimator, feedforward)
-        f_is = [-1 if filters.get(a) is None else self._filters.index(
-            id(filters[a]), lambda: self._checked(a, filters[a])) for a in range(n)]
-        row, noise, sig, n_samples = [], [], [], self._n_samples   # kept once all areas pass
-        for a, area in enumerate(grid.areas):
-            channels = attacks.get(a, {})
-            scc = filters.get(a)
-            if isinstance(scc, CoupledFilter):
-                kf = scc.kalman
-                e_i = -1 if kf is None else self._kf.index(id(kf), lambda: kf)
-            elif isinstance(estimator, str) and estimator == "kalman":   # one per area and noise
-                e_i = self._kf.index((a, tuple(noise_std)), lambda: make_estimator(
-                    estimator, area, self.period, noise_std))   # its gain takes milliseconds
-            else:
-                kf = make_estimator(estimator, area, self.period, noise_std)
-                e_i = -1 if kf is None else self._kf.index(id(kf), lambda: kf)
-            if noisy:
-                noise.append(make_noise(noise_std, self.n_ctrl, seed if a == 0 else (seed, a)))
-            kinds, params, offsets, st, sv = scenario_signals(
-                channels.get("pc"), channels.get("wref"), loads.get(a), self.tc, self.t,
-                channels.get("ace"))
-            offsets[:, 0] += n_samples                # into this run's sample arrays
-            sig.append(((kinds, params, offsets), st, sv))
-            n_samples += len(st)
-            row.append((e_i, len(self._noise) + len(noise) - 1 if noisy else -1, f_is[a],
-                        int(feedforward), int(anti_windup)))
-        self._noise += noise
-        for area_sig, st, sv in sig:
-            self._sig.append(area_sig)
-            self._st.append(st)
-            self._sv.append(sv)
-        self._n_samples = n_samples
-        self._rows.append(row)
-        self._plant_of.append(p_i)
-        self._relay_noise.append([(*(noise_std if relay_noise else (0.0, 0.0)), seed)] * n)
-        return len(self._rows) - 1
-
-    def _checked(self, a: int, scc) -> SafetyFilter | CoupledFilter:
-        """``scc``, the filter of area ``a``, once checked: its type, its relays
-        (the simulation's) and its control period (once per distinct filter)."""
-        if not isinstance(scc, (SafetyFilter, CoupledFilter)):
-            raise ValueError(f"filters[{a}] must be a SafetyFilter, a CoupledFilter or "
-                             f"None, got {scc!r}")
-        if not np.array_equal(scc.relays.arrays()[0], self.relays.arrays()[0]):
-            raise ValueError(f"the filter of area {a} keeps the safe set of {scc.relays} "
-                             f"but the simulation's relays are {self.relays}: a trip "
-                             f"would go unflagged; build it with the same thresholds")
-        scc.check_period(self.period)
-        return scc
-
-    def run(self, *, trace: bool = False, stop_on_trip: bool = False,
-            lanes: bool = True) -> Run:
-        """Run every scenario added; ``trace`` keeps everything (one scenario only).
-
-        With ``lanes`` (untraced single-area runs), the scenarios that allow it
-        (no relay noise, a step load or none, not the coupled filter) run
-        ``LANES`` at a time in SIMD registers (:func:`_run_lanes`), a block per
-        plant, the others one at a time (:func:`_run`, the reference), as do a
-        plant's last few (fewer than ``LANE_MIN_FILL`` in its last block: a
-        block pays for all its lanes); the metrics are the same bit for bit
-        either way.
-
-        Raises ``ValueError`` naming the scenarios whose state became non-finite
-        (a signal that is finite as specified but not where it is evaluated);
-        their metrics would otherwise read as a quiet run."""
-        stop_on_trip = check_flag("stop_on_trip", stop_on_trip)
-        grid, n = self.grid, len(self._rows)
-        n_a, n_s = grid.n_areas, grid.n_states
-        kinds, params, offsets, st, sv = signal_tables(self._sig, self._st, self._sv, (n, n_a))
-        plants = self._plants.items
-        ad = np.array([p[0] for p in plants])
-        bu, bl = np.array([p[1] for p in plants]), np.array([p[2] for p in plants])
-        k_freq, k_tie = grid.agc_gains()
-        ka, kb, kc, kg, kdim = _kalman_tables(self._kf.items)
-        methods, fdata, foff = filter_tables(self._filters.items)
-        noise = np.array(self._noise) if self._noise else np.zeros((1, self.n_ctrl, 2))
-        limits, delays = self.relays.arrays()
-        metrics = np.zeros((n, n_a, len(METRICS)))
-        ends = np.zeros(n, np.int64)
-        rows = (self.n_steps + 1) if trace else 0
-        tx, tt = np.zeros((rows, n_s)), np.zeros((rows, n_a), np.int64)
-        tc = np.full((self.n_ctrl if trace else 0, n_a, N_CTRL), np.nan)
-        plant_of = np.array(self._plant_of, np.int64)
-        index = np.array(self._rows, np.int64).reshape(n, n_a, 5)
-        relay_noise = np.array(self._relay_noise, float).reshape(n, n_a, 3)
-        rest = np.arange(n)
-        if lanes and not trace and n_a == 1 and n_s == N_AREA_STATES:
-            f_i = index[:, 0, 2]
-            fit = ((relay_noise[:, 0, 0] == 0.0) & (relay_noise[:, 0, 1] == 0.0)
-                   & np.isin(kinds[:, 0, LOAD], (STEP, NONE))
-                   & ((f_i < 0) | (methods[np.maximum(f_i, 0)] != COUPLED)))
-            blocks, left = lane_blocks(plant_of, np.flatnonzero(fit), LANE_MIN_FILL)
-            _run_lanes(self.n_steps, self.ratio, self.dt, ad, bu, bl,
-                       k_freq[0] * self.period, k_tie[0] * self.period, plant_of, blocks,
-                       index, kinds, params, offsets, st, sv, noise, ka, kb, kc, kg, kdim,
-                       methods, fdata, foff, limits, delays, stop_on_trip, metrics, ends,
-                       np.zeros(N_Z * LANES), np.zeros(N_Z * LANES), np.zeros(N_AREA_STATES),
-                       np.zeros(N_AREA_STATES), np.zeros((LANES, MEMORY)),
-                       np.zeros((LANES, 1)), np.zeros((LANES, 2, ka.shape[1])),
-                       np.zeros(3), np.zeros(3), np.zeros((0, N_CTRL)), np.zeros(1))
-            rest = np.sort(np.concatenate([np.flatnonzero(~fit), left]))
-        if len(rest):
-            rest = slice(None) if len(rest) == n else rest   # all of them: views, no copies
-            m_rest, e_rest = metrics[rest], ends[rest]
-            _run(self.n_steps, self.ratio, self.dt, ad, bu, bl, grid.incidence(),
-                 k_freq * self.period, k_tie * self.period, plant_of[rest], index[rest],
-                 kinds[rest], params[rest], offsets[rest], st, sv, noise, ka, kb, kc, kg,
-                 kdim, methods, fdata, foff, limits, delays, relay_noise[rest],
-                 stop_on_trip, m_rest, tx, tc, tt, e_rest, np.zeros(n_s), np.zeros(n_s),
-                 np.zeros(n_a), np.zeros(n_a), np.zeros(N_AREA_STATES),
-                 np.zeros((n_a, MEMORY)), np.zeros((n_a, 1)),
-                 np.zeros((n_a, 2, ka.shape[1])), np.zeros((n_a, 3)), np.zeros((n_a, 3)),
-                 np.zeros(6 * n_a), np.zeros(n_s),
-                 np.zeros(max((rows_scratch(f.data) for f in self._filters.items
-                               if f.method_id == COUPLED), default=0)))
-            metrics[rest], ends[rest] = m_rest, e_rest
-        final = metrics[:, :, METRICS.index("final_abs_dw_meas")]
-        bad = np.flatnonzero(~np.all(np.isfinite(final), axis=1))
-        if len(bad):
-            raise ValueError(f"scenario(s) {bad[:5].tolist()} became non-finite: an attack or "
-                             f"load signal (pc_attack, wref_attack, load) gives a non-finite "
-                             f"value where it is evaluated (e.g. Samples times closer than a "
-                             f"float resolves, or a frequency so high its phase overflows), "
-                             f"or the plant itself diverges (gains such as k_agc or the bias "
-                             f"so far apart that the discretized loop is unstable)")
-        return Run(metrics, ends, tx, tc, tt)
-
-
-def lane_blocks(plant_of: np.ndarray, rows: np.ndarray,
-                min_fill: int = 1) -> tuple[np.ndarray, np.ndarray]:
-    """``rows`` (scenario numbers) grouped by plant into blocks of ``LANES``
-    (n_blocks, LANES), the last block of each plant padded with -1 if it holds at
-    least ``min_fill`` rows; and the rows of the last blocks that hold fewer (a
-    block costs the plant's arithmetic of all ``LANES`` lanes, whatever it holds)."""
-    blocks, left = [], []
-    for p in np.unique(plant_of[rows]):
-        mine = rows[plant_of[rows] == p]
-        full = len(mine) - len(mine) % LANES
-        if len(mine) - full < min_fill:
-            left.append(mine[full:])
-            mine = mine[:full]
-        pad = -len(mine) % LANES
-        blocks.append(np.concatenate([mine, np.full(pad, -1)]).reshape(-1, LANES))
-    return ((np.concatenate(blocks) if blocks else np.zeros((0, LANES))).astype(np.int64),
-            (np.concatenate(left) if left else np.zeros(0)).astype(np.int64))
 
 
 def check_load_measured(filters: dict, estimator, feedforward: bool) -> None:
@@ -1041,46 +704,6 @@ def check_coupled_estimator(filt: CoupledFilter, estimator,
         raise ValueError(f"noise_std={tuple(noise_std)} exceeds the noise the coupled filter "
                          f"was built for ({built_for}): its error bound would not hold; build "
                          f"it with noise_std={tuple(noise_std)}")
-
-
-def signal_tables(sig: list[tuple], st: list[np.ndarray], sv: list[np.ndarray],
-                  shape: tuple[int, ...]) -> tuple:
-    """The signals of :func:`scenario_signals`, one per generator side, as the
-    engine's arrays ``(kinds, params, offsets, sample times, sample values)``,
-    the first three shaped ``shape + (N_CHANNELS, ...)``."""
-    kinds = np.array([s[0] for s in sig], np.int64).reshape(*shape, N_CHANNELS)
-    params = np.array([s[1] for s in sig]).reshape(*shape, N_CHANNELS, N_PARAMS)
-    offsets = np.array([s[2] for s in sig], np.int64).reshape(*shape, N_CHANNELS, 2)
-    return (kinds, params, offsets, np.concatenate(st) if st else np.zeros(0),
-            np.concatenate(sv) if sv else np.zeros(0))
-
-
-def filter_tables(filters: list[SafetyFilter]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The filters' method ids, their data one after another and each one's
-    offset into it: ``(methods, fdata, foff)``, as :func:`scenario_tables` reads them."""
-    methods = np.array([f.method_id for f in filters] or [0], np.int64)
-    data = [f.data for f in filters]
-    foff = np.concatenate([[0], np.cumsum([len(d) for d in data])]).astype(np.int64)
-    return methods, np.concatenate(data) if data else np.zeros(0), foff
-
-
-def _kalman_tables(filters: list) -> tuple:
-    """The Kalman filters' matrices (each area's :class:`KalmanFilter`, or a
-    coupled filter's :class:`~lfc.filters.coupled.GridKalman`), padded to the
-    largest: ``(A, B, C, gain, dims)`` with ``dims[i]`` = (states,
-    measurements, inputs)."""
-    m = max(len(filters), 1)
-    n, n_y, n_u = (max([getattr(kf, d) for kf in filters], default=1)
-                   for d in ("n", "n_y", "n_u"))
-    n = max(n, N_KF)
-    ka, kb = np.zeros((m, n, n)), np.zeros((m, n, n_u))
-    kc, kg = np.zeros((m, n_y, n)), np.zeros((m, n, n_y))
-    kdim = np.zeros((m, 3), np.int64)
-    for i, kf in enumerate(filters):
-        a, y, b = kf.n, kf.n_y, kf.n_u
-        ka[i, :a, :a], kb[i, :a, :b], kc[i, :y, :a], kg[i, :a, :y] = kf.A, kf.B, kf.C, kf.gain
-        kdim[i] = a, y, b
-    return ka, kb, kc, kg, kdim
 
 
 class GeneratorSide:

@@ -20,12 +20,13 @@ import pandas as pd
 
 from lfc._validate import (ParameterTypeError, check_flag, check_folder, check_multiple,
                            check_positive, in_engine_types)
-from lfc.engine import CTRL_COLUMNS, N_CTRL, Scenarios, sample_signal
+from lfc.engine import CTRL_COLUMNS, N_CTRL, sample_signal
 from lfc.filters import SafetyFilter, binding_names
 from lfc.filters.base import (ACTIVE, ALARM_BITS, INFEASIBLE, INVALID, MAX_ABS_INPUT, OUTSIDE,
                               SOLVER_ERROR)
 from lfc.model import STATES, LFCParams
 from lfc.relays import RELAY_NAMES, RelaySettings, relays_or_default
+from lfc.scenarios import Scenarios
 from lfc.signals import Signal
 
 __all__ = ["ALARM_COLUMNS", "METRIC_KEYS", "SimResult", "check_timing", "simulate_area"]

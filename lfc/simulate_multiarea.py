@@ -71,12 +71,13 @@ from lfc._validate import (ParameterTypeError, check_count, check_folder, check_
                            in_engine_types)
 from lfc.batch import metrics_frame
 from lfc.estimation import check_noise_std
-from lfc.engine import METRICS, Scenarios, check_area_keys, sample_signal
+from lfc.engine import METRICS, check_area_keys, sample_signal
 from lfc.filters import SafetyFilter, build
 from lfc.filters.coupled import CoupledFilter
 from lfc.model import STATES
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams
 from lfc.relays import RELAY_NAMES, RelaySettings, relays_or_default
+from lfc.scenarios import Scenarios
 from lfc.simulate import METRIC_KEYS, SimResult, check_timing, result
 
 __all__ = ["MultiAreaResult", "area_filter", "grid_results", "multiarea_result",

@@ -1,7 +1,7 @@
 """Compiling the engine's two loops into numba's on-disk cache, in parallel.
 
-The engine's loops — :func:`lfc.engine._run`, the scalar reference, and
-:func:`lfc.engine._run_lanes` — are compiled once per change of the compiled
+The engine's loops — :func:`lfc.engine.run_kernel`, the scalar reference, and
+:func:`lfc.lanes.run_lanes` — are compiled once per change of the compiled
 sources (about a minute of CPU on 2 cores: ``bench/records/compile.md``); then every
 process loads them from the cache (:mod:`lfc._jit`) in a fraction of a second.  But
 a process that starts while the cache is cold compiles its own copy: parallel work
@@ -51,8 +51,9 @@ class Compiling:
 
 
 def _cached() -> bool:
-    from lfc import engine
-    return all(_in_cache(loop) for loop in (engine._run, engine._run_lanes))
+    from lfc.engine import run_kernel
+    from lfc.lanes import run_lanes
+    return all(_in_cache(loop) for loop in (run_kernel, run_lanes))
 
 
 def start_compiling(say: Callable[[str], None] | None = None) -> Compiling:

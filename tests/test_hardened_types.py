@@ -578,7 +578,7 @@ def test_a_refused_filter_leaves_the_scenarios_as_they_were():
     refused scenario (its second area's filter keeps other relays, or its second
     area's attack is not a signal) adds no row, noise or samples, and the next
     one runs as if it had never been tried."""
-    from lfc.engine import Scenarios
+    from lfc.scenarios import Scenarios
     other = lfc.SafetyFilter(TWO.areas[1], lfc.RelaySettings(rocof_limit=0.02))
     good = lfc.SafetyFilter(TWO.areas[0])
     sc = Scenarios(TWO, duration=1.0, dt=1e-3, control_period=0.01,

@@ -8,8 +8,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import lfc
-from lfc import engine
-from lfc.engine import LANES, Scenarios, lane_blocks
+from lfc import lanes as lane_kernel
+from lfc import scenarios
+from lfc.lanes import LANES, lane_blocks
+from lfc.scenarios import Scenarios
 from lfc.relays import RelaySettings
 from lfc.signals import Sinusoid, Square, Step
 from test_batch import random_scenarios
@@ -23,7 +25,7 @@ def both(table: pd.DataFrame, duration: float = 6.0,
     at a time."""
     kw = dict(duration=duration, progress=False, executor=None, chunk_size=len(table) + 1)
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(engine, "LANE_MIN_FILL", min_fill)
+        patch.setattr(scenarios, "LANE_MIN_FILL", min_fill)
         lanes = lfc.simulate_many(P, table, lanes=True, **kw)
     return lanes, lfc.simulate_many(P, table, lanes=False, **kw)
 
@@ -69,7 +71,7 @@ def test_lanes_stop_at_a_trip_where_one_at_a_time_stops(stop, duration, period):
     """A lane that trips stops there (its state and metrics frozen) while the
     others in its block go on; with an odd number of plant steps per control
     period and a last period of three (the lanes step two at a time, between two
-    buffers: ``lfc.engine._lane_steps``), too."""
+    buffers: ``lfc.lanes._lane_steps``), too."""
     relays = RelaySettings()
     runs = []
     for lanes in (True, False):
@@ -119,5 +121,5 @@ def test_one_plant_per_row_runs_one_at_a_time_with_the_same_numbers():
     long: ``bench/bench_batch.py --fill``), a plant with a full block in lanes."""
     table = mixed(40, seed=5)
     table["M"] = np.where(np.arange(40) < 20, P.M, np.linspace(3.0, 5.0, 40))
-    lanes, scalar = both(table, duration=3.0, min_fill=engine.LANE_MIN_FILL)
+    lanes, scalar = both(table, duration=3.0, min_fill=lane_kernel.LANE_MIN_FILL)
     pd.testing.assert_frame_equal(lanes, scalar, check_exact=True)

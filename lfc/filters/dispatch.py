@@ -20,6 +20,7 @@ from lfc.filters.certified import CertifiedFilter
 from lfc.filters.certified import decide as decide_certified
 from lfc.filters.contract import ContractFilter
 from lfc.filters.contract import decide as decide_contract
+from lfc.filters.coupled import CoupledFilter, rows_scratch
 from lfc.filters.paper import PaperFilter
 from lfc.filters.paper import decide as decide_paper
 
@@ -95,3 +96,14 @@ def decide_many(method: int, fd: np.ndarray, x: np.ndarray, u_ref: np.ndarray, p
         values[i, 0], values[i, 1], values[i, 2], values[i, 3] = out[2], out[3], out[4], out[5]
         values[i, 4], values[i, 5], values[i, 6], values[i, 7] = out[6], out[7], out[8], out[9]
     return u
+
+
+#: the methods whose decision reads the whole grid (the engine hands them every area's
+#: state, command and load); the lanes, one area at a time, do not run them
+GRID_WIDE = (CoupledFilter.method_id,)
+
+
+def scratch_size(filt) -> int:
+    """The scratch entries ``filt``'s compiled decision needs inside a simulation
+    (:class:`lfc.engine.Work`'s ``sums``): 0 but for a grid-wide method."""
+    return rows_scratch(filt.data) if filt.method_id in GRID_WIDE else 0
