@@ -46,7 +46,8 @@ from lfc._jit import maxnum, minnum
 from lfc.filters.base import clear_built
 from lfc.filters.bounds import pair
 from lfc.filters.contract import contract_design
-from lfc.filters.coupled import CoupledFilter, row_intervals
+from lfc.filters.coupled import CoupledFilter
+from lfc.filters.coupled_kernel import row_intervals
 from lfc.simulate_multiarea import area_filter
 
 DURATION, REPEAT = 20.0, 3

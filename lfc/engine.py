@@ -38,9 +38,9 @@ from lfc.filters import SafetyFilter
 from lfc.filters.base import ACTIVE, ALARM_BITS, MAX_ABS_INPUT, MEMORY, OUTSIDE
 from lfc.filters.coupled import METHOD_ID as COUPLED
 from lfc.filters.coupled import CoupledFilter
-from lfc.filters.coupled import N_R as N_R_COUPLED
-from lfc.filters.coupled import decide as decide_coupled
-from lfc.filters.coupled import grid_estimate, rows_scratch
+from lfc.filters.coupled_kernel import N_R as N_R_COUPLED
+from lfc.filters.coupled_kernel import decide as decide_coupled
+from lfc.filters.coupled_kernel import grid_estimate, rows_scratch
 from lfc.filters.dispatch import decide
 from lfc.model import LFCParams
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams
@@ -59,6 +59,16 @@ CTRL_COLUMNS = ("u_ref", "u", "flags", "h_freq", "h_rocof", "margin_freq", "marg
 METRICS = ("first_trip_t", "first_trip_relay", "max_abs_dw_meas", "max_abs_rocof_meas",
            "active", "alarms", "max_abs_modification", "sum_abs_modification", "outside",
            "final_abs_dw_meas")
+
+
+class Timing(NamedTuple):
+    """A run's clock: ``n_steps`` plant steps of ``dt`` (s), the generator sides every
+    ``ratio`` steps; ``stop_on_trip`` ends a scenario at its first trip."""
+
+    n_steps: int
+    ratio: int
+    dt: float
+    stop_on_trip: bool
 
 
 class Plants(NamedTuple):
@@ -334,11 +344,10 @@ def _watch(met: np.ndarray, t: float, dw: float, rc: float, noisy: bool, r0: flo
 
 
 @kernel
-def run_kernel(n_steps: int, ratio: int, dt: float, stop_on_trip: bool, plants: Plants,
-               rows: Rows, samples: Samples, estimators: Estimators, filters: FilterTables,
-               relays: RelayTables, out: Outputs, work: Work) -> None:
-    """Advance every scenario of one grid from equilibrium for ``n_steps`` plant steps
-    of ``dt`` (s), the generator sides every ``ratio`` steps.
+def run_kernel(timing: Timing, plants: Plants, rows: Rows, samples: Samples,
+               estimators: Estimators, filters: FilterTables, relays: RelayTables,
+               out: Outputs, work: Work) -> None:
+    """Advance every scenario of one grid from equilibrium (:class:`Timing`).
 
     The grid has ``n_a = plants.incidence.shape[0]`` areas and
     ``plants.incidence.shape[1]`` tie-lines (:mod:`lfc.multiarea`; one area and no
@@ -352,6 +361,7 @@ def run_kernel(n_steps: int, ratio: int, dt: float, stop_on_trip: bool, plants: 
     state in registers for a control period; it computes the same sums in the
     same order as the general path.
     """
+    n_steps, ratio, dt, stop_on_trip = timing
     ad, bu, bl, inc, k_freq, k_tie = plants
     plant_of, index, kinds, params, offsets, relay_noise = rows
     st, sv, noise = samples

@@ -16,21 +16,9 @@ from typing import NamedTuple
 import numpy as np
 
 from lfc._jit import choose, inline, kernel
-from lfc.engine import (
-    ACE,
-    LOAD,
-    N_CTRL,
-    Estimators,
-    FilterTables,
-    Outputs,
-    Plants,
-    RelayTables,
-    Rows,
-    Samples,
-    generator_period,
-    scenario_tables,
-    signal_value,
-)
+from lfc.engine import (ACE, LOAD, N_CTRL, Estimators, FilterTables, Outputs, Plants,
+                        RelayTables, Rows, Samples, Timing, generator_period, scenario_tables,
+                        signal_value)
 from lfc.filters.base import ACTIVE, ALARM_BITS, MEMORY, OUTSIDE
 from lfc.multiarea import N_AREA_STATES
 from lfc.relays import TIME_TOL, relay_sample
@@ -158,9 +146,9 @@ class LaneWork(NamedTuple):
 
 
 @kernel
-def run_lanes(n_steps: int, ratio: int, dt: float, stop_on_trip: bool, plants: Plants,
-              rows: Rows, samples: Samples, estimators: Estimators, filters: FilterTables,
-              relays: RelayTables, out: Outputs, blocks: np.ndarray, work: LaneWork) -> None:
+def run_lanes(timing: Timing, plants: Plants, rows: Rows, samples: Samples,
+              estimators: Estimators, filters: FilterTables, relays: RelayTables,
+              out: Outputs, blocks: np.ndarray, work: LaneWork) -> None:
     """:func:`~lfc.engine.run_kernel` for single-area scenarios without relay noise
     whose load is a step or none, ``LANES`` at a time: ``blocks`` (n_blocks, LANES)
     holds the scenario numbers of each block, all on one plant (-1: an empty lane).
@@ -169,6 +157,7 @@ def run_lanes(n_steps: int, ratio: int, dt: float, stop_on_trip: bool, plants: P
     :func:`_lane_steps` advances all lanes.  The metrics and ``ends`` equal
     :func:`~lfc.engine.run_kernel`'s bit for bit (``tests/test_lanes.py``); ``out``'s
     trace arrays are not written.  ``work`` (:class:`LaneWork`) holds the lanes' state."""
+    n_steps, ratio, dt, stop_on_trip = timing
     ad, bu, bl = plants.ad, plants.bu, plants.bl
     k_freq, k_tie = plants.k_freq[0], plants.k_tie[0]
     plant_of, index, kinds, params, offsets = (rows.plant_of, rows.index, rows.kinds,

@@ -14,30 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from lfc._validate import ParameterTypeError, check_flag, check_seed
-from lfc.engine import (
-    LOAD,
-    METRICS,
-    N_CHANNELS,
-    N_CTRL,
-    N_KF,
-    Estimators,
-    FilterTables,
-    Outputs,
-    Plants,
-    RelayTables,
-    Rows,
-    Samples,
-    Work,
-    check_area_keys,
-    check_attacks,
-    check_coupled,
-    check_load_measured,
-    check_noise,
-    make_estimator,
-    make_noise,
-    run_kernel,
-    scenario_signals,
-)
+from lfc.engine import (LOAD, METRICS, N_CHANNELS, N_CTRL, N_KF, Estimators, FilterTables,
+                        Outputs, Plants, RelayTables, Rows, Samples, Timing, Work,
+                        check_area_keys, check_attacks, check_coupled, check_load_measured,
+                        check_noise, make_estimator, make_noise, run_kernel, scenario_signals)
 from lfc.filters import SafetyFilter
 from lfc.filters.coupled import CoupledFilter
 from lfc.filters.dispatch import GRID_WIDE, scratch_size
@@ -238,6 +218,7 @@ class Scenarios:
         estimators = kalman_tables(self._kf.items)
         filters = filter_tables(self._filters.items)
         relays = RelayTables(*self.relays.arrays())
+        timing = Timing(self.n_steps, self.ratio, self.dt, stop_on_trip)
         n_trace = (self.n_steps + 1) if trace else 0
         out = Outputs(np.zeros((n, n_a, len(METRICS))), np.zeros(n, np.int64),
                       np.zeros((n_trace, n_s)),
@@ -250,8 +231,7 @@ class Scenarios:
                    & np.isin(kinds[:, 0, LOAD], (STEP, NONE))
                    & ((f_i < 0) | ~np.isin(filters.methods[np.maximum(f_i, 0)], GRID_WIDE)))
             blocks, left = lane_blocks(rows.plant_of, np.flatnonzero(fit), LANE_MIN_FILL)
-            run_lanes(self.n_steps, self.ratio, self.dt, stop_on_trip, plants, rows, samples,
-                      estimators, filters, relays, out, blocks,
+            run_lanes(timing, plants, rows, samples, estimators, filters, relays, out, blocks,
                       LaneWork.sized(estimators.a.shape[1]))
             rest = np.sort(np.concatenate([np.flatnonzero(~fit), left]))
         if len(rest):
@@ -259,8 +239,7 @@ class Scenarios:
             mine = Rows(*(column[rest] for column in rows))
             part = Outputs(out.metrics[rest], out.ends[rest], *out[2:])
             n_sums = max((scratch_size(f) for f in self._filters.items), default=0)
-            run_kernel(self.n_steps, self.ratio, self.dt, stop_on_trip, plants, mine, samples,
-                       estimators, filters, relays, part,
+            run_kernel(timing, plants, mine, samples, estimators, filters, relays, part,
                        Work.sized(n_s, n_a, estimators.a.shape[1], n_sums))
             out.metrics[rest], out.ends[rest] = part.metrics, part.ends
         metrics, ends = out.metrics, out.ends
@@ -300,7 +279,7 @@ def filter_tables(filters: list[SafetyFilter]) -> FilterTables:
 
 def kalman_tables(filters: list) -> Estimators:
     """The Kalman filters' matrices (each area's :class:`KalmanFilter`, or a
-    coupled filter's :class:`~lfc.filters.coupled.GridKalman`), padded to the
+    coupled filter's :class:`~lfc.filters.coupled_set.GridKalman`), padded to the
     largest (``dims[i]``: states, measurements, inputs)."""
     m = max(len(filters), 1)
     n, n_y, n_u = (max([getattr(kf, d) for kf in filters], default=1)

@@ -20,7 +20,9 @@ from hypothesis import strategies as st
 import lfc
 from lfc import MultiAreaParams
 from lfc.filters.base import INVALID, OUTSIDE
-from lfc.filters.coupled import CoupledFilter, CoupledOptions, reduced_model, row_intervals
+from lfc.filters.coupled import CoupledFilter, CoupledOptions
+from lfc.filters.coupled_kernel import row_intervals
+from lfc.filters.coupled_set import reduced_model
 from lfc.simulate_multiarea import simulate_grid_linear
 import tiers
 from test_coupled_baseline import STEP, step_battery
@@ -222,11 +224,11 @@ def test_an_ellipsoid_the_solver_left_just_outside_invariance_is_moved_inside():
     """Found on an AMD EPYC (2026-11-29): behind T = 50 pu the solver's ``Q`` met
     ``A Q + Q A' <= 0`` only to its tolerance (about 5e-7 too high) at every floor,
     where Intel's BLAS kernels gave one that passed, so the defaults did not build
-    there.  ``_made_invariant`` moves such a ``Q`` inside: given one whose
+    there.  ``made_invariant`` moves such a ``Q`` inside: given one whose
     inequality is off by 1e-6 (a Lyapunov solution pushed out along its top
     eigenvector), the result makes ``A Q + Q A'`` negative definite and keeps
     every output's reach within its room."""
-    from lfc.filters.coupled import _made_invariant, output_rows
+    from lfc.filters.coupled_set import made_invariant, output_rows
     from scipy.linalg import solve_continuous_lyapunov
     A, _, _, _ = reduced_model(MultiAreaParams.two_area(T=50.0))
     n = len(A)
@@ -237,7 +239,7 @@ def test_an_ellipsoid_the_solver_left_just_outside_invariance_is_moved_inside():
     bad = Q + solve_continuous_lyapunov(A, (1.0 + 1e-6) * np.outer(v, v))
     assert np.max(np.linalg.eigvalsh(A @ bad + bad @ A.T)) == pytest.approx(1e-6, rel=1e-3)
     room = 1.01 * np.sqrt(np.einsum("ij,jk,ik->i", C, bad, C))
-    good = _made_invariant(A, C, bad, room)
+    good = made_invariant(A, C, bad, room)
     assert np.max(np.linalg.eigvalsh(A @ good + good @ A.T)) < 0
     assert np.all(np.einsum("ij,jk,ik->i", C, good, C) <= room ** 2 * (1 + 1e-12))
     assert np.min(np.linalg.eigvalsh(good)) > 0
@@ -251,7 +253,7 @@ def test_the_shaped_terminal_set_builds_where_the_lyapunov_one_leaves_no_room():
     (``terminal="auto"``), keeping the Lyapunov one where it has room.  The shaped
     one is invariant (``A'P + PA`` negative definite) and keeps every output
     within its room."""
-    from lfc.filters.coupled import output_rows, shaped_terminal
+    from lfc.filters.coupled_set import output_rows, shaped_terminal
     light = MultiAreaParams(areas=THREE.areas[:2] + (LIGHT,), tie=THREE.tie)
     assert CoupledFilter(light, RELAYS).cert.terminal == "sdp"
     assert CoupledFilter(THREE, RELAYS).cert.terminal == "lyapunov"
@@ -518,7 +520,7 @@ def test_a_call_never_raises_and_says_why():
 
 def intervals_row_by_row(rows: np.ndarray, n_s: int, x: np.ndarray, u: np.ndarray,
                          p: np.ndarray, k: int) -> tuple:
-    """``lfc.filters.coupled.row_intervals`` written out in Python, one
+    """``lfc.filters.coupled_kernel.row_intervals`` written out in Python, one
     row of ``rows`` (bound new, bound held, the state's, the commands' and the
     loads' gains) after another: the specification the compiled pass must equal."""
     n_a, inf = len(u), math.inf

@@ -20,7 +20,9 @@ from scipy.stats import chi2
 import lfc
 from lfc import MultiAreaParams
 from lfc.filters.base import OUTSIDE
-from lfc.filters.coupled import RHO_NEW, CoupledFilter, CoupledOptions, _load_error_steps
+from lfc.filters.coupled import CoupledFilter, CoupledOptions
+from lfc.filters.coupled_kernel import RHO_NEW
+from lfc.filters.coupled_set import load_error_steps
 from lfc.experiments.redteam import severity as sev
 from lfc.simulate_multiarea import simulate_grid_linear
 from test_coupled import RELAYS, THREE, battery, ieee39, kundur
@@ -43,7 +45,7 @@ def errors(result, area: int) -> dict[str, np.ndarray]:
 
 
 def test_the_error_is_the_lemmas_and_no_attack_moves_it():
-    """The proof's lemma (``_load_error_steps``), checked against the engine: on the
+    """The proof's lemma (``load_error_steps``), checked against the engine: on the
     two-area preset under a 1 pu sinusoid on area 0's command, without noise, the
     estimate's error is 0 (to rounding, 1e-15) until a 0.05 pu load step in area 1 at 2.003 s,
     then equals 0.05 times the lemma's response for that offset (0.3 of a period)
@@ -56,7 +58,7 @@ def test_the_error_is_the_lemmas_and_no_attack_moves_it():
     grid = MultiAreaParams.two_area()
     filt = CoupledFilter(grid, RELAYS, noise_std=NOISE)
     n_r = len(filt.cert.A)
-    steps = _load_error_steps(filt.kalman, filt.cert.A, filt.cert.Bl, 0.01)
+    steps = load_error_steps(filt.kalman, filt.cert.A, filt.cert.Bl, 0.01)
     r = simulate_grid_linear(grid, loads={1: lfc.Step(0.05, start=2.003)},
                              filters={0: filt, 1: filt},
                              attacks={0: {"pc": lfc.Sinusoid(1.0, 0.5, start=1.0)}},
@@ -220,7 +222,7 @@ def test_the_strict_held_level_takes_off_what_every_periods_loads_move_the_error
     """Theorem B' (``held_level="strict"``), its lemma: if every control period's
     load variation is at most 1, the loads' part of the estimate's error moves a
     row by at most the sum over ages of the largest response of that age
-    (:meth:`~lfc.filters.coupled.LoadErrors.total`: an enclosure, every instant of
+    (:meth:`~lfc.filters.coupled_set.LoadErrors.total`: an enclosure, every instant of
     the period and every age included; the offsets' interpolation and the ages after
     the last add less than 0.1 % of it).  Checked against the engine without noise
     on two areas:
@@ -234,7 +236,7 @@ def test_the_strict_held_level_takes_off_what_every_periods_loads_move_the_error
     strict = CoupledFilter(grid, RELAYS, noise_std=NOISE, held_level="strict")
     sharp = CoupledFilter(grid, RELAYS, noise_std=NOISE)
     c = strict.cert
-    steps = _load_error_steps(strict.kalman, c.A, c.Bl, 0.01)
+    steps = load_error_steps(strict.kalman, c.A, c.Bl, 0.01)
     w0 = np.hstack([c.C, np.zeros((4, 2))])
     bound = 0.01 * steps.total(w0)
     np.testing.assert_allclose(bound, [9.004e-5, 9.8375e-3] * 2, rtol=1e-4)

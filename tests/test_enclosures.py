@@ -24,7 +24,8 @@ import lfc
 from lfc import LFCParams, MultiAreaParams
 from lfc.filters.bounds import expm_at
 from lfc.filters.certified import CertifiedSet, _error_bound, box_plants
-from lfc.filters.coupled import CoupledFilter, _load_error_steps, output_rows, reduced_model
+from lfc.filters.coupled import CoupledFilter
+from lfc.filters.coupled_set import load_error_steps, output_rows, reduced_model
 from lfc.filters.responses import load_gains, period_step_gain, rate_gains, responses
 from lfc.model import lfc_matrices, output_matrix
 from test_coupled import ring
@@ -180,15 +181,15 @@ def load_errors():
 
 
 def test_the_kalman_errors_bounds_contain_twenty_times_as_many_offsets_and_ages(load_errors):
-    """:class:`~lfc.filters.coupled.LoadErrors`: ``sup`` and ``total`` (11 offsets
+    """:class:`~lfc.filters.coupled_set.LoadErrors`: ``sup`` and ``total`` (11 offsets
     per period, the interpolation's bound between them and the tail's in ``Q``'s
     norm after the last age) against 201 offsets and the error followed a
     thousand times further (``tol`` 1e-12): within 0.1 % (the interpolation's
     bound, ``spacing^2 / 8`` of the curvature's, is the most of it); ``sup_norm`` of a
     matrix likewise."""
     f, c, w = load_errors
-    steps = _load_error_steps(f.kalman, c.A, c.Bl, 0.01)
-    fine = _load_error_steps(f.kalman, c.A, c.Bl, 0.01, offsets=201, tol=1e-12)
+    steps = load_error_steps(f.kalman, c.A, c.Bl, 0.01)
+    fine = load_error_steps(f.kalman, c.A, c.Bl, 0.01, offsets=201, tol=1e-12)
     sup = np.abs(w @ fine.rows.T).max(axis=1)
     total = np.abs(w @ fine.rows.T).reshape(len(w), -1, fine.per_age).max(axis=2).sum(axis=1)
     _contains(steps.sup(w), sup, 1e-3)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import lfc
-from lfc.filters import base, certified, contract, coupled, paper
+from lfc.filters import base, certified, contract, coupled, coupled_kernel, paper
 from lfc.filters.base import Layout
 from lfc.simulate_multiarea import area_filter
 
@@ -88,13 +88,13 @@ def test_the_grid_filters_data_is_what_their_layouts_name():
     assert (fields["f_lim"], fields["r_lim"]) == (RELAYS.F, RELAYS.rocof_limit)
     assert fields["half"] > 0 and fields["step"] > 0
     grid = area_filter(two, 0, "coupled", RELAYS, 0.01)
-    head = coupled.LAYOUT.unpack(grid.data)
+    head = coupled_kernel.LAYOUT.unpack(grid.data)
     assert (head["n_a"], head["f_lim"], head["r_lim"]) == (2, RELAYS.F, RELAYS.rocof_limit)
     assert head["n_s"] == two.n_states
 
 
 def test_every_compiled_method_declares_its_layout():
-    for module in (paper, certified, contract, coupled):
+    for module in (paper, certified, contract, coupled_kernel):
         assert isinstance(module.LAYOUT, base.Layout), module.__name__
 
 
@@ -137,3 +137,49 @@ def test_build_is_the_one_way_to_build_a_filter_by_name():
         build("coupled", P)
     with pytest.raises(TypeError, match="plant must be an LFCParams or a MultiAreaParams"):
         build("paper", "two_area")
+
+
+# -- the package's shape (issue "One"): what a reader can hold in mind -------------------
+PACKAGE = Path(lfc.__file__).parent
+#: code whose every edit makes the committed fits stale (lfc.testbed.fit.FIT_FILES and
+#: FIT_FUNCTIONS: a refit moves every ANDES figure), kept as it is until the next refit
+FROZEN_POSITIONAL = {"lfc/engine.py:generator_period"}
+FROZEN_PRIVATE_IMPORTS = {("lfc/testbed/plant.py", "_same_float"),
+                          ("lfc/testbed/plant.py", "_Recorded")}
+
+
+def _sources():
+    for path in sorted(PACKAGE.rglob("*.py")):
+        yield path.relative_to(PACKAGE.parent).as_posix(), path.read_text()
+
+
+def test_no_module_is_longer_than_900_lines():
+    long = {name: n for name, text in _sources() if (n := len(text.splitlines())) > 900}
+    assert long == {}
+
+
+def test_no_function_takes_more_than_12_positional_parameters():
+    """The kernel's arrays travel as named tuples (``lfc.engine.Plants``, ``Rows``, ...),
+    not as positions; the one exception is frozen code (``FROZEN_POSITIONAL``)."""
+    wide = set()
+    for name, text in _sources():
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                params = [a.arg for a in node.args.posonlyargs + node.args.args]
+                if len([p for p in params if p not in ("self", "cls")]) > 12:
+                    wide.add(f"{name}:{node.name}")
+    assert wide == FROZEN_POSITIONAL
+
+
+def test_no_private_name_is_imported_from_another_module():
+    """A name one module keeps to itself (``_name``) is not another module's to use (a
+    module private to the package, ``lfc._jit``, is the package's); the exceptions are
+    frozen code (``FROZEN_PRIVATE_IMPORTS``)."""
+    found = set()
+    for name, text in _sources():
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("lfc"):
+                found |= {(name, alias.name) for alias in node.names
+                          if alias.name.startswith("_") and not alias.name.startswith("__")
+                          and not (PACKAGE / f"{alias.name}.py").exists()}
+    assert found == FROZEN_PRIVATE_IMPORTS

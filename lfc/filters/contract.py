@@ -79,7 +79,7 @@ from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, MAX_ABS_INPUT, Backend
                               METHOD_IDS, Options, built_once, given, hold_invalid, option,
                               valid_input)
 from lfc.filters.certified import NUMERIC_MARGIN
-from lfc.filters.coupled import held_grid, output_rows
+from lfc.filters.coupled_set import held_grid, output_rows
 from lfc.filters.responses import load_gains, rate_gains
 from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams, as_grid

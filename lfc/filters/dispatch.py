@@ -20,7 +20,8 @@ from lfc.filters.certified import CertifiedFilter
 from lfc.filters.certified import decide as decide_certified
 from lfc.filters.contract import ContractFilter
 from lfc.filters.contract import decide as decide_contract
-from lfc.filters.coupled import CoupledFilter, rows_scratch
+from lfc.filters.coupled import CoupledFilter
+from lfc.filters.coupled_kernel import rows_scratch
 from lfc.filters.paper import PaperFilter
 from lfc.filters.paper import decide as decide_paper
 
