@@ -11,6 +11,11 @@ default options.
 - one call = one row of a batch = one control sample of the compiled loop;
 - the loop's alarm log and ``scc_active`` are exactly the calls that alarmed.
 
+The grid-wide filters (the coupled certificate: ``GRID_KINDS``, every method the engine
+dispatches with the whole grid) pass the same checks on a grid: their options rebuild
+them, any input gives a finite command with consistent flags, and one call per area in
+the engine's order replays the compiled loop.
+
 and every linear plant :func:`lfc.simulate` and :func:`lfc.simulate_many`
 take (an area, grids of two and three areas): a result's metrics are those of
 its ``simulate_many`` row, and its trace keeps the barrier values.
@@ -237,3 +242,76 @@ def test_the_cvxpy_reference_in_the_compiled_loop_applies_the_closed_forms_comma
     for a in range(2):
         np.testing.assert_allclose(runs[1].areas[a].controls["pc"],
                                    runs[0].areas[a].controls["pc"], atol=1e-6)
+
+
+# -- grid-wide filters (the coupled certificate): the same checks, on a grid ---------------
+TWO, RELAYS = lfc.MultiAreaParams.two_area(), lfc.RelaySettings()
+GRID_KINDS = ("coupled",)       # built by name through lfc.filters.build
+
+
+def grid_filter(kind: str):
+    return lfc.filters.build(kind, TWO, 0, RELAYS)
+
+
+def test_every_grid_wide_method_is_in_this_suite():
+    """A method the engine dispatches with the whole grid (``GRID_WIDE``) is one of
+    ``GRID_KINDS``: registering one adds it here or fails."""
+    from lfc.filters.dispatch import GRID_WIDE
+    assert {grid_filter(kind).method_id for kind in GRID_KINDS} == set(GRID_WIDE)
+
+
+@pytest.mark.parametrize("kind", GRID_KINDS)
+def test_a_grid_filters_options_rebuild_it_and_its_repr_names_them(kind):
+    f = grid_filter(kind)
+    again = type(f)(f.params, f.relays, **vars(f.options))
+    np.testing.assert_array_equal(again.data, f.data)
+    assert again.options == f.options
+    for name, value in vars(f.options).items():
+        assert f"{name}={value!r}" in repr(f), name
+
+
+@pytest.mark.parametrize("kind", GRID_KINDS)
+@settings(max_examples=tiers.examples(150), deadline=None)
+@given(data=st.data(), area=st.integers(0, 1), calls=st.integers(1, 3))
+def test_any_grid_input_gives_a_finite_command_and_consistent_flags(kind, data, area, calls):
+    from lfc.filters.base import ACTIVE, ALARM_BITS, INVALID
+    f = grid_filter(kind)
+    n, n_s = TWO.n_areas, TWO.n_states
+    x = np.array(data.draw(st.lists(values, min_size=n_s, max_size=n_s)))
+    u = np.array(data.draw(st.lists(values, min_size=n, max_size=n)))
+    p = np.array(data.draw(st.lists(values, min_size=n, max_size=n)))
+    u_ref = data.draw(values)
+    memory = np.zeros(2)
+    for _ in range(calls):               # also after the memory took a value
+        cmd, flags, reason = f.filter(x, u, p, area, u_ref, memory)
+        assert math.isfinite(cmd) and np.isfinite(memory).all()
+        invalid = not all(abs(v) <= MAX_ABS_INPUT for v in (*x, *u, *p, u_ref))
+        assert bool(flags & INVALID) == invalid
+        assert bool(flags & ALARM_BITS) == bool(reason)
+        assert bool(flags & ACTIVE) == (cmd != u_ref)
+
+
+@pytest.mark.parametrize("kind", GRID_KINDS)
+def test_the_compiled_loop_applies_what_a_grid_filters_calls_return_and_logs_its_alarms(kind):
+    """Replay a two-area run's control samples (exact state) through one call per area
+    in the engine's order (area 0 first; each area sees the commands decided before it
+    this period): the applied commands are equal, up to the round-off of the line flows
+    recovered from the metered exports (:meth:`grid_state`; the engine holds the flows
+    themselves), and each area's alarm log is exactly its calls that alarmed."""
+    r = lfc.simulate(TWO, duration=4.0, attacks={0: {"pc": lfc.Sinusoid(2.0, 0.5, start=0.5)}},
+                     loads={1: lfc.Step(0.05, start=2.0)}, filters={0: kind, 1: kind})
+    f, t = grid_filter(kind), r.trace["t"].to_numpy()
+    n = TWO.n_areas
+    memory, u, alarms = [np.zeros(2) for _ in range(n)], np.zeros(n), [0] * n
+    controls = [area.controls for area in r.areas]
+    for j, tc in enumerate(controls[0]["t"]):
+        row = r.trace.iloc[np.searchsorted(t, tc - 1e-9)]
+        x = f.grid_state(np.array([[row[f"{s}_{a}"] for s in STATES] for a in range(n)]),
+                         np.array([row[f"p_tie_{a}"] for a in range(n)]))
+        p = np.array([row[f"p_load_{a}"] for a in range(n)])
+        for a in range(n):
+            cmd, _, reason = f.filter(x, u, p, a, controls[a]["pc_ref"].iloc[j], memory[a])
+            assert cmd == pytest.approx(controls[a]["pc"].iloc[j], rel=0, abs=1e-12), (j, a)
+            u[a] = cmd
+            alarms[a] += bool(reason)
+    assert [len(area.alarms) for area in r.areas] == alarms and sum(alarms) > 0
