@@ -34,9 +34,6 @@ _WHERE = {
     "SimResult": "lfc.simulate",
     "MultiAreaResult": "lfc.simulate_multiarea",
     "simulate": "lfc.run", "simulate_many": "lfc.run",
-    # deprecated names of 0.3 (they call simulate and simulate_many), removed in 0.5
-    "simulate_batch": "lfc.run", "simulate_multiarea": "lfc.run",
-    "simulate_multiarea_batch": "lfc.run",
 }
 
 __all__ = sorted(_WHERE)

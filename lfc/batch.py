@@ -49,9 +49,10 @@ from lfc.filters.base import built_once
 from lfc.filters.base import given as holds_value
 from lfc.model import LFCParams
 from lfc.relays import RELAY_NAMES, RelaySettings, relays_or_default
+from lfc.run import Runner, only_for_metrics, register
 from lfc.scenarios import Scenarios
 from lfc.signals import Chirp, Ramp, Samples, Signal, Sinusoid, Square, Step
-from lfc.simulate import METRIC_KEYS, check_timing
+from lfc.simulate import METRIC_KEYS, check_timing, simulate_area
 
 WAVEFORMS = ("sinusoid", "square", "chirp", "step", "ramp", "samples", "none")
 CHANNELS = ("pc", "wref", "load")
@@ -682,3 +683,19 @@ def _digest(chunk: pd.DataFrame, args: tuple) -> str:
     files never match)."""
     text = chunk.to_csv() + repr(args) + code_digest()
     return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+# -- the area's runner (lfc.run): simulate and simulate_many of an LFCParams ---------------
+def _simulate(plant: LFCParams, *, duration: float, design=None, **scenario):
+    return simulate_area(plant, duration=duration, **scenario)
+
+
+def _simulate_many(plant: LFCParams, scenarios: pd.DataFrame, *, duration: float,
+                   design=None, keep: str = "metrics", **kwargs):
+    if keep == "metrics":
+        return simulate_table(plant, scenarios, duration=duration, **kwargs)
+    only_for_metrics(kwargs, ("executor", "chunk_size", "out", "lanes"))
+    return table_results(plant, scenarios, duration=duration, **kwargs)
+
+
+register(LFCParams, Runner("area", "an LFCParams", _simulate, _simulate_many))

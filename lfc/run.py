@@ -17,44 +17,121 @@ plant                      ``simulate`` keywords, result               ``simulat
 
 On ANDES the filters and the AGC keep a linear design model, as in the paper:
 ``design`` (default: the model fitted to the case, cached on disk).
+
+A plant brings its own way to run: a :class:`Runner` registered for its type
+(:func:`register`) or for a protocol it follows (:func:`register_protocol`: an
+``AndesPlant`` of your own is recognized by its methods).  The linear plants register
+theirs in :mod:`lfc.simulate` and :mod:`lfc.simulate_multiarea`, the ANDES cases in
+:mod:`lfc.testbed.runners`; :data:`PLUGINS` are imported the first time a plant
+matches no runner, so this module names no plant type and imports no testbed.
 """
 
 from __future__ import annotations
 
-import warnings
+import importlib
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
 
 from lfc._validate import ParameterTypeError
-from lfc.model import LFCParams
-from lfc.multiarea import MultiAreaParams
 
 __all__ = ["simulate", "simulate_many"]
 
-PLANTS = ("an LFCParams, a MultiAreaParams, an lfc.testbed.MicrogridCase, an "
-          "lfc.testbed.GridCase or an lfc.testbed.AndesPlant")
-# the methods of lfc.testbed.loop.AndesPlant (a plant of your own on ANDES)
-ANDES_PLANT = ("build", "attach", "measure", "extra", "protect", "actuate", "set_load")
+#: the modules that register runners, imported when a plant matches no runner (a module
+#: whose optional dependency is missing, the testbed without ANDES, is skipped)
+PLUGINS = ("lfc.simulate", "lfc.simulate_multiarea", "lfc.testbed")
+#: what :func:`simulate_many` returns: the metrics table, or one result per scenario
+KEEP = ("metrics", "results")
 
 
-def testbed_kind(plant) -> str | None:
-    """``"microgrid"`` or ``"grid"`` for a testbed case, ``"andes"`` for an
-    ANDES plant (:class:`lfc.testbed.loop.AndesPlant`), else None (ANDES is only
-    imported when one is given)."""
-    if all(callable(getattr(plant, m, None)) for m in ANDES_PLANT) \
-            and hasattr(plant, "n_areas"):
-        return "andes"
-    module = type(plant).__module__
-    if not module.startswith("lfc.testbed"):
-        return None
-    from lfc.testbed import GridCase, MicrogridCase
-    if isinstance(plant, MicrogridCase):
-        return "microgrid"
-    if isinstance(plant, GridCase):
-        return "grid"
-    return None
+@dataclass(frozen=True)
+class Runner:
+    """How one kind of plant runs.
+
+    Parameters
+    ----------
+    name : str
+        The kind of plant (``"area"``, ``"grid"``, ``"microgrid"``, ``"grid case"``,
+        ``"andes plant"``): what :func:`runner_of` tells callers that treat kinds
+        differently (:mod:`lfc.wire`).
+    label : str
+        The plant as an error message names it (``"an LFCParams"``).
+    simulate : callable
+        ``simulate(plant, *, duration, design, **scenario)``: one scenario's result.
+    simulate_many : callable, optional
+        ``simulate_many(plant, scenarios, *, duration, design, keep, **keywords)``;
+        None if the plant runs one scenario per call (``many_refused`` says so).
+    takes_design : bool
+        Whether ``design=`` (the generator sides' model) means anything for it.
+    many_refused : str
+        The message of :func:`simulate_many` for a plant without one.
+    """
+
+    name: str
+    label: str
+    simulate: Callable[..., Any]
+    simulate_many: Callable[..., Any] | None = None
+    takes_design: bool = False
+    many_refused: str = ""
 
 
-def _bad_plant(plant) -> ParameterTypeError:
-    return ParameterTypeError(f"plant must be {PLANTS}, got {type(plant).__name__}")
+_BY_TYPE: dict[type, Runner] = {}
+_BY_PROTOCOL: list[tuple[Callable[[object], bool], Runner]] = []
+_plugins_loaded = False
+
+
+def register(plant_type: type, runner: Runner) -> None:
+    """Run plants of ``plant_type`` (and its subclasses) with ``runner``."""
+    if not isinstance(plant_type, type) or not isinstance(runner, Runner):
+        raise ParameterTypeError(f"register takes a type and a Runner, got {plant_type!r}, "
+                                 f"{runner!r:.60}")
+    _BY_TYPE[plant_type] = runner
+
+
+def register_protocol(matches: Callable[[object], bool], runner: Runner) -> None:
+    """Run plants for which ``matches(plant)`` is true with ``runner`` (tried after the
+    registered types, in the order registered)."""
+    if not callable(matches) or not isinstance(runner, Runner):
+        raise ParameterTypeError(f"register_protocol takes a callable and a Runner, got "
+                                 f"{matches!r:.60}, {runner!r:.60}")
+    _BY_PROTOCOL.append((matches, runner))
+
+
+def _find(plant) -> Runner | None:
+    for cls in type(plant).__mro__:
+        if cls in _BY_TYPE:
+            return _BY_TYPE[cls]
+    return next((runner for matches, runner in _BY_PROTOCOL if matches(plant)), None)
+
+
+def _load_plugins() -> None:
+    global _plugins_loaded
+    for module in PLUGINS:
+        try:
+            importlib.import_module(module)
+        except ImportError:        # an optional extra that is not installed
+            continue
+    _plugins_loaded = True
+
+
+def runner_of(plant) -> Runner:
+    """The :class:`Runner` of ``plant``.
+
+    Raises
+    ------
+    TypeError
+        (:class:`~lfc._validate.ParameterTypeError`, also a ``ValueError``) naming the
+        plants there are runners for, if ``plant`` is none of them.
+    """
+    runner = _find(plant)
+    if runner is None and not _plugins_loaded:
+        _load_plugins()
+        runner = _find(plant)
+    if runner is None:
+        labels = [r.label for r in (*_BY_TYPE.values(), *(r for _, r in _BY_PROTOCOL))]
+        names = ", ".join(labels[:-1]) + f" or {labels[-1]}" if len(labels) > 1 else labels[0]
+        raise ParameterTypeError(f"plant must be {names}, got {type(plant).__name__}")
+    return runner
 
 
 def simulate(plant, *, duration: float, design=None, **kwargs):
@@ -62,13 +139,13 @@ def simulate(plant, *, duration: float, design=None, **kwargs):
 
     Parameters
     ----------
-    plant : LFCParams, MultiAreaParams, MicrogridCase or GridCase
+    plant : LFCParams, MultiAreaParams, MicrogridCase, GridCase or an AndesPlant
         The plant (module docstring).
     duration : float
         Simulated time (s), > 0.
     design : LFCParams or MultiAreaParams, optional
         ANDES cases only: the design model of the generator side (default the
-        model fitted to the case).
+        model fitted to the case; required for an ``AndesPlant`` of your own).
     **kwargs
         The scenario: for an area, :func:`lfc.simulate.simulate_area`'s
         keywords; for a grid, :func:`lfc.simulate_multiarea.simulate_grid_linear`'s;
@@ -80,44 +157,9 @@ def simulate(plant, *, duration: float, design=None, **kwargs):
     -------
     SimResult or MultiAreaResult
     """
-    if design is not None and testbed_kind(plant) is None:
-        raise ValueError("design is for ANDES cases only; a linear plant is its own design "
-                         "model (give a filter built on another model to study mismatch)")
-    if isinstance(plant, LFCParams):
-        from lfc.simulate import simulate_area
-        return simulate_area(plant, duration=duration, **kwargs)
-    if isinstance(plant, MultiAreaParams):
-        from lfc.simulate_multiarea import simulate_grid_linear
-        return simulate_grid_linear(plant, duration=duration, **kwargs)
-    kind = testbed_kind(plant)
-    from lfc.engine import check_load_measured
-    if kind == "microgrid":
-        check_load_measured({None: kwargs.get("scc")}, kwargs.get("estimator"),
-                            kwargs.get("load_feedforward", False))
-    elif kind is not None:
-        check_load_measured(kwargs.get("filters") or {}, kwargs.get("estimator"),
-                            kwargs.get("feedforward", True))
-    if kind == "microgrid":
-        from lfc.testbed.fit import design_model
-        from lfc.testbed.plant import simulate_microgrid
-        return simulate_microgrid(design if design is not None else design_model(plant),
-                                  duration=duration, case=plant, **kwargs)
-    if kind == "grid":
-        from lfc.testbed.grid_fit import grid_design
-        from lfc.testbed.grid_plant import simulate_andes_grid
-        return simulate_andes_grid(design if design is not None else grid_design(plant),
-                                   duration=duration, case=plant, **kwargs)
-    if kind == "andes":
-        from lfc.testbed.grid_plant import simulate_andes_grid
-        if design is None:
-            raise ValueError("design is required for an AndesPlant of your own: a "
-                             "MultiAreaParams of its n_areas areas")
-        return simulate_andes_grid(design, duration=duration, plant=plant, **kwargs)
-    raise _bad_plant(plant)
-
-
-#: what :func:`simulate_many` returns: the metrics table, or one result per scenario
-KEEP = ("metrics", "results")
+    runner = runner_of(plant)
+    _check_design(runner, design)
+    return runner.simulate(plant, duration=duration, design=design, **kwargs)
 
 
 def simulate_many(plant, scenarios, *, duration: float, design=None, keep: str = "metrics",
@@ -156,74 +198,24 @@ def simulate_many(plant, scenarios, *, duration: float, design=None, keep: str =
     """
     if keep not in KEEP:
         raise ValueError(f"keep must be one of {KEEP}, got {keep!r:.40}")
-    if design is not None and testbed_kind(plant) is None:
-        raise ValueError("design is for ANDES cases only")
-    if isinstance(plant, LFCParams):
-        from lfc.batch import simulate_table, table_results
-        if keep == "metrics":
-            return simulate_table(plant, scenarios, duration=duration, **kwargs)
-        _only_for_metrics(kwargs, ("executor", "chunk_size", "out", "lanes"))
-        return table_results(plant, scenarios, duration=duration, **kwargs)
-    if isinstance(plant, MultiAreaParams):
-        from lfc.simulate_multiarea import (SCENARIO_KEYS, check_grid_scenarios, grid_results,
-                                            simulate_grid_table)
-        shared = {k: kwargs.pop(k) for k in SCENARIO_KEYS if k in kwargs}
-        if shared:                                   # keywords every scenario shares
-            check_grid_scenarios(scenarios)
-            scenarios = [{**shared, **s} for s in scenarios]
-        run = simulate_grid_table if keep == "metrics" else grid_results
-        return run(plant, scenarios, duration=duration, **kwargs)
-    kind = testbed_kind(plant)
-    if kind == "grid":
-        from lfc.simulate_multiarea import results_table
-        from lfc.testbed.grid_fit import grid_design
-        from lfc.testbed.grid_plant import simulate_andes_grid_table
-        results = simulate_andes_grid_table(design if design is not None else grid_design(plant),
-                                            scenarios, duration=duration, case=plant, **kwargs)
-        return results if keep == "results" else results_table(results)
-    if kind == "microgrid":
-        raise ValueError("simulate_many does not run the ANDES microgrid (one scenario per "
-                         "call: simulate(MicrogridCase(), ...))")
-    if kind == "andes":
-        raise ValueError("simulate_many does not run an AndesPlant of your own (one scenario "
-                         "per call: simulate(plant, design=..., ...))")
-    raise _bad_plant(plant)
+    runner = runner_of(plant)
+    _check_design(runner, design)
+    if runner.simulate_many is None:
+        raise ValueError(runner.many_refused)
+    return runner.simulate_many(plant, scenarios, duration=duration, design=design, keep=keep,
+                                **kwargs)
 
 
-def _only_for_metrics(kwargs: dict, names: tuple[str, ...]) -> None:
+def _check_design(runner: Runner, design) -> None:
+    if design is not None and not runner.takes_design:
+        raise ValueError("design is for ANDES cases only; a linear plant is its own design "
+                         "model (give a filter built on another model to study mismatch)")
+
+
+def only_for_metrics(kwargs: dict, names: tuple[str, ...]) -> None:
+    """``ValueError`` if ``kwargs`` holds one of ``names``, keywords of the metrics
+    table only (``keep="results"`` runs each scenario with its trace)."""
     given = [n for n in names if n in kwargs]
     if given:
         raise ValueError(f"{given[0]} is for keep='metrics' (the metrics table, in chunks and "
                          f"processes); keep='results' runs each row with its trace")
-
-
-# -- the names of release 0.3, for one release --------------------------------------------
-def _deprecated(old: str, new: str) -> None:
-    warnings.warn(f"lfc.{old} is deprecated and will be removed in 0.5; use lfc.{new} "
-                  f"(the same keywords)", DeprecationWarning, stacklevel=3)
-# (simulate_testbed, simulate_grid, simulate_grid_batch: lfc/testbed/deprecated.py)
-
-
-def simulate_batch(params: LFCParams, scenarios, **kwargs):
-    """Deprecated: :func:`simulate_many` of an ``LFCParams`` plant."""
-    _deprecated("simulate_batch", "simulate_many")
-    return simulate_many(params, scenarios, **kwargs)
-
-
-def simulate_multiarea(params: MultiAreaParams, **kwargs):
-    """Deprecated: :func:`simulate` of a ``MultiAreaParams`` plant."""
-    _deprecated("simulate_multiarea", "simulate")
-    if not isinstance(params, MultiAreaParams):
-        raise ParameterTypeError(f"params must be a MultiAreaParams, got "
-                                 f"{type(params).__name__}")
-    return simulate(params, **kwargs)
-
-
-def simulate_multiarea_batch(params: MultiAreaParams, scenarios, **kwargs):
-    """Deprecated: :func:`simulate_many` of a ``MultiAreaParams`` plant."""
-    _deprecated("simulate_multiarea_batch", "simulate_many")
-    if not isinstance(params, MultiAreaParams):
-        raise ParameterTypeError(f"params must be a MultiAreaParams, got "
-                                 f"{type(params).__name__}")
-    return simulate_many(params, scenarios, **kwargs)
-

@@ -77,6 +77,7 @@ from lfc.filters.coupled import CoupledFilter
 from lfc.model import STATES
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams
 from lfc.relays import RELAY_NAMES, RelaySettings, relays_or_default
+from lfc.run import Runner, register
 from lfc.scenarios import Scenarios
 from lfc.simulate import METRIC_KEYS, SimResult, check_timing, result
 
@@ -388,3 +389,21 @@ def simulate_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
     out.insert(0, "area", np.tile(np.arange(n_a), len(rows)))
     out.insert(0, "scenario", np.repeat(np.arange(len(rows)), n_a))
     return out
+
+
+# -- the grid's runner (lfc.run): simulate and simulate_many of a MultiAreaParams ----------
+def _simulate(plant: MultiAreaParams, *, duration: float, design=None, **scenario):
+    return simulate_grid_linear(plant, duration=duration, **scenario)
+
+
+def _simulate_many(plant: MultiAreaParams, scenarios: list[dict], *, duration: float,
+                   design=None, keep: str = "metrics", **kwargs):
+    shared = {k: kwargs.pop(k) for k in SCENARIO_KEYS if k in kwargs}
+    if shared:                                   # keywords every scenario shares
+        check_grid_scenarios(scenarios)
+        scenarios = [{**shared, **s} for s in scenarios]
+    run = simulate_grid_table if keep == "metrics" else grid_results
+    return run(plant, scenarios, duration=duration, **kwargs)
+
+
+register(MultiAreaParams, Runner("grid", "a MultiAreaParams", _simulate, _simulate_many))

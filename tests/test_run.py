@@ -1,5 +1,8 @@
-"""The two entry points: simulate and simulate_many take any plant, and the names of
-0.3 are deprecated aliases that call them."""
+"""The two entry points: simulate and simulate_many take any plant, each kind of plant
+bringing its runner; the names of 0.3 are gone."""
+
+import ast
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -90,64 +93,61 @@ def test_design_is_for_andes_cases_only():
         lfc.simulate(P, duration=1.0, design=P)
 
 
-@pytest.mark.parametrize("old, args, new", [
-    ("simulate_multiarea", (TWO,), lambda: lfc.simulate(TWO, duration=1.0)),
-    ("simulate_multiarea_batch", (TWO, [{}]), lambda: lfc.simulate_many(TWO, [{}],
-                                                                         duration=1.0)),
-])
-def test_old_names_warn_and_call_the_new_ones(old, args, new):
-    with pytest.warns(DeprecationWarning, match=f"lfc.{old} is deprecated"):
-        got = getattr(lfc, old)(*args, duration=1.0)
-    want = new()
-    if isinstance(want, pd.DataFrame):
-        pd.testing.assert_frame_equal(got, want)
-    else:
-        pd.testing.assert_frame_equal(got.trace, want.trace)
-
-
-def test_simulate_batch_warns_and_calls_simulate_many():
-    table = pd.DataFrame({"waveform": ["step"], "channel": ["load"], "amplitude": [0.1],
-                          "freq_hz": [0.0], "start": [0.5], "alpha": [20.0], "Ts": [0.25]})
-    with pytest.warns(DeprecationWarning, match="lfc.simulate_batch is deprecated"):
-        got = lfc.simulate_batch(P, table, duration=1.0, progress=False)
-    pd.testing.assert_frame_equal(got, lfc.simulate_many(P, table, duration=1.0,
-                                                         progress=False))
-
-
-def test_old_grid_names_still_refuse_a_single_area():
-    with pytest.warns(DeprecationWarning), \
-            pytest.raises(ValueError, match="params must be a MultiAreaParams"):
-        lfc.simulate_multiarea(P, duration=1.0)
+@pytest.mark.parametrize("old", ["simulate_batch", "simulate_multiarea",
+                                 "simulate_multiarea_batch"])
+def test_the_names_of_0_3_are_gone(old):
+    """Removed in 0.4 (CHANGELOG.md names what replaces each); ``lfc.simulate_multiarea``
+    is the module once imported, not a function."""
+    assert old not in lfc.__all__ and not callable(getattr(lfc, old, None))
+    assert old in (Path(lfc.__file__).parents[1] / "CHANGELOG.md").read_text()
 
 
 def test_simulate_runs_the_andes_cases_with_their_fitted_design_models():
     pytest.importorskip("andes")
-    from lfc.testbed import (GridCase, MicrogridCase, grid_design, simulate_grid,
-                             simulate_grid_batch, simulate_testbed)
+    from lfc.testbed import GridCase, MicrogridCase, grid_design
     from lfc.testbed.fit import design_model
     micro = lfc.simulate(MicrogridCase(), duration=0.5, pc_attack=ATTACK)
-    with pytest.warns(DeprecationWarning, match="simulate_testbed is deprecated"):
-        old = simulate_testbed(design_model(), duration=0.5, pc_attack=ATTACK)
-    pd.testing.assert_frame_equal(micro.trace, old.trace)
+    again = lfc.simulate(MicrogridCase(), design=design_model(), duration=0.5, pc_attack=ATTACK)
+    pd.testing.assert_frame_equal(micro.trace, again.trace)
     case = GridCase.kundur()
     grid = lfc.simulate(case, duration=0.3, attacks={0: {"pc": ATTACK}})
-    with pytest.warns(DeprecationWarning, match="simulate_grid is deprecated"):
-        old = simulate_grid(grid_design(case), case=case, duration=0.3,
-                            attacks={0: {"pc": ATTACK}})
-    pd.testing.assert_frame_equal(grid.trace, old.trace)
-    with pytest.warns(DeprecationWarning, match="simulate_grid_batch is deprecated"):
-        old = simulate_grid_batch(grid_design(case), [{"attacks": {0: {"pc": ATTACK}}}],
-                                  duration=0.3, jobs=1, progress=False)
-    pd.testing.assert_frame_equal(grid.trace, old[0].trace)
+    again = lfc.simulate(case, design=grid_design(case), duration=0.3,
+                         attacks={0: {"pc": ATTACK}})
+    pd.testing.assert_frame_equal(grid.trace, again.trace)
+    many = lfc.simulate_many(case, [{"attacks": {0: {"pc": ATTACK}}}], duration=0.3, jobs=1,
+                             progress=False, keep="results")
+    pd.testing.assert_frame_equal(grid.trace, many[0].trace)
     with pytest.raises(ValueError, match="does not run the ANDES microgrid"):
         lfc.simulate_many(MicrogridCase(), [], duration=1.0)
 
 
-def test_the_plant_check_names_every_method_of_an_andes_plant():
-    """lfc.run recognizes an AndesPlant by its methods without importing the
-    testbed: its list is the protocol's."""
+def test_a_plant_brings_its_runner_and_an_andes_plant_is_known_by_its_methods():
+    """Issue "One": lfc.run names no plant type — each kind registers its runner
+    (the linear plants in their modules, the ANDES cases in lfc.testbed, loaded the
+    first time a plant matches none); a plant of your own with every method of the
+    AndesPlant protocol and ``n_areas`` runs as one, and lacking one method it is an
+    unknown plant."""
     pytest.importorskip("andes")
-    from lfc.run import ANDES_PLANT
-    from lfc.testbed.loop import AndesPlant
-    methods = {n for n, v in vars(AndesPlant).items() if callable(v) and not n.startswith("_")}
-    assert set(ANDES_PLANT) == methods
+    from lfc.run import Runner, register, runner_of
+    from lfc.testbed import ANDES_PLANT, GridCase, MicrogridCase
+    source = ast.parse(Path(lfc.run.__file__).read_text())
+    named = {n.id for n in ast.walk(source) if isinstance(n, ast.Name)}
+    imported = {n.module for n in ast.walk(source) if isinstance(n, ast.ImportFrom)}
+    assert not named & {"LFCParams", "MultiAreaParams", "MicrogridCase", "GridCase"}
+    assert not [m for m in imported if m.startswith(("lfc.testbed", "lfc.simulate", "lfc.batch"))]
+    assert [runner_of(p).name for p in (P, TWO, MicrogridCase(), GridCase.kundur())] == \
+        ["area", "grid", "microgrid", "grid case"]
+    methods = {name: (lambda *args: None) for name in ANDES_PLANT}
+    own = type("Own", (), {**methods, "n_areas": 2})()
+    assert runner_of(own).name == "andes plant"
+    with pytest.raises(ValueError, match="design is required for an AndesPlant"):
+        lfc.simulate(own, duration=1.0)
+    lacking = type("Lacking", (), {**methods, "n_areas": 2, ANDES_PLANT[0]: None})()
+    with pytest.raises(ValueError, match="plant must be"):
+        runner_of(lacking)
+
+    class Mine(lfc.LFCParams):
+        pass
+    assert runner_of(Mine()).name == "area"              # a subclass runs as its base
+    with pytest.raises(TypeError, match="register takes a type and a Runner"):
+        register(Mine(), Runner("x", "an x", lfc.simulate))

@@ -49,7 +49,7 @@ from lfc.lockstep import LinearGrid
 from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams, as_grid
 from lfc.relays import relays_or_default
-from lfc.run import testbed_kind
+from lfc.run import runner_of
 from lfc.simulate import SimResult, check_timing
 from lfc.simulate_multiarea import MultiAreaResult, area_filter
 from lfc.wire.attacks import WireAttack
@@ -186,11 +186,14 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
     -------
     WireResult
     """
-    testbed = testbed_kind(params)
-    if not isinstance(params, (LFCParams, MultiAreaParams)) and testbed not in ("microgrid",
-                                                                                  "grid"):
+    try:
+        kind = runner_of(params).name
+    except ValueError:
+        kind = None
+    if kind not in ("area", "grid", "microgrid", "grid case"):
         raise ValueError(f"params must be an LFCParams (one area), a MultiAreaParams, a "
                          f"MicrogridCase or a GridCase, got {type(params).__name__}")
+    testbed = {"microgrid": "microgrid", "grid case": "grid"}.get(kind)
     if protocol not in PROTOCOLS:
         raise ValueError(f"protocol must be one of {PROTOCOLS}, got {protocol!r}")
     if agc not in AGC:

@@ -1,0 +1,77 @@
+"""The ANDES plants' runners (:mod:`lfc.run`): what :func:`lfc.simulate` and
+:func:`lfc.simulate_many` do with a :class:`~lfc.testbed.MicrogridCase`, a
+:class:`~lfc.testbed.GridCase` and an :class:`~lfc.testbed.loop.AndesPlant` of your own.
+
+The generator sides keep a linear design model: ``design`` (default: the model fitted
+to the case, cached on disk; required for a plant of your own).  Importing
+:mod:`lfc.testbed` registers them.
+"""
+
+from __future__ import annotations
+
+from lfc.engine import check_load_measured
+from lfc.run import Runner, register, register_protocol
+from lfc.simulate_multiarea import results_table
+from lfc.testbed.case import MicrogridCase
+from lfc.testbed.grid import GridCase
+from lfc.testbed.loop import AndesPlant
+
+#: the methods of an ANDES plant (:class:`~lfc.testbed.loop.AndesPlant`)
+ANDES_PLANT = tuple(n for n, v in vars(AndesPlant).items()
+                    if callable(v) and not n.startswith("_"))
+
+
+def _microgrid(case: MicrogridCase, *, duration: float, design=None, **scenario):
+    from lfc.testbed.fit import design_model
+    from lfc.testbed.plant import simulate_microgrid
+    check_load_measured({None: scenario.get("scc")}, scenario.get("estimator"),
+                        scenario.get("load_feedforward", False))
+    return simulate_microgrid(design if design is not None else design_model(case),
+                              duration=duration, case=case, **scenario)
+
+
+def _grid_case(case: GridCase, *, duration: float, design=None, **scenario):
+    from lfc.testbed.grid_fit import grid_design
+    from lfc.testbed.grid_plant import simulate_andes_grid
+    check_load_measured(scenario.get("filters") or {}, scenario.get("estimator"),
+                        scenario.get("feedforward", True))
+    return simulate_andes_grid(design if design is not None else grid_design(case),
+                               duration=duration, case=case, **scenario)
+
+
+def _grid_case_many(case: GridCase, scenarios: list[dict], *, duration: float, design=None,
+                    keep: str = "metrics", **kwargs):
+    from lfc.testbed.grid_fit import grid_design
+    from lfc.testbed.grid_plant import simulate_andes_grid_table
+    results = simulate_andes_grid_table(design if design is not None else grid_design(case),
+                                        scenarios, duration=duration, case=case, **kwargs)
+    return results if keep == "results" else results_table(results)
+
+
+def _own_plant(plant, *, duration: float, design=None, **scenario):
+    from lfc.testbed.grid_plant import simulate_andes_grid
+    if design is None:
+        raise ValueError("design is required for an AndesPlant of your own: a "
+                         "MultiAreaParams of its n_areas areas")
+    check_load_measured(scenario.get("filters") or {}, scenario.get("estimator"),
+                        scenario.get("feedforward", True))
+    return simulate_andes_grid(design, duration=duration, plant=plant, **scenario)
+
+
+def is_andes_plant(plant) -> bool:
+    """Whether ``plant`` follows the :class:`~lfc.testbed.loop.AndesPlant` protocol:
+    every one of its methods, and ``n_areas``."""
+    return all(callable(getattr(plant, m, None)) for m in ANDES_PLANT) \
+        and hasattr(plant, "n_areas")
+
+
+register(MicrogridCase, Runner(
+    "microgrid", "an lfc.testbed.MicrogridCase", _microgrid, takes_design=True,
+    many_refused="simulate_many does not run the ANDES microgrid (one scenario per call: "
+                 "simulate(MicrogridCase(), ...))"))
+register(GridCase, Runner("grid case", "an lfc.testbed.GridCase", _grid_case, _grid_case_many,
+                          takes_design=True))
+register_protocol(is_andes_plant, Runner(
+    "andes plant", "an lfc.testbed.AndesPlant", _own_plant, takes_design=True,
+    many_refused="simulate_many does not run an AndesPlant of your own (one scenario per "
+                 "call: simulate(plant, design=..., ...))"))
