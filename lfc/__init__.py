@@ -31,6 +31,7 @@ _WHERE = {
     "RelayBank": "lfc.relays", "RelaySettings": "lfc.relays",
     "Chirp": "lfc.signals", "Ramp": "lfc.signals", "Samples": "lfc.signals",
     "Sinusoid": "lfc.signals", "Square": "lfc.signals", "Step": "lfc.signals",
+    "Scenario": "lfc.scenarios",
     "SimResult": "lfc.simulate",
     "MultiAreaResult": "lfc.simulate_multiarea",
     "simulate": "lfc.run", "simulate_many": "lfc.run",

@@ -5,7 +5,10 @@ with :mod:`pickle` and lets an ``UnpicklingError`` or ``EOFError`` out: one file
 short (a full disk, a killed process, a copy interrupted) made every later call of
 the function fail.  :func:`install` makes numba's cache file reader treat such a file
 of this package as absent, with a ``RuntimeWarning`` naming it: the function is
-compiled again and the file rewritten.  Files of other packages are left to numba.
+compiled again and the file rewritten.  A file that names a class or module of this
+package that no longer exists (renamed or moved since numba wrote it: its index keys
+the compiled types, a kernel's named tuples among them) is stale, not damaged: a miss
+without a warning.  Files of other packages are left to numba.
 :mod:`lfc.engine`, through which every compiled run goes, installs it.
 """
 
@@ -35,6 +38,14 @@ def _damaged(cache_file: caching.IndexDataCacheFile, err: Exception) -> None:
                   stacklevel=4)
 
 
+def _stale(err: Exception) -> bool:
+    """Whether unpickling failed on a name of this package that is gone (a class
+    renamed, a module moved) rather than on damaged bytes."""
+    if isinstance(err, ModuleNotFoundError):
+        return (err.name or "").split(".")[0] == "lfc"
+    return isinstance(err, AttributeError) and "on <module 'lfc" in str(err)
+
+
 def _guarded(read, miss):
     """``read`` (a reader method of numba's cache file) returning ``miss()`` where a
     file of this package is damaged; numba treats that as a missing file (the
@@ -46,7 +57,8 @@ def _guarded(read, miss):
         except DAMAGED as err:
             if not _ours(self):
                 raise
-            _damaged(self, err)
+            if not _stale(err):
+                _damaged(self, err)
             return miss()
     guarded.lfc_guarded = True
     return guarded

@@ -409,8 +409,10 @@ def metrics_frame(metrics: np.ndarray, n_ctrl: int, index) -> pd.DataFrame:
     relay = np.array(RELAY_NAMES, dtype=object)[np.maximum(m["first_trip_relay"], 0)
                                                  .astype(int)]
     n_ctrl = max(n_ctrl, 1)
+    # object, None where no trip (pandas would infer a string column with NaN there)
+    first = pd.Series(np.where(tripped, relay, None), index=index, dtype=object)
     return pd.DataFrame({
-        "tripped": tripped, "first_trip_relay": np.where(tripped, relay, None),
+        "tripped": tripped, "first_trip_relay": first,
         "first_trip_t": m["first_trip_t"], "max_abs_dw_meas": m["max_abs_dw_meas"],
         "max_abs_rocof_meas": m["max_abs_rocof_meas"],
         "scc_active_fraction": m["active"] / n_ctrl,
@@ -692,10 +694,50 @@ def _simulate(plant: LFCParams, *, duration: float, design=None, **scenario):
 
 def _simulate_many(plant: LFCParams, scenarios: pd.DataFrame, *, duration: float,
                    design=None, keep: str = "metrics", **kwargs):
+    if isinstance(scenarios, list):
+        return scenario_list(plant, scenarios, duration=duration, keep=keep, **kwargs)
     if keep == "metrics":
         return simulate_table(plant, scenarios, duration=duration, **kwargs)
     only_for_metrics(kwargs, ("executor", "chunk_size", "out", "lanes"))
     return table_results(plant, scenarios, duration=duration, **kwargs)
 
 
-register(LFCParams, Runner("area", "an LFCParams", _simulate, _simulate_many))
+def scenario_list(params: LFCParams, scenarios: list, *, duration: float,
+                  relays: RelaySettings | None = None, dt: float = 1e-3,
+                  control_period: float = 0.01, keep: str = "metrics", lanes: bool = True,
+                  progress: bool = False) -> pd.DataFrame | list:
+    """``simulate_many`` of the area ``params`` over a list of
+    :class:`~lfc.scenarios.Scenario` (each may carry its own ``plant``: the filters
+    and the local controller keep ``params``), in this process, in SIMD lanes where
+    they allow it: one row per scenario (``scenario``, ``area`` 0 and the metrics, as
+    a grid's), or with ``keep="results"`` one result each (a scenario with its own
+    plant is refused there: :func:`lfc.simulate` runs the plant it is given)."""
+    from lfc.scenarios import Scenario
+    bad = next((i for i, s in enumerate(scenarios) if not isinstance(s, Scenario)), None)
+    if bad is not None:
+        raise ParameterTypeError(f"scenarios must be a DataFrame or a list of Scenario; "
+                                 f"scenarios[{bad}] is a {type(scenarios[bad]).__name__}")
+    check_timing(duration, dt, control_period)
+    check_flag("progress", progress)
+    relays = in_engine_types(relays_or_default(relays))
+    if keep == "results":
+        own = next((i for i, s in enumerate(scenarios) if s.plant is not None), None)
+        if own is not None:
+            raise ValueError(f"scenarios[{own}].plant: keep='results' runs each scenario as "
+                             f"lfc.simulate does, on the plant given")
+        return [simulate_area(params, duration=duration, relays=relays, dt=dt,
+                              control_period=control_period, **s.keywords("area"))
+                for s in tqdm(scenarios, desc="simulate_many", unit="scenario",
+                              disable=not progress)]
+    sc = Scenarios(params, duration=duration, dt=dt, control_period=control_period,
+                   relays=relays)
+    for s in scenarios:
+        sc.add(s)
+    run = sc.run(lanes=check_flag("lanes", lanes))
+    table = metrics_frame(run.metrics[:, 0], sc.n_ctrl, pd.RangeIndex(len(scenarios)))
+    table.insert(0, "area", 0)
+    table.insert(0, "scenario", np.arange(len(scenarios)))
+    return table
+
+
+register(LFCParams, Runner("area", "area", "an LFCParams", _simulate, _simulate_many))

@@ -106,7 +106,7 @@ class Rows(NamedTuple):
     relay_noise: np.ndarray
 
 
-class Samples(NamedTuple):
+class SignalSamples(NamedTuple):
     """What the rows' signals and noise read."""
 
     #: every sampled signal's times (s) and values, one after another (``Rows.offsets``)
@@ -344,7 +344,7 @@ def _watch(met: np.ndarray, t: float, dw: float, rc: float, noisy: bool, r0: flo
 
 
 @kernel
-def run_kernel(timing: Timing, plants: Plants, rows: Rows, samples: Samples,
+def run_kernel(timing: Timing, plants: Plants, rows: Rows, samples: SignalSamples,
                estimators: Estimators, filters: FilterTables, relays: RelayTables,
                out: Outputs, work: Work) -> None:
     """Advance every scenario of one grid from equilibrium (:class:`Timing`).

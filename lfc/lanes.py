@@ -17,8 +17,8 @@ import numpy as np
 
 from lfc._jit import choose, inline, kernel
 from lfc.engine import (ACE, LOAD, N_CTRL, Estimators, FilterTables, Outputs, Plants,
-                        RelayTables, Rows, Samples, Timing, generator_period, scenario_tables,
-                        signal_value)
+                        RelayTables, Rows, SignalSamples, Timing, generator_period,
+                        scenario_tables, signal_value)
 from lfc.filters.base import ACTIVE, ALARM_BITS, MEMORY, OUTSIDE
 from lfc.multiarea import N_AREA_STATES
 from lfc.relays import TIME_TOL, relay_sample
@@ -146,7 +146,7 @@ class LaneWork(NamedTuple):
 
 
 @kernel
-def run_lanes(timing: Timing, plants: Plants, rows: Rows, samples: Samples,
+def run_lanes(timing: Timing, plants: Plants, rows: Rows, samples: SignalSamples,
               estimators: Estimators, filters: FilterTables, relays: RelayTables,
               out: Outputs, blocks: np.ndarray, work: LaneWork) -> None:
     """:func:`~lfc.engine.run_kernel` for single-area scenarios without relay noise

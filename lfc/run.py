@@ -50,6 +50,10 @@ class Runner:
 
     Parameters
     ----------
+    form : {"area", "grid"}
+        The form of its scenario keywords (:meth:`lfc.scenarios.Scenario.keywords`):
+        an area's (``pc_attack``, ``scc``, ...) or a grid's (``attacks``,
+        ``filters``, ...).
     name : str
         The kind of plant (``"area"``, ``"grid"``, ``"microgrid"``, ``"grid case"``,
         ``"andes plant"``): what :func:`runner_of` tells callers that treat kinds
@@ -67,6 +71,7 @@ class Runner:
         The message of :func:`simulate_many` for a plant without one.
     """
 
+    form: str
     name: str
     label: str
     simulate: Callable[..., Any]
@@ -134,13 +139,16 @@ def runner_of(plant) -> Runner:
     return runner
 
 
-def simulate(plant, *, duration: float, design=None, **kwargs):
+def simulate(plant, scenario=None, *, duration: float, design=None, **kwargs):
     """Simulate one scenario from equilibrium, with a trace.
 
     Parameters
     ----------
     plant : LFCParams, MultiAreaParams, MicrogridCase, GridCase or an AndesPlant
         The plant (module docstring).
+    scenario : lfc.scenarios.Scenario, optional
+        The scenario as one object, in place of its keywords (any plant: an area
+        is area 0).
     duration : float
         Simulated time (s), > 0.
     design : LFCParams or MultiAreaParams, optional
@@ -159,6 +167,8 @@ def simulate(plant, *, duration: float, design=None, **kwargs):
     """
     runner = runner_of(plant)
     _check_design(runner, design)
+    if scenario is not None:
+        kwargs = _with_scenario(runner, scenario, kwargs)
     return runner.simulate(plant, duration=duration, design=design, **kwargs)
 
 
@@ -171,9 +181,10 @@ def simulate_many(plant, scenarios, *, duration: float, design=None, keep: str =
     ----------
     plant : LFCParams, MultiAreaParams or GridCase
         The plant (module docstring).
-    scenarios : DataFrame or list of dict
-        For an area, a table (:func:`lfc.batch.simulate_table`: one row per
-        scenario); for a grid, a list of dicts of :func:`simulate`'s keywords.
+    scenarios : DataFrame, list of Scenario or list of dict
+        A list of :class:`lfc.scenarios.Scenario` for every plant; for an area also a
+        table (:func:`lfc.batch.simulate_table`: one row per scenario), for a grid a
+        list of dicts of :func:`simulate`'s keywords.
     duration : float
         Simulated time (s), > 0.
     design : MultiAreaParams, optional
@@ -192,9 +203,10 @@ def simulate_many(plant, scenarios, *, duration: float, design=None, keep: str =
     Returns
     -------
     DataFrame or list
-        An area: ``scenarios`` with the metric columns added; a grid (linear or
-        ANDES): one row per scenario and area (``scenario``, ``area`` and the
-        metrics).  With ``keep="results"``, the results.
+        An area's table: ``scenarios`` with the metric columns added; a list of
+        scenarios, or a grid (linear or ANDES): one row per scenario and area
+        (``scenario``, ``area`` and the metrics).  With ``keep="results"``, the
+        results.
     """
     if keep not in KEEP:
         raise ValueError(f"keep must be one of {KEEP}, got {keep!r:.40}")
@@ -204,6 +216,21 @@ def simulate_many(plant, scenarios, *, duration: float, design=None, keep: str =
         raise ValueError(runner.many_refused)
     return runner.simulate_many(plant, scenarios, duration=duration, design=design, keep=keep,
                                 **kwargs)
+
+
+def _with_scenario(runner: Runner, scenario, kwargs: dict) -> dict:
+    """``kwargs`` with ``scenario``'s keywords in the runner's form."""
+    from lfc.scenarios import AREA_KEYS, GRID_KEYS, Scenario
+    if not isinstance(scenario, Scenario):
+        raise ParameterTypeError(f"scenario must be an lfc.scenarios.Scenario, got "
+                                 f"{type(scenario).__name__}")
+    both = sorted(set(kwargs) & {*AREA_KEYS, *GRID_KEYS})
+    if both:
+        raise ValueError(f"give the scenario as a Scenario or as keywords, not both: {both}")
+    if scenario.plant is not None:
+        raise ValueError("scenario.plant: simulate runs the plant it is given (a scenario's "
+                         "own plant is for simulate_many of a linear area)")
+    return {**scenario.keywords(runner.form), **kwargs}
 
 
 def _check_design(runner: Runner, design) -> None:

@@ -9,14 +9,17 @@ they allow it, the reference kernel (:func:`lfc.engine.run_kernel`) for the rest
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
+from numbers import Integral
 
 import numpy as np
+import pandas as pd
 
-from lfc._validate import ParameterTypeError, check_flag, check_seed
-from lfc.engine import (LOAD, METRICS, N_CHANNELS, N_CTRL, N_KF, Estimators, FilterTables,
-                        Outputs, Plants, RelayTables, Rows, Samples, Timing, Work,
-                        check_area_keys, check_attacks, check_coupled, check_load_measured,
+from lfc._validate import ParameterTypeError, check_flag, check_seed, in_engine_types
+from lfc.engine import (CHANNELS, LOAD, METRICS, N_CHANNELS, N_CTRL, N_KF, Estimators,
+                        FilterTables, Outputs, Plants, RelayTables, Rows, SignalSamples, Timing,
+                        Work, check_area_keys, check_attacks, check_coupled, check_load_measured,
                         check_noise, make_estimator, make_noise, run_kernel, scenario_signals)
 from lfc.filters import SafetyFilter
 from lfc.filters.coupled import CoupledFilter
@@ -24,8 +27,9 @@ from lfc.filters.dispatch import GRID_WIDE, scratch_size
 from lfc.lanes import LANE_MIN_FILL, LaneWork, lane_blocks, run_lanes
 from lfc.model import LFCParams
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams, as_grid, discretize_grid
-from lfc.relays import RelaySettings
-from lfc.signals import N_PARAMS, NONE, STEP
+from lfc.relays import RelaySettings, relays_or_default
+from lfc.signals import (N_PARAMS, NONE, STEP, Chirp, Ramp, Samples, Sinusoid, Square,
+                         Step)
 
 
 class _Table:
@@ -100,43 +104,37 @@ class Scenarios:
         self._sv: list[np.ndarray] = []
         self._n_samples = 0
 
-    def add(self, *, plant: LFCParams | MultiAreaParams | None = None,
-            attacks: dict | None = None, loads: dict | None = None,
-            filters: dict | None = None, estimator=None,
-            noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0,
-            feedforward: bool = False, relay_noise: bool = False,
-            anti_windup: bool = False) -> int:
-        """One scenario; returns its row number.
-
-        ``attacks`` (``{area: {"pc" | "wref" | "ace": signal}}``), ``loads``
-        (``{area: signal}``), ``filters`` (``{area: SafetyFilter}``, built),
-        ``estimator``, ``noise_std``, ``seed`` (area ``a > 0`` draws from ``(seed,
-        a)``), ``feedforward`` (the filter is given the area's net disturbance),
-        ``anti_windup`` (:func:`~lfc.engine.generator_period`) and ``relay_noise`` as in
-        :func:`lfc.simulate` (a grid) and
-        :func:`lfc.simulate`; ``plant`` (default the design model) is the grid
-        the scenario runs on, with the design's areas and tie-lines.
-        """
+    def add(self, scenario: Scenario | None = None, **keywords) -> int:
+        """One scenario, a :class:`Scenario` or its fields as keywords; returns its row
+        number.  Area ``a > 0`` draws its noise from ``(seed, a)``; the scenario's
+        ``plant`` (default the design model) must have the design's areas and
+        tie-lines.  ``ValueError`` naming what is wrong, before anything is kept."""
         grid = self.grid
         n = grid.n_areas
-        plant = grid if plant is None else as_grid(plant)
+        if scenario is None:            # the areas' range first, then the rest, once
+            fields = keywords
+        elif keywords:
+            raise ValueError(f"give a Scenario or its fields, not both (got {sorted(keywords)})")
+        elif not isinstance(scenario, Scenario):
+            raise ParameterTypeError(f"scenario must be a Scenario, got "
+                                     f"{type(scenario).__name__}")
+        else:
+            fields = vars(scenario)
+        check_attacks(fields.get("attacks"), n)
+        check_area_keys(fields.get("loads"), n, "loads")
+        check_area_keys(fields.get("filters"), n, "filters")
+        scenario = Scenario(**keywords) if scenario is None else scenario
+        attacks, loads, filters = scenario.attacks, scenario.loads, scenario.filters
+        estimator, noise_std, seed = scenario.estimator, scenario.noise_std, scenario.seed
+        feedforward, anti_windup = bool(scenario.feedforward), scenario.anti_windup
+        relay_noise, noisy = scenario.relay_noise, any(s > 0 for s in scenario.noise_std)
+        plant = grid if scenario.plant is None else as_grid(scenario.plant)
         if plant.n_areas != n or len(plant.tie) != len(grid.tie):
             raise ValueError(f"plant must have the design's {n} area(s) and {len(grid.tie)} "
                              f"tie-line(s), got {plant!r}")
-        p_i = self._plants.index(plant, lambda: discretize_grid(plant, self.dt))
-        attacks = check_attacks(attacks, n)
-        loads = check_area_keys(loads, n, "loads")
-        filters = check_area_keys(filters, n, "filters")
-        noisy = check_noise(noise_std)
-        seed = check_seed("seed", seed)
-        feedforward = check_flag("feedforward", feedforward)
-        anti_windup = check_flag("anti_windup", anti_windup)
-        relay_noise = check_flag("relay_noise", relay_noise)
-        if relay_noise and not noisy:
-            raise ValueError("relay_noise=True needs noise_std > 0 (the relays' measurement "
-                             "noise)")
         check_coupled(filters, grid, estimator, noise_std)
         check_load_measured(filters, estimator, feedforward)
+        p_i = self._plants.index(plant, lambda: discretize_grid(plant, self.dt))
         f_is = [-1 if filters.get(a) is None else self._filters.index(
             id(filters[a]), lambda: self._checked(a, filters[a])) for a in range(n)]
         row, noise, sig, n_samples = [], [], [], self._n_samples   # kept once all areas pass
@@ -213,7 +211,7 @@ class Scenarios:
         rows = Rows(np.array(self._plant_of, np.int64),
                     np.array(self._rows, np.int64).reshape(n, n_a, 5), kinds, params, offsets,
                     np.array(self._relay_noise, float).reshape(n, n_a, 3))
-        samples = Samples(st, sv, np.array(self._noise) if self._noise
+        samples = SignalSamples(st, sv, np.array(self._noise) if self._noise
                           else np.zeros((1, self.n_ctrl, 2)))
         estimators = kalman_tables(self._kf.items)
         filters = filter_tables(self._filters.items)
@@ -295,3 +293,266 @@ def kalman_tables(filters: list) -> Estimators:
     return Estimators(ka, kb, kc, kg, kdim)
 
 
+# -- one scenario --------------------------------------------------------------------------
+#: the keywords of a scenario in an area's form (lfc.simulate of an LFCParams or a microgrid)
+AREA_KEYS = ("pc_attack", "wref_attack", "load", "scc", "estimator", "noise_std", "seed",
+             "load_feedforward", "relay_noise", "anti_windup")
+#: the keywords of a scenario in a grid's form (lfc.simulate of a MultiAreaParams or a grid)
+GRID_KEYS = ("attacks", "loads", "filters", "estimator", "noise_std", "seed", "feedforward",
+             "relay_noise", "anti_windup")
+#: what a scenario table's waveform names (lfc.batch.scenario_signal), by signal class
+WAVEFORMS = {Sinusoid: "sinusoid", Square: "square", Chirp: "chirp", Step: "step",
+             Ramp: "ramp", Samples: "samples"}
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One scenario of any plant: what reaches each area's generator side and how it
+    measures, checked once when made.
+
+    A single area is area 0 of a grid of one area: :meth:`for_area` takes
+    :func:`lfc.simulate`'s keywords of an area, :meth:`from_table` a scenario table's
+    rows, and ``lfc.simulate(plant, scenario)`` and ``lfc.simulate_many(plant,
+    scenarios)`` run it on any plant (:meth:`keywords` gives the plant's form).
+
+    Parameters
+    ----------
+    attacks : dict, optional
+        ``{area: {"pc" | "wref" | "ace": signal}}``: the attacker's additions to the
+        command that reaches the area (pu), to its frequency reference (pu) and to the
+        tie-line term of its area control error (pu); a
+        :class:`~lfc.signals.Signal` or any callable of time (s).
+    loads : dict, optional
+        ``{area: signal}``: each area's load change (pu).
+    filters : dict, optional
+        ``{area: filter}``: a built filter (:class:`~lfc.filters.SafetyFilter`, a
+        grid's :class:`~lfc.filters.coupled.CoupledFilter`) or, on a grid, a kind
+        :func:`lfc.filters.build` builds by name (``"certified"``, ``"coupled"``, ...).
+    estimator : None, "kalman" or KalmanFilter
+        What the filters see: the true state (None) or a Kalman estimate.
+    noise_std : (float, float)
+        Std of the white noise on each controller's ``dw_meas`` (pu) and
+        ``rocof_meas`` (pu/s) readings, each 0 or in :data:`lfc.estimation.STD`.
+    seed : int
+        Seed of the noise, in [0, 2**32).
+    feedforward : bool or None
+        Give each filter its area's true disturbance; None (default) is the plant's
+        default (an area: no; a grid: its net disturbance, load plus export).
+    relay_noise : bool
+        The relays read through the noise too (needs ``noise_std`` > 0).
+    anti_windup : bool
+        Conditional integration of the AGC behind a held command.
+    plant : LFCParams or MultiAreaParams, optional
+        The plant this scenario runs on when not the one given (a scenario table's
+        ``M``, ``D``, ... columns; the filters and the AGC keep the given one as their
+        design model); :func:`lfc.simulate_many` of a linear plant only.
+
+    Raises
+    ------
+    ValueError
+        Naming the field, for a value out of its range or of the wrong shape.
+    """
+
+    attacks: dict = field(default_factory=dict)
+    loads: dict = field(default_factory=dict)
+    filters: dict = field(default_factory=dict)
+    estimator: object = None
+    noise_std: tuple[float, float] = (0.0, 0.0)
+    seed: int = 0
+    feedforward: bool | None = None
+    relay_noise: bool = False
+    anti_windup: bool = False
+    plant: LFCParams | MultiAreaParams | None = None
+
+    def __post_init__(self) -> None:
+        attacks = _areas("attacks", self.attacks)
+        for a, channels in attacks.items():
+            if not isinstance(channels, dict) or set(channels) - set(CHANNELS):
+                error = ValueError if isinstance(channels, dict) else ParameterTypeError
+                raise error(f"attacks[{a}] must be a dict with keys among {CHANNELS}, got "
+                            f"{channels!r:.80}")
+        loads = _areas("loads", self.loads)     # signals: checked where they are sampled
+        object.__setattr__(self, "attacks", {a: dict(c) for a, c in attacks.items()})
+        object.__setattr__(self, "loads", loads)
+        object.__setattr__(self, "filters", _areas("filters", self.filters))
+        noisy = check_noise(self.noise_std)
+        object.__setattr__(self, "noise_std", tuple(float(s) for s in self.noise_std))
+        object.__setattr__(self, "seed", check_seed("seed", self.seed))
+        if self.feedforward is not None:
+            object.__setattr__(self, "feedforward", check_flag("feedforward", self.feedforward))
+        object.__setattr__(self, "relay_noise", check_flag("relay_noise", self.relay_noise))
+        object.__setattr__(self, "anti_windup", check_flag("anti_windup", self.anti_windup))
+        if self.relay_noise and not noisy:
+            raise ValueError("relay_noise=True needs noise_std > 0 (the relays' measurement "
+                             "noise)")
+        if self.plant is not None and not isinstance(self.plant, (LFCParams, MultiAreaParams)):
+            raise ParameterTypeError(f"plant must be an LFCParams, a MultiAreaParams or None, "
+                                     f"got {type(self.plant).__name__}")
+
+    @classmethod
+    def for_area(cls, *, pc_attack=None, wref_attack=None, load=None, scc=None,
+                 estimator=None, noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0,
+                 load_feedforward: bool = False, relay_noise: bool = False,
+                 anti_windup: bool = False) -> Scenario:
+        """The scenario of one area from :func:`lfc.simulate`'s keywords of an area."""
+        channels = {k: v for k, v in (("pc", pc_attack), ("wref", wref_attack)) if v is not None}
+        return cls(attacks={0: channels} if channels else {},
+                   loads={} if load is None else {0: load},
+                   filters={} if scc is None else {0: scc}, estimator=estimator,
+                   noise_std=noise_std, seed=seed, feedforward=load_feedforward,
+                   relay_noise=relay_noise, anti_windup=anti_windup)
+
+    def keywords(self, form: str) -> dict:
+        """The scenario as :func:`lfc.simulate`'s keywords of a plant of ``form``:
+        ``"area"`` (``pc_attack``, ``scc``, ...: ``AREA_KEYS``) or ``"grid"``
+        (``attacks``, ``filters``, ...: ``GRID_KEYS``); ``feedforward`` None and
+        ``relay_noise`` False are left to the plant (the ANDES plants' relays read no
+        noise).  ``ValueError`` for an area if it names an area but 0, an ``ace``
+        attack (an area has no tie-line) or a filter given by kind."""
+        if form == "grid":
+            kw = {k: getattr(self, k) for k in GRID_KEYS}
+            return {k: v for k, v in kw.items()
+                    if not (k == "feedforward" and v is None or k == "relay_noise" and not v)}
+        if form != "area":
+            raise ValueError(f"form must be 'area' or 'grid', got {form!r:.40}")
+        for name in ("attacks", "loads", "filters"):
+            if set(getattr(self, name)) - {0}:
+                raise ValueError(f"{name}: a single area is area 0, got areas "
+                                 f"{sorted(getattr(self, name))}")
+        channels = self.attacks.get(0, {})
+        if "ace" in channels:
+            raise ValueError("attacks[0]['ace']: a single area has no tie-line (its area "
+                             "control error is its frequency)")
+        scc = self.filters.get(0)
+        if isinstance(scc, str):
+            raise ValueError(f"filters[0]={scc!r}: a single area takes a built filter "
+                             f"(lfc.SafetyFilter(params, method={scc!r}))")
+        kw = {"pc_attack": channels.get("pc"), "wref_attack": channels.get("wref"),
+              "load": self.loads.get(0), "scc": scc, "estimator": self.estimator,
+              "noise_std": self.noise_std, "seed": self.seed,
+              "load_feedforward": bool(self.feedforward), "anti_windup": self.anti_windup}
+        return {**kw, "relay_noise": True} if self.relay_noise else kw
+
+    @classmethod
+    def from_table(cls, table: pd.DataFrame, params: LFCParams, *, duration: float,
+                   relays: RelaySettings | None = None,
+                   control_period: float = 0.01) -> list[Scenario]:
+        """Each row of a scenario table (:func:`lfc.batch.simulate_table`'s columns,
+        checked as it checks them) as a scenario of the area ``params``, its filter built
+        on ``params`` with ``relays`` (default IEEE 1547 Cat. III) for
+        ``control_period`` (s); ``duration`` (s) ends a chirp."""
+        from lfc.batch import check_scenarios, row_scenario
+        relays = in_engine_types(relays_or_default(relays))
+        built: dict = {}
+        return [cls(**row_scenario(params, relays, row, duration, control_period, built))
+                for row in check_scenarios(table).to_dict("records")]
+
+    def to_row(self, params: LFCParams) -> dict:
+        """The scenario as one row of a scenario table for the area ``params``
+        (:meth:`from_table` reads it back to the same scenario): one signal of a
+        :data:`WAVEFORMS` class on ``pc``, ``wref`` or the load, or none; a filter
+        built on ``params`` or none; the Kalman estimate exactly where there is noise;
+        the plant's ``M``, ``D``, ... where it is not ``params``.  ``ValueError``
+        naming what a table cannot hold."""
+        kw = self.keywords("area")
+        given = [(c, s) for c, s in (("pc", kw["pc_attack"]), ("wref", kw["wref_attack"]),
+                                     ("load", kw["load"])) if s is not None]
+        if len(given) > 1:
+            raise ValueError(f"a table row holds one signal, got {[c for c, _ in given]}")
+        channel, signal = given[0] if given else ("pc", None)
+        row = {"channel": channel, **_waveform(signal)}
+        noisy = any(s > 0 for s in self.noise_std)
+        row.update(noise_w=self.noise_std[0], noise_rocof=self.noise_std[1], seed=self.seed,
+                   relay_noise=self.relay_noise, anti_windup=self.anti_windup)
+        row.update(_filter_columns(kw["scc"], params, row))
+        row.setdefault("declare_noise", False)        # a table's flags are in every row
+        if (self.estimator is not None) != noisy or (noisy and self.estimator != "kalman"):
+            raise ValueError("a table row's estimator is the Kalman filter exactly where "
+                             "there is noise")
+        if kw["load_feedforward"]:
+            raise ValueError("a table row has no load feed-forward")
+        if self.plant is not None and self.plant != params:
+            from lfc.batch import PLANT, UNREAD_PARAMS
+            if not isinstance(self.plant, LFCParams) or any(
+                    getattr(self.plant, f) != getattr(params, f) for f in UNREAD_PARAMS):
+                raise ValueError(f"a table row's plant differs from params only in {PLANT}")
+            row.update({f: getattr(self.plant, f) for f in PLANT})
+        return row
+
+
+def _areas(name: str, mapping) -> dict:
+    """``mapping`` (None: empty) as a dict whose keys are area indices (ints >= 0)."""
+    mapping = {} if mapping is None else mapping
+    if not isinstance(mapping, dict):
+        raise ParameterTypeError(f"{name} must be a dict {{area: ...}}, got {mapping!r:.80}")
+    for key in mapping:
+        if isinstance(key, bool) or not isinstance(key, Integral) or key < 0:
+            raise ValueError(f"a key of {name} must be an area index (an int >= 0), got "
+                             f"{key!r:.40}")
+    return {int(k): v for k, v in mapping.items() if v is not None}
+
+
+def _waveform(signal) -> dict:
+    """A table row's signal columns for ``signal`` (None: ``"none"``)."""
+    if signal is None:
+        return {"waveform": "none", "amplitude": 0.0, "freq_hz": 0.0, "start": 0.0}
+    kind = WAVEFORMS.get(type(signal))
+    if kind is None:
+        raise ValueError(f"a table row's signal is one of {sorted(WAVEFORMS.values())}, got "
+                         f"{type(signal).__name__}")
+    if kind == "samples":
+        times, values = np.asarray(signal.t, float), np.asarray(signal.values, float)
+        period = float(times[1] - times[0]) if len(times) > 1 else 1.0
+        if not np.allclose(np.diff(times), period, rtol=0, atol=1e-12):
+            raise ValueError("a table row's samples are uniform in time")
+        return {"waveform": kind, "amplitude": 0.0, "freq_hz": 0.0,
+                "start": float(times[0]), "values": values.tolist(), "sample_period": period}
+    if kind == "chirp":
+        from lfc.batch import CHIRP_F0
+        if signal.f0_hz != CHIRP_F0:
+            raise ValueError(f"a table row's chirp starts at {CHIRP_F0} Hz, got {signal.f0_hz}")
+        return {"waveform": kind, "amplitude": signal.amplitude, "freq_hz": signal.f1_hz,
+                "start": signal.start, "stop": signal.stop}
+    if getattr(signal, "phase", 0.0) != 0.0:
+        raise ValueError("a table row's sinusoid has no phase")
+    amplitude = {"step": "value", "ramp": "slope"}.get(kind, "amplitude")
+    return {"waveform": kind, "amplitude": getattr(signal, amplitude),
+            "freq_hz": getattr(signal, "freq_hz", 0.0), "start": signal.start,
+            "stop": signal.stop}
+
+
+def _filter_columns(scc, params: LFCParams, row: dict) -> dict:
+    """A table row's filter columns for ``scc`` (None: ``alpha`` NaN), checked by
+    reading them back as :func:`lfc.batch.simulate_table` does (``row`` holds the
+    row's noise columns, which the certified filter's declared noise reads)."""
+    from lfc.batch import NEUTRAL
+    from lfc.filters import options_of
+    if scc is None:
+        return {"method": "paper", "alpha": math.nan, "Ts": math.nan}
+    if not isinstance(scc, SafetyFilter) or scc.params != params:
+        raise ValueError("a table row's filter is a SafetyFilter built on the table's model "
+                         "(params)")
+    options = scc.options.as_dict()
+    columns = {"method": scc.method, "alpha": NEUTRAL["alpha"], "Ts": NEUTRAL["Ts"],
+               **scc.options.to_columns()}
+    Options = options_of(scc.method)
+    read = {**Options.from_columns({**row, **columns}),
+            **Options.for_period(options.get("control_period", 0.0))}
+    lost = sorted({k for k, v in read.items() if k in options and v != options[k]}
+                  | {k for k in scc.options.changed() if k not in read})
+    if lost:
+        raise ValueError(f"a table row cannot hold the filter's option(s) {lost}")
+    return columns
+
+
+def grid_scenarios(scenarios) -> object:
+    """A grid's ``simulate_many`` scenarios with every :class:`Scenario` in it as its
+    grid keywords (:meth:`Scenario.keywords`); anything else as it is (checked by the
+    grid's runner).  ``ValueError`` for a scenario with its own plant."""
+    if not isinstance(scenarios, list):
+        return scenarios
+    for i, s in enumerate(scenarios):
+        if isinstance(s, Scenario) and s.plant is not None:
+            raise ValueError(f"scenarios[{i}].plant: a grid's scenarios run on the plant "
+                             f"given (a scenario's own plant is an area table's M, D, ...)")
+    return [s.keywords("grid") if isinstance(s, Scenario) else s for s in scenarios]

@@ -78,7 +78,7 @@ from lfc.model import STATES
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams
 from lfc.relays import RELAY_NAMES, RelaySettings, relays_or_default
 from lfc.run import Runner, register
-from lfc.scenarios import Scenarios
+from lfc.scenarios import Scenarios, grid_scenarios
 from lfc.simulate import METRIC_KEYS, SimResult, check_timing, result
 
 __all__ = ["MultiAreaResult", "area_filter", "grid_results", "multiarea_result",
@@ -398,6 +398,7 @@ def _simulate(plant: MultiAreaParams, *, duration: float, design=None, **scenari
 
 def _simulate_many(plant: MultiAreaParams, scenarios: list[dict], *, duration: float,
                    design=None, keep: str = "metrics", **kwargs):
+    scenarios = grid_scenarios(scenarios)
     shared = {k: kwargs.pop(k) for k in SCENARIO_KEYS if k in kwargs}
     if shared:                                   # keywords every scenario shares
         check_grid_scenarios(scenarios)
@@ -406,4 +407,4 @@ def _simulate_many(plant: MultiAreaParams, scenarios: list[dict], *, duration: f
     return run(plant, scenarios, duration=duration, **kwargs)
 
 
-register(MultiAreaParams, Runner("grid", "a MultiAreaParams", _simulate, _simulate_many))
+register(MultiAreaParams, Runner("grid", "grid", "a MultiAreaParams", _simulate, _simulate_many))

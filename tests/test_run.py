@@ -150,4 +150,4 @@ def test_a_plant_brings_its_runner_and_an_andes_plant_is_known_by_its_methods():
         pass
     assert runner_of(Mine()).name == "area"              # a subclass runs as its base
     with pytest.raises(TypeError, match="register takes a type and a Runner"):
-        register(Mine(), Runner("x", "an x", lfc.simulate))
+        register(Mine(), Runner("area", "x", "an x", lfc.simulate))

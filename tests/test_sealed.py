@@ -380,6 +380,26 @@ def test_a_damaged_numba_cache_file_is_compiled_again_with_a_warning(tmp_path, m
         cache.load("key")
 
 
+def test_a_numba_cache_file_naming_a_class_since_renamed_is_stale_not_damaged(tmp_path,
+                                                                              monkeypatch):
+    """numba's index pickles the compiled types, the kernel's named tuples among them:
+    after a class of the package is renamed, the old file cannot be read.  That is a
+    stale file (compiled again, silently), not a damaged one."""
+    import warnings
+
+    from numba.core import caching
+
+    from lfc import _numba_cache, engine
+    _numba_cache.install()
+    monkeypatch.setattr(_numba_cache, "_PACKAGE", tmp_path)
+    cache = caching.IndexDataCacheFile(str(tmp_path), "engine.run_kernel-1.py311", b"stamp")
+    cache.save("key", {"types": engine.Timing(1, 1, 1e-3, False)})
+    monkeypatch.delattr(engine, "Timing")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert cache.load("key") is None
+
+
 def test_the_longest_run_is_scaled_by_the_grids_size_and_checked_before_allocating():
     """A six-area chain at the single area's longest run ended in ``MemoryError``:
     the limit is on the trace's values, with the estimate in the message."""

@@ -210,6 +210,12 @@ class Options:
         """Keyword arguments from one scenario-table row (its ``COLUMNS``)."""
         raise NotImplementedError
 
+    def to_columns(self) -> dict:
+        """The scenario-table columns :meth:`from_columns` reads back as these options
+        (those of ``COLUMNS`` that are options; a row's noise columns are its
+        scenario's)."""
+        return {c: getattr(self, c) for c in self.COLUMNS if hasattr(self, c)}
+
     @classmethod
     def for_period(cls, control_period: float) -> dict:
         """``{"control_period": control_period}`` for a method whose options depend

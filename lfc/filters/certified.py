@@ -313,6 +313,13 @@ class CertifiedOptions(Options):
                      "control_period"):
             object.__setattr__(self, name, float(getattr(self, name)))
 
+    def to_columns(self) -> dict:
+        """``uncertainty``, ``margin``, ``trips_per_hour`` (NaN: none) and
+        ``declare_noise`` (whether a noise model is declared: the row's noise)."""
+        return {"uncertainty": self.uncertainty, "margin": self.margin,
+                "trips_per_hour": math.nan if self.trips_per_hour is None
+                else self.trips_per_hour, "declare_noise": self.noise_std is not None}
+
     @classmethod
     def from_columns(cls, row: dict) -> dict:
         """The plant box ``uncertainty``, ``margin``, ``trips_per_hour`` and, with

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from lfc.engine import check_load_measured
 from lfc.run import Runner, register, register_protocol
+from lfc.scenarios import grid_scenarios
 from lfc.simulate_multiarea import results_table
 from lfc.testbed.case import MicrogridCase
 from lfc.testbed.grid import GridCase
@@ -44,7 +45,8 @@ def _grid_case_many(case: GridCase, scenarios: list[dict], *, duration: float, d
     from lfc.testbed.grid_fit import grid_design
     from lfc.testbed.grid_plant import simulate_andes_grid_table
     results = simulate_andes_grid_table(design if design is not None else grid_design(case),
-                                        scenarios, duration=duration, case=case, **kwargs)
+                                        grid_scenarios(scenarios), duration=duration,
+                                        case=case, **kwargs)
     return results if keep == "results" else results_table(results)
 
 
@@ -66,12 +68,12 @@ def is_andes_plant(plant) -> bool:
 
 
 register(MicrogridCase, Runner(
-    "microgrid", "an lfc.testbed.MicrogridCase", _microgrid, takes_design=True,
+    "area", "microgrid", "an lfc.testbed.MicrogridCase", _microgrid, takes_design=True,
     many_refused="simulate_many does not run the ANDES microgrid (one scenario per call: "
                  "simulate(MicrogridCase(), ...))"))
-register(GridCase, Runner("grid case", "an lfc.testbed.GridCase", _grid_case, _grid_case_many,
-                          takes_design=True))
+register(GridCase, Runner("grid", "grid case", "an lfc.testbed.GridCase", _grid_case,
+                          _grid_case_many, takes_design=True))
 register_protocol(is_andes_plant, Runner(
-    "andes plant", "an lfc.testbed.AndesPlant", _own_plant, takes_design=True,
+    "grid", "andes plant", "an lfc.testbed.AndesPlant", _own_plant, takes_design=True,
     many_refused="simulate_many does not run an AndesPlant of your own (one scenario per "
                  "call: simulate(plant, design=..., ...))"))
