@@ -712,8 +712,15 @@ def test_a_malformed_frame_is_not_a_command_and_never_stops_the_generator():
     assert station.take() is None
 
 
-def test_the_wire_refuses_a_plant_that_overflows_as_simulate_does():
+@pytest.mark.parametrize("protocol", ["modbus", "dnp3"])
+def test_the_wire_refuses_a_setpoint_that_would_overflow_the_plant(protocol):
+    """A 1e308 pu bias injected in the frames once made the plant non-finite (the run
+    then refused, as simulate does); the outstation now refuses the setpoint with its
+    protocol's range error (issue "Field"): the generator holds its last command, the
+    plant stays finite and the run lists every refusal."""
     from lfc.wire import run_wire
     bias = [{"op": "bias", "field": "pc", "value": 1e308}] * 2
-    with pytest.raises(ValueError, match="the plant became non-finite"):
-        run_wire(LFCParams(), duration=0.2, attack=bias)
+    run = run_wire(LFCParams(), duration=0.2, attack=bias, protocol=protocol)
+    assert np.isfinite(run.sim.trace[["dw", "rocof_meas"]].to_numpy()).all()
+    assert len(run.rejected) == len(run.exchanges) == 20 and run.exchanges.link.all()
+    assert run.rejected.reason.str.contains("not a finite value within").all()

@@ -48,9 +48,11 @@ import struct
 import threading
 import time
 
+from lfc.wire.registers import seq_problem, value_problem
 from lfc.wire.relay import EventLoop, Relay  # noqa: F401  (this protocol's transport)
 
 NAME, PORT = "DNP3", 20000
+OUTSTATION, MASTER = 1, 2           # link addresses: the generator's and the control centre's
 COMMAND_POINTS = ("pc", "wref", "ace", "seq")
 REPORT_POINTS = (("dw_meas", 3e-11), ("rocof_meas", 1e-9), ("pc_received", 1e-8), ("u_ref", 1e-8),
                  ("u", 1e-8),
@@ -176,41 +178,102 @@ class Codec:
 
 
 class Outstation:
-    """The generator's DNP3 outstation (address 1): the point list above."""
+    """The generator's DNP3 outstation (address 1): the point list above.
+
+    It answers only the control centre's address (2): a request from another source
+    is logged and left unanswered.  A command is applied whole or not at all: one DIRECT_OPERATE
+    request holding the four analog outputs, in order, whose values pass
+    :func:`~lfc.wire.registers.setpoint_problem`.  A value out of range or not
+    finite is answered OUT_OF_RANGE and stops the request (the later points are not
+    operated, IEEE 1815 4.4.4.3); a point out of order (a request missing a point)
+    is answered FORMAT_ERROR, as is every point after a refused one; nothing of a
+    refused request is applied, and nothing carries over to the next request.  Each
+    refused request is logged once in ``rejected`` (wall-clock time, the point
+    refused, reason)."""
 
     def __init__(self) -> None:
         self.inbox: tuple[dict, int, float] | None = None
         self.lock = threading.Lock()
         self.runner, self.task, self.loop, self.database = None, None, None, None
+        self.rejected: list[tuple[float, str, str]] = []
+        self._staged: dict[str, float] | None = {}     # None: this request was refused
+
+    def _refuse(self, point: str, value: float, reason: str, result):
+        with self.lock:
+            self.rejected.append((time.perf_counter(), f"{point}={value!r}", reason))
+        self._staged = None
+        return result
 
     def _handler(self):
         from dnp3.outstation.handler import CommandResult, DefaultCommandHandler
-        station, pending = self, {}
+        station = self
 
         class Handler(DefaultCommandHandler):
             def direct_operate_analog_output(self, index: int, value: float):
-                pending[COMMAND_POINTS[index]] = value
-                if COMMAND_POINTS[index] == "seq":
-                    values = dict(pending)
-                    seq = int(values.pop("seq"))
-                    with station.lock:
-                        station.inbox = (values, seq, time.perf_counter())
-                    pending.clear()
+                staged = station._staged
+                if staged is None:            # a point after a refused one: not operated
+                    return CommandResult.format_error()
+                if index >= len(COMMAND_POINTS):
+                    return station._refuse(f"index {index}", value, "no such point",
+                                           CommandResult.not_supported())
+                point = COMMAND_POINTS[index]
+                if list(staged) != list(COMMAND_POINTS[:index]):
+                    return station._refuse(point, value, f"out of order (after "
+                                           f"{list(staged) or 'nothing'})",
+                                           CommandResult.format_error())
+                problem = seq_problem(value) if point == "seq" else value_problem(point, value)
+                if problem is not None:
+                    return station._refuse(point, value, problem,
+                                           CommandResult.out_of_range())
+                staged[point] = value
                 return CommandResult.success()
         return Handler()
+
+    def _station(self, database, handler):
+        """The outstation of dnp3py, its requests bounded: the command a request
+        staged is applied after the request, whole, or dropped."""
+        from dnp3.outstation import Outstation as Station
+        from dnp3.outstation import OutstationConfig
+        owner = self
+
+        class Bounded(Station):
+            def process_request(self, data: bytes, *, peer=None):
+                # dnp3py answers any source; a device answers its master only
+                if peer is not None and peer.source != MASTER:
+                    with owner.lock:
+                        owner.rejected.append((time.perf_counter(),
+                                               f"a request from address {peer.source}",
+                                               f"not the control centre's address ({MASTER})"))
+                    return []
+                return super().process_request(data, peer=peer)
+
+            # dnp3py calls its command handler point by point; a request is the
+            # unit of a command here (dnp3py is pinned in environment.txt)
+            def _handle_direct_operate(self, request, **kwargs):
+                owner._staged = {}
+                try:
+                    return super()._handle_direct_operate(request, **kwargs)
+                finally:
+                    if owner._staged is not None and list(owner._staged) == list(COMMAND_POINTS):
+                        values = dict(owner._staged)
+                        seq = int(values.pop("seq"))
+                        with owner.lock:
+                            owner.inbox = (values, seq, time.perf_counter())
+                    owner._staged = {}
+
+        return Bounded(database=database, handler=handler,
+                       config=OutstationConfig(address=OUTSTATION, master_address=MASTER))
 
     async def start(self) -> int:
         """Listen on 127.0.0.1 (a port the kernel chooses); return the port."""
         from dnp3.database import AnalogInputConfig, Database
         from dnp3.database.point import EventClass
-        from dnp3.outstation import Outstation as Station
-        from dnp3.outstation import OutstationConfig, OutstationTcpRunner
+        from dnp3.outstation import OutstationTcpRunner
         self.loop = asyncio.get_running_loop()
         self.database = Database()
         for i in range(len(REPORT_POINTS)):
             self.database.add_analog_input(i, AnalogInputConfig(event_class=EventClass.NONE))
-        station = Station(database=self.database, config=OutstationConfig(address=1),
-                          handler=self._handler())
+        station = self._station(self.database, self._handler())
         self.runner = OutstationTcpRunner(outstation=station, host="127.0.0.1", port=0)
         self.task = asyncio.create_task(self.runner.run())
         for _ in range(500):
@@ -247,7 +310,7 @@ class Centre:
         from dnp3.master import DefaultSOEHandler, Master, MasterConfig, MasterTcpRunner
         self.loop, self.handler = loop, DefaultSOEHandler()
         self.master = Master(handler=self.handler,
-                             config=MasterConfig(address=2, outstation_address=1))
+                             config=MasterConfig(address=MASTER, outstation_address=OUTSTATION))
         self.runner = MasterTcpRunner(master=self.master, host="127.0.0.1", port=port,
                                       response_timeout=timeout)
         loop.run(self.runner.open())

@@ -156,8 +156,8 @@ class Link:
                                  ";".join(binding_names(rep["flags"]))
                                  if rep["flags"] & ACTIVE else "", rep["link"]))
 
-    def outcome(self, n_ctrl: int) -> tuple[pd.DataFrame, pd.DataFrame, list]:
-        """``(exchanges, alarm_log, frames)`` of :class:`lfc.wire.run.WireResult`."""
+    def outcome(self, n_ctrl: int) -> tuple[pd.DataFrame, pd.DataFrame, list, pd.DataFrame]:
+        """``(exchanges, alarm_log, frames, rejected)`` of :class:`lfc.wire.run.WireResult`."""
         rows = [(self.times[j], a, self.centre_rows[j, a][0], *self.side[j, a][:3],
                  self.centre_rows[j, a][1], self.centre_rows[j, a][2], self.side[j, a][3])
                 for j in range(n_ctrl) for a in range(self.n_areas)
@@ -168,4 +168,8 @@ class Link:
                                                     "reported_applied", "binding", "link"])
         frames = sorted((f + (a,) for a, relay in enumerate(self.relays or [])
                          for f in relay.log), key=lambda f: f[0])
-        return exchanges, alarm_log, frames
+        rejected = pd.DataFrame(sorted((t, a, what, why) for a, station
+                                       in enumerate(self.stations or [])
+                                       for t, what, why in station.rejected),
+                                columns=["time", "area", "what", "reason"])
+        return exchanges, alarm_log, frames, rejected

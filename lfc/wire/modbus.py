@@ -18,7 +18,7 @@ import threading
 import time
 
 from lfc.wire.registers import (N_COMMAND, N_REPORT, command_registers, read_command,
-                                read_report, report_registers)
+                                read_report, report_registers, setpoint_problem)
 
 NAME, PORT = "Modbus/TCP", 502        # the protocol's name and its well-known port (captures)
 
@@ -28,21 +28,45 @@ WRITE, READ = 16, 4          # function codes: write multiple registers, read in
 
 
 class Outstation:
-    """The generator's Modbus server: device 1, 13 holding and 20 input registers.
+    """The generator's Modbus server: device 1, 13 holding and 24 input registers
+    (:mod:`lfc.wire.registers`).
 
     ``inbox`` holds the last command's registers and the wall-clock time it
     arrived (``time.perf_counter``); :meth:`take` returns it decoded;
-    :meth:`publish` sets the report the next read returns."""
+    :meth:`publish` sets the report the next read returns.  A command is applied
+    only whole: one write of the 13 holding registers at address 0 (function 16)
+    whose values pass :func:`~lfc.wire.registers.setpoint_problem`.  Any other write
+    is refused with Modbus exception 2 (illegal data address: a partial write, one
+    elsewhere, a single-register write) or 3 (illegal data value) and logged in
+    ``rejected`` (wall-clock time, what was written, reason); the command slot keeps
+    what it held."""
 
     def __init__(self) -> None:
         self.inbox: tuple[list[int], float] | None = None
         self.report = [0] * N_REPORT
         self.lock = threading.Lock()
         self.server = None
+        self.rejected: list[tuple[float, str, str]] = []
+
+    def _refuse(self, function_code: int, address: int, count: int, reason: str, code):
+        what = f"function {function_code}: {count} register(s) at {address}"
+        with self.lock:
+            self.rejected.append((time.perf_counter(), what, reason))
+        return code
 
     async def _action(self, function_code: int, start_address: int, address: int, count: int,
-                      current_registers: list[int], set_values) -> None:
-        if function_code == WRITE and set_values is not None:
+                      current_registers: list[int], set_values):
+        from pymodbus.constants import ExcCodes
+        if set_values is not None:                       # a write, of any function
+            if function_code != WRITE or address != 0 or count != N_COMMAND:
+                return self._refuse(function_code, address, count,
+                                    f"not the whole command (function {WRITE} of {N_COMMAND} "
+                                    f"registers at 0)", ExcCodes.ILLEGAL_ADDRESS)
+            command = read_command(list(set_values))
+            problem = "malformed registers" if command is None else setpoint_problem(*command)
+            if problem is not None:
+                return self._refuse(function_code, address, count, problem,
+                                    ExcCodes.ILLEGAL_VALUE)
             with self.lock:
                 self.inbox = (list(set_values), time.perf_counter())
         elif function_code == READ:
@@ -162,19 +186,23 @@ class Codec:
 
 class Centre:
     """The control centre's Modbus client (a connection to ``port``; ``loop`` is
-    not used: the client is synchronous)."""
+    not used: the client is synchronous).  A command the outstation refuses (an
+    exception response: what reached it was not what was sent) is kept in
+    ``refused`` (its period's ``seq`` and the exception), and the run goes on: the
+    generator holds its last command, as a real master's would."""
 
     def __init__(self, port: int, loop: EventLoop | None = None, timeout: float = 10.0) -> None:
         from pymodbus.client import ModbusTcpClient
         self.client = ModbusTcpClient("127.0.0.1", port=port, timeout=timeout, retries=0)
         if not self.client.connect():
             raise ConnectionError(f"the control centre could not connect to 127.0.0.1:{port}")
+        self.refused: list[tuple[int, str]] = []
 
     def send(self, values: dict[str, float], seq: int) -> None:
         """Write one period's command (function 16 at 0)."""
         reply = self.client.write_registers(0, command_registers(values, seq), device_id=1)
         if reply.isError():
-            raise ConnectionError(f"the outstation refused the command: {reply}")
+            self.refused.append((seq, str(reply)))
 
     def poll(self) -> dict:
         """Read the report (function 4 at 0)."""

@@ -37,7 +37,10 @@ input      23    1         u16     ``link``: 1 if no command arrived for the per
 
 from __future__ import annotations
 
+import math
 import struct
+
+from lfc.filters.base import MAX_ABS_INPUT
 
 COMMAND = ("pc", "wref", "ace")        # holding registers, four each from 0
 SEQ = 12                               # holding register of the period counter
@@ -61,6 +64,37 @@ def decode(registers: list[int]) -> list[float]:
 def command_registers(values: dict[str, float], seq: int) -> list[int]:
     """The 13 holding registers of one period's command."""
     return encode([values[c] for c in COMMAND]) + [seq % 65536]
+
+
+def setpoint_problem(values: dict[str, float], seq: float) -> str | None:
+    """Why an outstation refuses a command (its protocol's range error), or None:
+    a value of ``pc``, ``wref`` or ``ace`` that is not finite or is beyond
+    ``MAX_ABS_INPUT`` (1e6 pu: what no measurement or command comes near, the
+    filters' invalid input), or a sequence number that is not an integer in
+    [0, 65535].  Both protocols check with this one rule."""
+    for name in COMMAND:
+        if name not in values:
+            return f"{name} missing (a command carries {', '.join(COMMAND)} and seq at once)"
+        problem = value_problem(name, values[name])
+        if problem is not None:
+            return problem
+    return seq_problem(seq)
+
+
+def value_problem(name: str, value: float) -> str | None:
+    """Why ``value`` cannot be command ``name``'s (not finite, or beyond
+    ``MAX_ABS_INPUT`` pu), or None."""
+    if isinstance(value, float | int) and math.isfinite(value) and abs(value) <= MAX_ABS_INPUT:
+        return None
+    return f"{name}={value!r:.30} is not a finite value within ±{MAX_ABS_INPUT:g} pu"
+
+
+def seq_problem(seq: float) -> str | None:
+    """Why ``seq`` cannot be a period's sequence number (an integer in [0, 65535])."""
+    if isinstance(seq, float | int) and math.isfinite(seq) and seq == int(seq) \
+            and 0 <= seq <= 0xFFFF:
+        return None
+    return f"seq={seq!r:.30} is not an integer in [0, 65535]"
 
 
 def _well_formed(registers: list[int], n: int) -> bool:

@@ -95,6 +95,10 @@ class WireResult:
     frames : list of (float, str, bytes, int)
         Every frame on both legs of every area's relay: wall-clock time (s), leg
         (:attr:`lfc.wire.relay.Relay.log`), bytes, area.
+    rejected : DataFrame
+        Every command an outstation refused: ``time`` (wall clock, s, as ``frames``),
+        ``area``, ``what`` (the write or the point operated) and ``reason`` (a partial
+        or misplaced write, a value out of range or not finite, a point out of order).
     settings : dict
     """
 
@@ -102,6 +106,7 @@ class WireResult:
     exchanges: pd.DataFrame
     alarm_log: pd.DataFrame
     frames: list
+    rejected: pd.DataFrame
     settings: dict
 
     @property
