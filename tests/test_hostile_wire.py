@@ -145,3 +145,31 @@ def test_a_run_reports_what_its_outstations_refused():
     result = run_wire(lfc.LFCParams(), duration=0.2, attack="fig4", protocol="modbus")
     assert list(result.rejected.columns) == ["time", "area", "what", "reason"]
     assert result.rejected.empty and (result.exchanges.link == 0).all()
+
+
+def test_dnp3_keeps_serving_its_master_while_an_outsider_connects():
+    """An outsider's connection to the outstation's port once closed the control
+    centre's (dnp3py serves one connection) and the run ended in a response
+    timeout; the outstation now serves each connection on its own."""
+    import socket
+
+    pytest.importorskip("dnp3")
+    from lfc.wire import dnp3 as dn
+    loop = dn.EventLoop()
+    station = dn.Outstation()
+    port = loop.run(station.start())
+    centre = dn.Centre(port, loop, timeout=2.0)
+    try:
+        centre.send(COMMAND, 1)
+        assert station.take() == (COMMAND, 1)
+        outsiders = [socket.create_connection(("127.0.0.1", port)) for _ in range(3)]
+        outsiders[0].sendall(b"\x05\x64garbage" * 10)
+        centre.send({**COMMAND, "pc": 0.5}, 2)
+        assert station.take() == ({**COMMAND, "pc": 0.5}, 2)
+        assert centre.poll()["seq"] == 0
+        for s in outsiders:
+            s.close()
+    finally:
+        centre.close()
+        loop.run(station.stop())
+        loop.close()

@@ -189,7 +189,8 @@ class Outstation:
     is answered FORMAT_ERROR, as is every point after a refused one; nothing of a
     refused request is applied, and nothing carries over to the next request.  Each
     refused request is logged once in ``rejected`` (wall-clock time, the point
-    refused, reason)."""
+    refused, reason).  Each TCP connection is served on its own (:func:`_runner`):
+    an outsider's connection does not close the control centre's."""
 
     def __init__(self) -> None:
         self.inbox: tuple[dict, int, float] | None = None
@@ -268,13 +269,12 @@ class Outstation:
         """Listen on 127.0.0.1 (a port the kernel chooses); return the port."""
         from dnp3.database import AnalogInputConfig, Database
         from dnp3.database.point import EventClass
-        from dnp3.outstation import OutstationTcpRunner
         self.loop = asyncio.get_running_loop()
         self.database = Database()
         for i in range(len(REPORT_POINTS)):
             self.database.add_analog_input(i, AnalogInputConfig(event_class=EventClass.NONE))
         station = self._station(self.database, self._handler())
-        self.runner = OutstationTcpRunner(outstation=station, host="127.0.0.1", port=0)
+        self.runner = _runner()(outstation=station, host="127.0.0.1", port=0)
         self.task = asyncio.create_task(self.runner.run())
         for _ in range(500):
             if self.runner.local_address is not None:
@@ -300,6 +300,41 @@ class Outstation:
             for i, c in enumerate(counts(report)):
                 self.database.update_analog_input(i, value=c)
         asyncio.run_coroutine_threadsafe(update(), self.loop).result(5.0)
+
+
+def _runner():
+    """dnp3py's TCP runner serving every connection on its own: its own closes the
+    connection it holds when another arrives (DNP3 over TCP is point to point), so
+    anyone who connects to the port hangs up the control centre.  Each connection
+    has its own link and transport state and its own peer id (the outstation tells
+    its masters apart by them)."""
+    from dnp3.outstation import OutstationTcpRunner
+    from dnp3.transport_io.channel import ChannelClosedError
+    from dnp3.transport_io.tcp_server import serve
+
+    class EveryConnection(OutstationTcpRunner):
+        async def run(self) -> None:
+            self._shutdown.clear()
+            self._server = await serve(self.host, self.port)
+            tasks: set[asyncio.Task] = set()
+            try:
+                while not self._shutdown.is_set():
+                    try:
+                        channel = await asyncio.wait_for(self._server.accept(), timeout=1.0)
+                    except TimeoutError:
+                        continue
+                    except ChannelClosedError:
+                        break
+                    task = asyncio.create_task(self._handle_connection(channel))
+                    tasks.add(task)
+                    task.add_done_callback(tasks.discard)
+            finally:
+                for task in list(tasks):
+                    task.cancel()
+                await asyncio.gather(*tasks, return_exceptions=True)
+                await self._server.stop()
+
+    return EveryConnection
 
 
 class Centre:
