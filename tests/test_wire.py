@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 import lfc
 from lfc.repro.cli import main
 from lfc.wire import WireAttack, run_wire
-from lfc.wire.attacks import from_simulate
+from lfc.wire.attacks import ATTACKS, from_simulate
 from lfc.wire.capture import read_commands, write_pcap
 from lfc.wire.registers import decode, encode
 
@@ -255,18 +255,24 @@ def test_red_team_winners_replay_over_the_wire(family):
 
 @pytest.mark.parametrize("protocol", ["modbus", "dnp3"])
 def test_in_real_time_the_filter_still_rides_the_attack(protocol):
-    """Real time (the plant at the wall clock, 3 s): every period has its round
-    trips and the generator's lateness measured; most commands arrive in time
-    (a late one is held and flagged: measured 4 of 500 over Modbus and 44 of 500
-    over DNP3 on a 2-core machine running another job, 88 of 300 over DNP3 while
-    the test suite ran beside it), and the paper's filter still keeps ROCOF
-    inside its setting during Fig. 4's attack: it filters what arrives, on time
-    or not."""
+    """Real time (the plant at the wall clock, 3 s, the default 10 ms period): the
+    commands arrive and the attack reaches the plant — the command received peaks
+    at the attack's amplitude — and the paper's filter still keeps ROCOF inside its
+    setting during Fig. 4's attack: it filters what arrives, on time or not.  A
+    command that misses its tick is held and flagged; the test declares at most
+    half of them (measured on a 2-core machine: 3 of 300 over Modbus and 0 of 300
+    over DNP3 alone, 8 and 42 with two busy processes on both cores; 88 of 300 over
+    DNP3 while the test suite ran beside it before the centre skipped the periods it
+    woke up too late for, when it kept sending every command a period late or more)."""
     run = run_wire(PARAMS, duration=3.0, attack="fig4", scc=paper(20.0), protocol=protocol,
                    mode="realtime")
     ex = run.exchanges
-    assert len(ex) == 300 and ex[["write_ms", "read_ms", "late_ms"]].notna().all().all()
-    assert ex.link.sum() < len(ex)         # how many miss depends on the machine's load
+    assert len(ex) == 300 and ex.late_ms.notna().all()
+    sent = ex.dropna(subset=["write_ms"])               # the centre skipped none or a few
+    assert sent.read_ms.iloc[:-1].notna().mean() > 0.9 and len(sent) > 250
+    assert ex.link.mean() <= 0.5, f"{int(ex.link.sum())} of 300 commands missed their tick"
+    amplitude = ATTACKS["fig4"][0]["signal"]["amplitude"]        # injected in the frames
+    assert ex.received.abs().max() == pytest.approx(amplitude, rel=0.01)
     assert not run.tripped and run.sim.trace.rocof_meas.abs().max() < RELAYS.rocof_limit
     with pytest.raises(ValueError, match="mode"):
         run_wire(PARAMS, duration=1.0, mode="fast")

@@ -112,6 +112,13 @@ class Link:
             centre.send({"pc": sent, "wref": 0.0, "ace": 0.0}, j)
             self.centre_rows[j, a] = [sent, 1e3 * (_now() - t0), math.nan]
 
+    def skip(self, j: int) -> None:
+        """The centre, late for period ``j``'s tick, neither sends nor reads for it
+        (real time): its row has no round trips."""
+        for a in range(len(self.centres)):
+            sent = self.g[0] if self.agc_gain is not None else 0.0
+            self.centre_rows[j, a] = [sent, math.nan, math.nan]
+
     def deliver(self, j: int, gens: list) -> list[int]:
         """Each generator side receives what arrived for period ``j`` (the last
         command again if none did); returns each area's link flag (1: none)."""

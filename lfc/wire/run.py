@@ -84,8 +84,9 @@ class WireResult:
         One row per control period and area: ``t`` (s), ``area``, ``sent`` (the
         command the centre wrote, pu), ``received`` (what the generator got, pu),
         ``applied`` (pu), ``link`` (1: no command arrived, the last one was held),
-        ``write_ms`` and ``read_ms`` (round trips through the relay, wall clock),
-        ``late_ms`` (real time: how late the generator's tick woke up).
+        ``write_ms`` and ``read_ms`` (round trips through the relay, wall clock; NaN
+        where the centre, in real time, woke up after the period's tick and skipped
+        it), ``late_ms`` (real time: how late the generator's tick woke up).
     alarm_log : DataFrame
         The operator's view, one row per period and area whose report carries an
         alarm: ``t``, ``area``, ``sent`` (the command field ``pc`` it wrote),
@@ -275,7 +276,7 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
                 generate(j, 0.0)
                 link.read(j)
         else:
-            _realtime(n_ctrl, period, link.send, generate, link.read)
+            _realtime(n_ctrl, period, link.send, generate, link.read, link.skip)
     finally:
         link.close()
     if not np.isfinite(plant.xs).all():
@@ -343,12 +344,14 @@ def _now() -> float:
     return time.perf_counter()
 
 
-def _realtime(n_ctrl: int, period: float, send, generate, read) -> None:
+def _realtime(n_ctrl: int, period: float, send, generate, read, skip) -> None:
     """The two sides on the wall clock: the generator (a thread) at ``t0 + j
     period``, the control centre half a period before, reading the last report
     and then sending the next command; a side that wakes up late does its work
     late (the lateness is recorded), a command that has not arrived is not
-    waited for (the generator holds)."""
+    waited for (the generator holds).  A centre that wakes up after the tick its
+    command was for skips that period (``skip(j)``: neither read nor sent) and
+    catches up with the clock, rather than sending every later command late too."""
     t0 = _now() + 0.05
     failed: list[BaseException] = []
 
@@ -364,6 +367,9 @@ def _realtime(n_ctrl: int, period: float, send, generate, read) -> None:
     thread.start()
     for j in range(n_ctrl):
         _sleep_until(t0 + (j - 0.5) * period)
+        if _now() > t0 + j * period:          # too late for tick j: catch up
+            skip(j)
+            continue
         if j > 0:
             read(j - 1)
         send(j)
