@@ -173,3 +173,29 @@ def test_dnp3_keeps_serving_its_master_while_an_outsider_connects():
         centre.close()
         loop.run(station.stop())
         loop.close()
+
+
+@pytest.mark.parametrize("protocol", ["dnp3", "modbus"])
+def test_a_forged_answer_looks_like_the_sessions_own(protocol):
+    """The ``drop`` attack answers the commands it swallows itself.  Its DNP3 answers
+    carried IIN 0x0000 and transport sequence 0 where the outstation's carry its
+    internal indications and an incrementing sequence — a detector's first rule.
+    Now the centre sees one device: the same indications in every response, and one
+    transport sequence (the outstation's later frames renumbered after each forged
+    one); over Modbus a forged acknowledgement echoes the write's transaction id."""
+    import lfc
+    from lfc.wire.run import run_wire
+    run = run_wire(lfc.LFCParams(), duration=2.0, attack="drop", protocol=protocol)
+    to_centre = [f[2] for f in run.frames if f[1] == "relay>centre"]
+    forged = int(run.exchanges.link.sum())
+    assert forged == 50                                     # 1.0 s to 1.5 s, every period
+    if protocol == "modbus":
+        asked = {f[2][:2] for f in run.frames if f[1] == "centre>relay"}
+        assert all(f[:2] in asked for f in to_centre)
+        return
+    from lfc.wire.dnp3 import RESPONSE, _user_data
+    data = [_user_data(f) for f in to_centre]
+    iin = {bytes(d[3:5]) for d in data if len(d) >= 5 and d[2] == RESPONSE}
+    assert len(iin) == 1 and iin != {b"\x00\x00"}
+    sequence = [d[0] & 0x3F for d in data if d]
+    assert all((b - a) % 64 == 1 for a, b in zip(sequence, sequence[1:]))

@@ -137,17 +137,42 @@ class Codec:
         return _with_user_data(frame, data[:3] + _ao_block(values, seq))
 
     @staticmethod
-    def ack(frame: bytes) -> bytes:
+    def ack(frame: bytes, session: dict) -> bytes:
+        """The outstation's RESPONSE echoing a dropped DIRECT_OPERATE with status
+        SUCCESS, as the session's own would be: its internal indications (the last
+        response's) and the next transport sequence number; the outstation's later
+        frames are renumbered after it (:meth:`upstream`)."""
         from dnp3.datalink.builder import build_unconfirmed_user_data
         from dnp3.datalink.frame import DataLinkFrame
         request = DataLinkFrame.from_bytes(frame)
         data = request.user_data
-        app = bytes([0xC0 | (data[1] & 0x0F), RESPONSE, 0, 0]) + data[3:]
+        iin = session.get("iin", b"\x00\x00")
+        sequence = (session.get("sequence", -1) + 1) % 64
+        session["sequence"] = sequence
+        session["shift"] = session.get("shift", 0) + 1
+        app = bytes([0xC0 | (data[1] & 0x0F), RESPONSE]) + iin + data[3:]
         reply = build_unconfirmed_user_data(destination=request.header.source,
                                             source=request.header.destination,
                                             dir_from_master=False,
-                                            user_data=bytes([0xC0]) + app)
+                                            user_data=bytes([0xC0 | sequence]) + app)
         return reply.to_bytes()
+
+    @staticmethod
+    def upstream(frame: bytes, session: dict) -> bytes:
+        """A frame of the outstation's: its internal indications kept for forged
+        answers, its transport sequence shifted by the answers forged so far (the
+        centre sees one sequence, as from one device)."""
+        data = _user_data(frame)
+        if not data:
+            return frame
+        if len(data) >= 5 and data[2] == RESPONSE:
+            session["iin"] = bytes(data[3:5])
+        shift = session.get("shift", 0)
+        sequence = ((data[0] & 0x3F) + shift) % 64
+        session["sequence"] = sequence
+        if not shift:
+            return frame
+        return _with_user_data(frame, bytes([(data[0] & 0xC0) | sequence]) + data[1:])
 
     @staticmethod
     def _g30(data: bytes) -> int | None:

@@ -162,7 +162,15 @@ class Codec:
     signature for every protocol)."""
 
     cut = staticmethod(frames)
-    ack = staticmethod(write_ack)
+
+    @staticmethod
+    def ack(frame: bytes, session: dict) -> bytes:
+        """The acknowledgement of a write (its transaction id echoed, as a server's)."""
+        return write_ack(frame)
+
+    @staticmethod
+    def upstream(frame: bytes, session: dict) -> bytes:
+        return frame
 
     @staticmethod
     def command(frame: bytes) -> tuple[dict[str, float], int] | None:

@@ -8,8 +8,11 @@ A protocol module (:mod:`lfc.wire.modbus`, :mod:`lfc.wire.dnp3`) provides a
 * ``cut(buffer) -> list[bytes]``: whole frames off the front of a bytearray;
 * ``command(frame) -> (values, seq) or None``: the command a frame carries;
 * ``with_command(frame, values, seq) -> bytes``: the frame carrying another one;
-* ``ack(frame) -> bytes``: the outstation's answer to a command, as the relay
-  forges it when it drops the frame;
+* ``ack(frame, session) -> bytes``: the outstation's answer to a command, as the
+  relay forges it when it drops the frame, made to match the session so far;
+* ``upstream(frame, session) -> bytes``: a frame from the outstation as the centre
+  then gets it (the session: a dict per connection the codec keeps what it needs in,
+  e.g. DNP3's internal indications and transport sequence);
 * ``report(frame) -> dict or None`` and ``with_report(frame, report) -> bytes``:
   the same for the report going back.
 
@@ -91,16 +94,17 @@ class Relay:
     async def _serve(self, c_reader, c_writer) -> None:
         self.tasks.add(asyncio.current_task())
         g_reader, g_writer = await asyncio.open_connection("127.0.0.1", self.upstream)
+        session: dict = {}
         try:
-            await asyncio.gather(self._down(c_reader, c_writer, g_writer),
-                                 self._up(g_reader, c_writer))
+            await asyncio.gather(self._down(c_reader, c_writer, g_writer, session),
+                                 self._up(g_reader, c_writer, session))
         except (ConnectionError, asyncio.IncompleteReadError):
             pass
         finally:
             for w in (c_writer, g_writer):
                 w.close()
 
-    async def _down(self, c_reader, c_writer, g_writer) -> None:
+    async def _down(self, c_reader, c_writer, g_writer, session: dict) -> None:
         """Centre to generator: commands (rewritten or dropped) and the rest."""
         buffer, codec = bytearray(), self.codec
         while data := await c_reader.read(65536):
@@ -111,7 +115,7 @@ class Relay:
                 if command is not None:
                     forwarded = self.on_command(*command)
                     if forwarded is None:
-                        ack = codec.ack(frame)
+                        ack = codec.ack(frame, session)
                         self._note("relay>centre", ack)
                         c_writer.write(ack)
                         await c_writer.drain()
@@ -122,13 +126,14 @@ class Relay:
                 await g_writer.drain()
         g_writer.close()          # the centre hung up: so does the relay, upstream
 
-    async def _up(self, g_reader, c_writer) -> None:
+    async def _up(self, g_reader, c_writer, session: dict) -> None:
         """Generator to centre: reports (rewritten) and the rest."""
         buffer, codec = bytearray(), self.codec
         while data := await g_reader.read(65536):
             buffer.extend(data)
             for frame in codec.cut(buffer):
                 self._note("generator>relay", frame)
+                frame = codec.upstream(frame, session)
                 report = codec.report(frame)
                 if report is not None:
                     frame = codec.with_report(frame, self.on_report(report))
