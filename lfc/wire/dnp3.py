@@ -37,7 +37,12 @@ The relay cuts the byte stream into DNP3 link frames (``05 64``, the length
 byte, a CRC after the header and after every 16 bytes of data); a command is a
 DIRECT_OPERATE request of g41v4, a report a RESPONSE carrying g30v1; a rewritten
 frame gets new CRCs; a dropped command is answered with a forged RESPONSE
-echoing it with status SUCCESS.
+echoing it with status SUCCESS, carrying the session's internal indications and
+next transport sequence number (the outstation's later frames renumbered after it).
+
+The outstation answers only the control centre's link address, applies a command
+whole or not at all and refuses a setpoint out of range with the protocol's status
+codes (:class:`Outstation`); it serves each TCP connection on its own.
 """
 
 from __future__ import annotations
