@@ -178,11 +178,12 @@ def test_dnp3_keeps_serving_its_master_while_an_outsider_connects():
 @pytest.mark.parametrize("protocol", ["dnp3", "modbus"])
 def test_a_forged_answer_looks_like_the_sessions_own(protocol):
     """The ``drop`` attack answers the commands it swallows itself.  Its DNP3 answers
-    carried IIN 0x0000 and transport sequence 0 where the outstation's carry its
-    internal indications and an incrementing sequence — a detector's first rule.
-    Now the centre sees one device: the same indications in every response, and one
-    transport sequence (the outstation's later frames renumbered after each forged
-    one); over Modbus a forged acknowledgement echoes the write's transaction id."""
+    carried IIN 0x0000 and transport sequence 0 where the outstation's carried its
+    internal indications (0x9000: restarted, needs time) and an incrementing sequence
+    — a detector's first rule.  Now the centre sees one device: the indications of
+    the session in every answer, and one transport sequence (the outstation's later
+    frames renumbered after each forged one); over Modbus a forged acknowledgement
+    echoes the write's transaction id."""
     import lfc
     from lfc.wire.run import run_wire
     run = run_wire(lfc.LFCParams(), duration=2.0, attack="drop", protocol=protocol)
@@ -195,7 +196,27 @@ def test_a_forged_answer_looks_like_the_sessions_own(protocol):
         return
     from lfc.wire.dnp3 import RESPONSE, _user_data
     data = [_user_data(f) for f in to_centre]
-    iin = {bytes(d[3:5]) for d in data if len(d) >= 5 and d[2] == RESPONSE}
-    assert len(iin) == 1 and iin != {b"\x00\x00"}
+    answers = [d for d in data if len(d) > 5 and d[2] == RESPONSE and d[5] == 41]
+    assert len(answers) == 200                         # every command answered, 50 forged
+    assert {bytes(d[3:5]) for d in answers} == {b"\x00\x00"}   # after the master's start-up
     sequence = [d[0] & 0x3F for d in data if d]
     assert all((b - a) % 64 == 1 for a, b in zip(sequence, sequence[1:]))
+
+
+def test_the_dnp3_master_starts_up_as_a_master_does():
+    """Every DNP3 response carried DEVICE_RESTART and NEED_TIME for the whole run:
+    nobody cleared them.  The master now polls, syncs the time and clears the
+    restart on connecting."""
+    pytest.importorskip("dnp3")
+    from lfc.wire import dnp3 as dn
+    loop = dn.EventLoop()
+    station = dn.Outstation()
+    centre = dn.Centre(loop.run(station.start()), loop)
+    try:
+        assert centre.startup_iin == 0x90 and centre.iin == 0
+        centre.send(COMMAND, 1)
+        assert centre.poll()["seq"] == 0 and centre.iin == 0
+    finally:
+        centre.close()
+        loop.run(station.stop())
+        loop.close()

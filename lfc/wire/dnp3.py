@@ -369,7 +369,13 @@ def _runner():
 
 class Centre:
     """The control centre's DNP3 master (address 2), connected to ``port`` through
-    ``loop`` (an :class:`~lfc.wire.relay.EventLoop`)."""
+    ``loop`` (an :class:`~lfc.wire.relay.EventLoop`).
+
+    On connecting it does what a master does (IEEE 1815 5.1): an integrity poll,
+    then, as the outstation's internal indications ask, a time synchronization
+    (a WRITE of g50v1, the wall clock) and the clearing of DEVICE_RESTART (a WRITE
+    of g80v1 index 7).  ``startup_iin`` holds the indications it found, ``iin`` the
+    latest response's."""
 
     def __init__(self, port: int, loop: EventLoop, timeout: float = 10.0) -> None:
         from dnp3.master import DefaultSOEHandler, Master, MasterConfig, MasterTcpRunner
@@ -379,6 +385,31 @@ class Centre:
         self.runner = MasterTcpRunner(master=self.master, host="127.0.0.1", port=port,
                                       response_timeout=timeout)
         loop.run(self.runner.open())
+        self.iin = self.startup_iin = self._request(self.master.build_integrity_poll())
+        self._start_up()
+
+    def _request(self, request) -> int:
+        """Send ``request``; the internal indications of its last response."""
+        responses = self.loop.run(self.runner.request(request))
+        self.iin = int(responses[-1].iin) if responses else self.iin
+        return self.iin
+
+    def _start_up(self) -> None:
+        from dnp3.application.builder import build_write_request
+        from dnp3.application.fragment import ObjectBlock
+        from dnp3.application.qualifiers import ObjectHeader
+        from dnp3.core.flags import IIN
+        blocks = []
+        if self.iin & IIN.NEED_TIME:
+            ms = int(time.time() * 1000)
+            blocks.append(ObjectBlock(header=ObjectHeader(group=50, variation=1, qualifier=0x07),
+                                      data=bytes([1]) + ms.to_bytes(6, "little")))
+        if self.iin & IIN.DEVICE_RESTART:
+            blocks.append(ObjectBlock(header=ObjectHeader(group=80, variation=1, qualifier=0x00),
+                                      data=bytes([7, 7, 0])))
+        if blocks:
+            self._request(build_write_request(tuple(blocks),
+                                              seq=self.master.next_request_sequence()))
 
     def send(self, values: dict[str, float], seq: int) -> None:
         """DIRECT_OPERATE the four analog outputs (g41v4)."""
@@ -390,12 +421,11 @@ class Centre:
             objects=(ObjectBlock(header=ObjectHeader(group=41, variation=4, qualifier=0x17),
                                  data=block[3:]),),
             seq=self.master.next_request_sequence())
-        self.loop.run(self.runner.request(request))
+        self._request(request)
 
     def poll(self) -> dict:
         """Read the report (a range poll of g30v1, points 0-8)."""
-        self.loop.run(self.runner.request(
-            self.master.build_range_poll(30, 1, 0, len(REPORT_POINTS) - 1)))
+        self._request(self.master.build_range_poll(30, 1, 0, len(REPORT_POINTS) - 1))
         points = self.handler.analog_inputs
         return from_counts([points[i].value for i in range(len(REPORT_POINTS))])
 
