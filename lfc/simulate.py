@@ -107,6 +107,17 @@ class SimResult:
         }
 
     @property
+    def areas(self) -> tuple[SimResult]:
+        """``(self,)``: an area is a grid of one area, so code written for a grid's
+        result (:class:`~lfc.simulate_multiarea.MultiAreaResult`) reads an area's."""
+        return (self,)
+
+    def table(self) -> pd.DataFrame:
+        """The metrics as :func:`lfc.simulate_many` rows (:func:`metrics_table`): one
+        row, ``area`` 0, as a grid's result gives one per area."""
+        return metrics_table([self.metrics()])
+
+    @property
     def first_trip(self) -> dict | None:
         """The first relay trip, ``{"relay": name, "t": s}``, or None."""
         if not len(self.trips):
@@ -125,6 +136,18 @@ class SimResult:
         (out / "metrics.json").write_text(json.dumps(self.metrics(), indent=2))
         (out / "settings.json").write_text(json.dumps(self.settings, indent=2, default=str))
         return out
+
+
+def metrics_table(per_area: list[dict]) -> pd.DataFrame:
+    """Each area's :meth:`SimResult.metrics` as rows: ``area`` then ``METRIC_KEYS``,
+    as :func:`lfc.simulate_many` gives them (where no relay tripped,
+    ``first_trip_relay`` None and ``first_trip_t`` NaN)."""
+    table = pd.DataFrame([{"area": a, **m} for a, m in enumerate(per_area)],
+                         columns=["area", *METRIC_KEYS])
+    table["first_trip_t"] = table["first_trip_t"].astype(float)
+    table["first_trip_relay"] = table["first_trip_relay"].astype(object).where(
+        table["tripped"].astype(bool), None)
+    return table
 
 
 MAX_STEPS = 10**7   # plant steps in one single-area run (2.8 h at 1 ms)

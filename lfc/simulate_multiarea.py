@@ -79,7 +79,7 @@ from lfc.multiarea import N_AREA_STATES, MultiAreaParams
 from lfc.relays import RELAY_NAMES, RelaySettings, relays_or_default
 from lfc.run import Runner, register
 from lfc.scenarios import Scenarios, grid_scenarios
-from lfc.simulate import METRIC_KEYS, SimResult, check_timing, result
+from lfc.simulate import METRIC_KEYS, SimResult, check_timing, metrics_table, result
 
 __all__ = ["MultiAreaResult", "area_filter", "grid_results", "multiarea_result",
            "results_table", "simulate_grid_linear", "simulate_grid_table"]
@@ -135,6 +135,11 @@ class MultiAreaResult:
     def metrics(self) -> dict[int, dict]:
         """Each area's :meth:`SimResult.metrics` (JSON-serializable)."""
         return {i: r.metrics() for i, r in enumerate(self.areas)}
+
+    def table(self) -> pd.DataFrame:
+        """The metrics as :func:`lfc.simulate_many` rows, one per area: ``area`` and
+        ``METRIC_KEYS`` (an area's result gives the same, :meth:`SimResult.table`)."""
+        return metrics_table([r.metrics() for r in self.areas])
 
     @property
     def tripped(self) -> bool:

@@ -67,15 +67,20 @@ def test_an_area_is_area_0_and_its_keywords_come_back():
     (TWO, Scenario(attacks={0: {"pc": ATTACK}}, filters={0: "coupled", 1: "coupled"})),
 ])
 def test_simulate_runs_a_scenario_as_its_keywords(plant, scenario):
+    """One scenario as an object or as keywords: the same run; its result's metrics
+    table (``table()``: ``area`` and the metrics, an area's as a grid's) is its
+    ``simulate_many`` rows."""
     form = "area" if isinstance(plant, lfc.LFCParams) else "grid"
     one = lfc.simulate(plant, scenario, duration=4.0)
     pd.testing.assert_frame_equal(one.trace, lfc.simulate(plant, duration=4.0,
                                                           **scenario.keywords(form)).trace)
     rows = lfc.simulate_many(plant, [scenario, Scenario()], duration=4.0)
     assert list(rows.columns[:2]) == ["scenario", "area"]
-    metrics = one.metrics() if form == "grid" else {0: one.metrics()}
-    for a, m in metrics.items():
-        assert same_metrics(m, rows[(rows.scenario == 0) & (rows.area == a)].iloc[0]), a
+    for a, area in enumerate(one.areas):              # an area is a grid of one area
+        assert same_metrics(area.metrics(), rows[(rows.scenario == 0) & (rows.area == a)]
+                            .iloc[0]), a
+    mine = rows[rows.scenario == 0].drop(columns="scenario").reset_index(drop=True)
+    pd.testing.assert_frame_equal(one.table(), mine, check_dtype=False, rtol=1e-12)
     assert not rows[rows.scenario == 1].tripped.any()
     with pytest.raises(ValueError, match="as a Scenario or as keywords, not both"):
         lfc.simulate(plant, scenario, duration=1.0, seed=3)
