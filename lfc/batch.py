@@ -50,7 +50,7 @@ from lfc.filters.base import given as holds_value
 from lfc.model import LFCParams
 from lfc.relays import RELAY_NAMES, RelaySettings, relays_or_default
 from lfc.run import Runner, only_for_metrics, register
-from lfc.scenarios import Scenarios
+from lfc.scenarios import Scenario, Scenarios
 from lfc.signals import Chirp, Ramp, Samples, Signal, Sinusoid, Square, Step
 from lfc.simulate import METRIC_KEYS, check_timing, simulate_area
 
@@ -339,21 +339,22 @@ def _check_unused(scenarios: pd.DataFrame) -> None:
 
 
 def row_scenario(params: LFCParams, relays: RelaySettings, row: dict, duration: float,
-                 control_period: float, built: dict) -> dict:
-    """One checked table row as the keywords of :meth:`lfc.scenarios.Scenarios.add`
-    (its plant, filter, estimator, noise, seed, flags and signal); ``built``
-    holds the filters already built for these ``params`` and ``relays``."""
+                 control_period: float, built: dict) -> Scenario:
+    """One checked table row as an :class:`lfc.Scenario` (its plant, filter,
+    estimator, noise, seed, flags and signal); ``built`` holds the filters already
+    built for these ``params`` and ``relays``."""
     signal = scenario_signal(row, duration)
     channel = row["channel"]
     noise = tuple(0.0 if pd.isna(v) else float(v)             # NaN: no noise, as checked
                   for v in (row.get(c, 0.0) for c in NOISE))
-    return dict(plant=_plant(params, row),
-                filters={0: _filter(params, relays, row, control_period, built)},
-                estimator="kalman" if any(noise) else None, noise_std=noise,
-                seed=int(row.get("seed", 0)), relay_noise=bool(row.get("relay_noise", False)),
-                anti_windup=bool(row.get("anti_windup", False)),
-                attacks={0: {channel: signal}} if channel != "load" else None,
-                loads={0: signal} if channel == "load" else None)
+    return Scenario(plant=_plant(params, row),
+                    filters={0: _filter(params, relays, row, control_period, built)},
+                    estimator="kalman" if any(noise) else None, noise_std=noise,
+                    seed=int(row.get("seed", 0)),
+                    relay_noise=bool(row.get("relay_noise", False)),
+                    anti_windup=bool(row.get("anti_windup", False)),
+                    attacks={0: {channel: signal}} if channel != "load" else None,
+                    loads={0: signal} if channel == "load" else None)
 
 
 def run_chunk(params: LFCParams, scenarios: pd.DataFrame, duration: float,
@@ -367,7 +368,7 @@ def run_chunk(params: LFCParams, scenarios: pd.DataFrame, duration: float,
                    relays=relays)
     built: dict = {}     # this chunk's filters by their options (built_once keys by repr: slower)
     for row in scenarios.to_dict("records"):
-        sc.add(**row_scenario(params, relays, row, duration, control_period, built))
+        sc.add(row_scenario(params, relays, row, duration, control_period, built))
     run = sc.run(lanes=lanes)
     return metrics_frame(run.metrics[:, 0], sc.n_ctrl, scenarios.index)
 
@@ -379,7 +380,6 @@ def table_results(params: LFCParams, scenarios: pd.DataFrame, *, duration: float
     trace: one :class:`~lfc.simulate.SimResult` per row, in the table's order,
     whose ``metrics()`` are the row :func:`simulate_table` gives (the same
     numbers).  ``simulate_many(params, table, keep="results")``."""
-    from lfc.simulate import simulate_area
     scenarios = check_scenarios(scenarios)
     check_timing(duration, dt, control_period)
     check_flag("progress", progress)
@@ -389,15 +389,10 @@ def table_results(params: LFCParams, scenarios: pd.DataFrame, *, duration: float
     out = []
     for row in tqdm(scenarios.to_dict("records"), desc="simulate_many", unit="scenario",
                     disable=not progress):
-        kw = row_scenario(params, relays, row, duration, control_period, built)
-        attack = (kw["attacks"] or {0: {}})[0]
-        out.append(simulate_area(kw["plant"], duration=duration, dt=dt,
+        s = row_scenario(params, relays, row, duration, control_period, built)
+        out.append(simulate_area(s.plant, duration=duration, dt=dt,
                                  control_period=control_period, relays=relays,
-                                 pc_attack=attack.get("pc"), wref_attack=attack.get("wref"),
-                                 load=(kw["loads"] or {0: None})[0], scc=kw["filters"][0],
-                                 estimator=kw["estimator"], noise_std=kw["noise_std"],
-                                 seed=kw["seed"], relay_noise=kw["relay_noise"],
-                                 anti_windup=kw["anti_windup"]))
+                                 **s.keywords("area")))
     return out
 
 
@@ -685,6 +680,109 @@ def _digest(chunk: pd.DataFrame, args: tuple) -> str:
     files never match)."""
     text = chunk.to_csv() + repr(args) + code_digest()
     return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+# -- the table's rows as lfc.Scenario, and back ----------------------------------------------
+#: the waveform a table row names, by signal class (:func:`scenario_signal`'s inverse)
+SIGNAL_WAVEFORMS = {Sinusoid: "sinusoid", Square: "square", Chirp: "chirp", Step: "step",
+                    Ramp: "ramp", Samples: "samples"}
+
+
+def table_scenarios(table: pd.DataFrame, params: LFCParams, *, duration: float,
+                    relays: RelaySettings | None = None,
+                    control_period: float = 0.01) -> list[Scenario]:
+    """Each row of a scenario table (:func:`simulate_table`'s columns, checked as it
+    checks them) as an :class:`lfc.Scenario` of the area ``params``, its filter built
+    on ``params`` with ``relays`` (default IEEE 1547 Cat. III) for ``control_period``
+    (s); ``duration`` (s) ends a chirp."""
+    relays = in_engine_types(relays_or_default(relays))
+    built: dict = {}
+    return [row_scenario(params, relays, row, duration, control_period, built)
+            for row in check_scenarios(table).to_dict("records")]
+
+
+def scenario_row(scenario: Scenario, params: LFCParams) -> dict:
+    """``scenario`` as one row of a scenario table for the area ``params``
+    (:func:`table_scenarios` reads it back to the same scenario): one signal of a
+    ``SIGNAL_WAVEFORMS`` class on ``pc``, ``wref`` or the load, or none; a filter built
+    on ``params`` or none; the Kalman estimate exactly where there is noise; the
+    plant's ``M``, ``D``, ... where it is not ``params``.  ``ValueError`` naming what
+    a table cannot hold."""
+    kw = scenario.keywords("area")
+    given = [(c, s) for c, s in (("pc", kw["pc_attack"]), ("wref", kw["wref_attack"]),
+                                 ("load", kw["load"])) if s is not None]
+    if len(given) > 1:
+        raise ValueError(f"a table row holds one signal, got {[c for c, _ in given]}")
+    channel, signal = given[0] if given else ("pc", None)
+    row = {"channel": channel, **_waveform(signal)}
+    noisy = any(s > 0 for s in scenario.noise_std)
+    row.update(noise_w=scenario.noise_std[0], noise_rocof=scenario.noise_std[1],
+               seed=scenario.seed, relay_noise=scenario.relay_noise,
+               anti_windup=scenario.anti_windup)
+    row.update(_filter_columns(kw["scc"], params, row))
+    row.setdefault("declare_noise", False)        # a table's flags are in every row
+    if (scenario.estimator is not None) != noisy or (noisy and scenario.estimator != "kalman"):
+        raise ValueError("a table row's estimator is the Kalman filter exactly where "
+                         "there is noise")
+    if kw["load_feedforward"]:
+        raise ValueError("a table row has no load feed-forward")
+    plant = scenario.plant
+    if plant is not None and plant != params:
+        if not isinstance(plant, LFCParams) or any(
+                getattr(plant, f) != getattr(params, f) for f in UNREAD_PARAMS):
+            raise ValueError(f"a table row's plant differs from params only in {PLANT}")
+        row.update({f: getattr(plant, f) for f in PLANT})
+    return row
+
+
+def _waveform(signal) -> dict:
+    """A table row's signal columns for ``signal`` (None: ``"none"``)."""
+    if signal is None:
+        return {"waveform": "none", "amplitude": 0.0, "freq_hz": 0.0, "start": 0.0}
+    kind = SIGNAL_WAVEFORMS.get(type(signal))
+    if kind is None:
+        raise ValueError(f"a table row's signal is one of {sorted(SIGNAL_WAVEFORMS.values())}, "
+                         f"got "
+                         f"{type(signal).__name__}")
+    if kind == "samples":
+        times, values = np.asarray(signal.t, float), np.asarray(signal.values, float)
+        period = float(times[1] - times[0]) if len(times) > 1 else 1.0
+        if not np.allclose(np.diff(times), period, rtol=0, atol=1e-12):
+            raise ValueError("a table row's samples are uniform in time")
+        return {"waveform": kind, "amplitude": 0.0, "freq_hz": 0.0,
+                "start": float(times[0]), "values": values.tolist(), "sample_period": period}
+    if kind == "chirp":
+        if signal.f0_hz != CHIRP_F0:
+            raise ValueError(f"a table row's chirp starts at {CHIRP_F0} Hz, got {signal.f0_hz}")
+        return {"waveform": kind, "amplitude": signal.amplitude, "freq_hz": signal.f1_hz,
+                "start": signal.start, "stop": signal.stop}
+    if getattr(signal, "phase", 0.0) != 0.0:
+        raise ValueError("a table row's sinusoid has no phase")
+    amplitude = {"step": "value", "ramp": "slope"}.get(kind, "amplitude")
+    return {"waveform": kind, "amplitude": getattr(signal, amplitude),
+            "freq_hz": getattr(signal, "freq_hz", 0.0), "start": signal.start,
+            "stop": signal.stop}
+
+
+def _filter_columns(scc, params: LFCParams, row: dict) -> dict:
+    """A table row's filter columns for ``scc`` (None: ``alpha`` NaN), checked by
+    reading them back as :func:`lfc.batch.simulate_table` does (``row`` holds the
+    row's noise columns, which the certified filter's declared noise reads)."""
+    if scc is None:
+        return {"method": "paper", "alpha": math.nan, "Ts": math.nan}
+    if not isinstance(scc, SafetyFilter) or scc.params != params:
+        raise ValueError("a table row's filter is a SafetyFilter built on the table's model "
+                         "(params)")
+    options = scc.options.as_dict()
+    columns = {"method": scc.method, "alpha": NEUTRAL["alpha"], "Ts": NEUTRAL["Ts"],
+               **scc.options.to_columns()}
+    Options = options_of(scc.method)
+    read = {**Options.from_columns({**row, **columns}),
+            **Options.for_period(options.get("control_period", 0.0))}
+    lost = sorted({k for k, v in read.items() if k in options and v != options[k]}
+                  | {k for k in scc.options.changed() if k not in read})
+    if lost:
+        raise ValueError(f"a table row cannot hold the filter's option(s) {lost}")
+    return columns
 
 
 # -- the area's runner (lfc.run): simulate and simulate_many of an LFCParams ---------------

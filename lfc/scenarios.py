@@ -9,14 +9,12 @@ they allow it, the reference kernel (:func:`lfc.engine.run_kernel`) for the rest
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from numbers import Integral
 
 import numpy as np
-import pandas as pd
 
-from lfc._validate import ParameterTypeError, check_flag, check_seed, in_engine_types
+from lfc._validate import ParameterTypeError, check_flag, check_seed
 from lfc.engine import (CHANNELS, LOAD, METRICS, N_CHANNELS, N_CTRL, N_KF, Estimators,
                         FilterTables, Outputs, Plants, RelayTables, Rows, SignalSamples, Timing,
                         Work, check_area_keys, check_attacks, check_coupled, check_load_measured,
@@ -27,9 +25,8 @@ from lfc.filters.dispatch import GRID_WIDE, scratch_size
 from lfc.lanes import LANE_MIN_FILL, LaneWork, lane_blocks, run_lanes
 from lfc.model import LFCParams
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams, as_grid, discretize_grid
-from lfc.relays import RelaySettings, relays_or_default
-from lfc.signals import (N_PARAMS, NONE, STEP, Chirp, Ramp, Samples, Sinusoid, Square,
-                         Step)
+from lfc.relays import RelaySettings
+from lfc.signals import N_PARAMS, NONE, STEP
 
 
 class _Table:
@@ -300,9 +297,7 @@ AREA_KEYS = ("pc_attack", "wref_attack", "load", "scc", "estimator", "noise_std"
 #: the keywords of a scenario in a grid's form (lfc.simulate of a MultiAreaParams or a grid)
 GRID_KEYS = ("attacks", "loads", "filters", "estimator", "noise_std", "seed", "feedforward",
              "relay_noise", "anti_windup")
-#: what a scenario table's waveform names (lfc.batch.scenario_signal), by signal class
-WAVEFORMS = {Sinusoid: "sinusoid", Square: "square", Chirp: "chirp", Step: "step",
-             Ramp: "ramp", Samples: "samples"}
+
 
 
 @dataclass(frozen=True)
@@ -311,9 +306,10 @@ class Scenario:
     measures, checked once when made.
 
     A single area is area 0 of a grid of one area: :meth:`for_area` takes
-    :func:`lfc.simulate`'s keywords of an area, :meth:`from_table` a scenario table's
-    rows, and ``lfc.simulate(plant, scenario)`` and ``lfc.simulate_many(plant,
-    scenarios)`` run it on any plant (:meth:`keywords` gives the plant's form).
+    :func:`lfc.simulate`'s keywords of an area, :func:`lfc.batch.table_scenarios` a
+    scenario table's rows (:func:`lfc.batch.scenario_row` writes one back), and
+    ``lfc.simulate(plant, scenario)`` and ``lfc.simulate_many(plant, scenarios)`` run
+    it on any plant (:meth:`keywords` gives the plant's form).
 
     Parameters
     ----------
@@ -433,52 +429,6 @@ class Scenario:
               "load_feedforward": bool(self.feedforward), "anti_windup": self.anti_windup}
         return {**kw, "relay_noise": True} if self.relay_noise else kw
 
-    @classmethod
-    def from_table(cls, table: pd.DataFrame, params: LFCParams, *, duration: float,
-                   relays: RelaySettings | None = None,
-                   control_period: float = 0.01) -> list[Scenario]:
-        """Each row of a scenario table (:func:`lfc.batch.simulate_table`'s columns,
-        checked as it checks them) as a scenario of the area ``params``, its filter built
-        on ``params`` with ``relays`` (default IEEE 1547 Cat. III) for
-        ``control_period`` (s); ``duration`` (s) ends a chirp."""
-        from lfc.batch import check_scenarios, row_scenario
-        relays = in_engine_types(relays_or_default(relays))
-        built: dict = {}
-        return [cls(**row_scenario(params, relays, row, duration, control_period, built))
-                for row in check_scenarios(table).to_dict("records")]
-
-    def to_row(self, params: LFCParams) -> dict:
-        """The scenario as one row of a scenario table for the area ``params``
-        (:meth:`from_table` reads it back to the same scenario): one signal of a
-        :data:`WAVEFORMS` class on ``pc``, ``wref`` or the load, or none; a filter
-        built on ``params`` or none; the Kalman estimate exactly where there is noise;
-        the plant's ``M``, ``D``, ... where it is not ``params``.  ``ValueError``
-        naming what a table cannot hold."""
-        kw = self.keywords("area")
-        given = [(c, s) for c, s in (("pc", kw["pc_attack"]), ("wref", kw["wref_attack"]),
-                                     ("load", kw["load"])) if s is not None]
-        if len(given) > 1:
-            raise ValueError(f"a table row holds one signal, got {[c for c, _ in given]}")
-        channel, signal = given[0] if given else ("pc", None)
-        row = {"channel": channel, **_waveform(signal)}
-        noisy = any(s > 0 for s in self.noise_std)
-        row.update(noise_w=self.noise_std[0], noise_rocof=self.noise_std[1], seed=self.seed,
-                   relay_noise=self.relay_noise, anti_windup=self.anti_windup)
-        row.update(_filter_columns(kw["scc"], params, row))
-        row.setdefault("declare_noise", False)        # a table's flags are in every row
-        if (self.estimator is not None) != noisy or (noisy and self.estimator != "kalman"):
-            raise ValueError("a table row's estimator is the Kalman filter exactly where "
-                             "there is noise")
-        if kw["load_feedforward"]:
-            raise ValueError("a table row has no load feed-forward")
-        if self.plant is not None and self.plant != params:
-            from lfc.batch import PLANT, UNREAD_PARAMS
-            if not isinstance(self.plant, LFCParams) or any(
-                    getattr(self.plant, f) != getattr(params, f) for f in UNREAD_PARAMS):
-                raise ValueError(f"a table row's plant differs from params only in {PLANT}")
-            row.update({f: getattr(self.plant, f) for f in PLANT})
-        return row
-
 
 def _areas(name: str, mapping) -> dict:
     """``mapping`` (None: empty) as a dict whose keys are area indices (ints >= 0)."""
@@ -490,59 +440,6 @@ def _areas(name: str, mapping) -> dict:
             raise ValueError(f"a key of {name} must be an area index (an int >= 0), got "
                              f"{key!r:.40}")
     return {int(k): v for k, v in mapping.items() if v is not None}
-
-
-def _waveform(signal) -> dict:
-    """A table row's signal columns for ``signal`` (None: ``"none"``)."""
-    if signal is None:
-        return {"waveform": "none", "amplitude": 0.0, "freq_hz": 0.0, "start": 0.0}
-    kind = WAVEFORMS.get(type(signal))
-    if kind is None:
-        raise ValueError(f"a table row's signal is one of {sorted(WAVEFORMS.values())}, got "
-                         f"{type(signal).__name__}")
-    if kind == "samples":
-        times, values = np.asarray(signal.t, float), np.asarray(signal.values, float)
-        period = float(times[1] - times[0]) if len(times) > 1 else 1.0
-        if not np.allclose(np.diff(times), period, rtol=0, atol=1e-12):
-            raise ValueError("a table row's samples are uniform in time")
-        return {"waveform": kind, "amplitude": 0.0, "freq_hz": 0.0,
-                "start": float(times[0]), "values": values.tolist(), "sample_period": period}
-    if kind == "chirp":
-        from lfc.batch import CHIRP_F0
-        if signal.f0_hz != CHIRP_F0:
-            raise ValueError(f"a table row's chirp starts at {CHIRP_F0} Hz, got {signal.f0_hz}")
-        return {"waveform": kind, "amplitude": signal.amplitude, "freq_hz": signal.f1_hz,
-                "start": signal.start, "stop": signal.stop}
-    if getattr(signal, "phase", 0.0) != 0.0:
-        raise ValueError("a table row's sinusoid has no phase")
-    amplitude = {"step": "value", "ramp": "slope"}.get(kind, "amplitude")
-    return {"waveform": kind, "amplitude": getattr(signal, amplitude),
-            "freq_hz": getattr(signal, "freq_hz", 0.0), "start": signal.start,
-            "stop": signal.stop}
-
-
-def _filter_columns(scc, params: LFCParams, row: dict) -> dict:
-    """A table row's filter columns for ``scc`` (None: ``alpha`` NaN), checked by
-    reading them back as :func:`lfc.batch.simulate_table` does (``row`` holds the
-    row's noise columns, which the certified filter's declared noise reads)."""
-    from lfc.batch import NEUTRAL
-    from lfc.filters import options_of
-    if scc is None:
-        return {"method": "paper", "alpha": math.nan, "Ts": math.nan}
-    if not isinstance(scc, SafetyFilter) or scc.params != params:
-        raise ValueError("a table row's filter is a SafetyFilter built on the table's model "
-                         "(params)")
-    options = scc.options.as_dict()
-    columns = {"method": scc.method, "alpha": NEUTRAL["alpha"], "Ts": NEUTRAL["Ts"],
-               **scc.options.to_columns()}
-    Options = options_of(scc.method)
-    read = {**Options.from_columns({**row, **columns}),
-            **Options.for_period(options.get("control_period", 0.0))}
-    lost = sorted({k for k, v in read.items() if k in options and v != options[k]}
-                  | {k for k in scc.options.changed() if k not in read})
-    if lost:
-        raise ValueError(f"a table row cannot hold the filter's option(s) {lost}")
-    return columns
 
 
 def grid_scenarios(scenarios) -> object:

@@ -1,6 +1,7 @@
 """Issue "One": one ``Scenario`` for every plant — checked once when made, run by
 ``lfc.simulate(plant, scenario)`` and ``lfc.simulate_many(plant, [scenario, ...])`` on
-an area, a grid and ANDES, read from a scenario table and written back to one."""
+an area, a grid and ANDES, read from a scenario table and written back to one
+(``lfc.batch.table_scenarios``, ``scenario_row``)."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from same_metrics import same_metrics
 from test_lanes import mixed
 
 import lfc
+from lfc.batch import scenario_row, table_scenarios
 from lfc.scenarios import Scenario
 from lfc.simulate import METRIC_KEYS
 
@@ -112,14 +114,14 @@ def test_a_scenario_list_keeps_its_results_as_simulate_gives_them():
 @settings(max_examples=tiers.examples(8), deadline=None)
 @given(seed=st.integers(0, 10_000))
 def test_a_table_read_as_scenarios_and_written_back_runs_the_same(seed):
-    """``Scenario.from_table`` then ``to_row``: the same table, row for row (every kind
+    """``table_scenarios`` then ``scenario_row``: the same table, row for row (every kind
     of row: waveforms on every channel, the filters and their readings, other plants,
     noise with its Kalman estimate, relay noise, anti-windup); its scenarios as a list
     give the table's metrics."""
     table = mixed(24, seed)
-    scenarios = Scenario.from_table(table, P, duration=4.0)
-    again = pd.DataFrame([s.to_row(P) for s in scenarios])
-    twice = pd.DataFrame([s.to_row(P) for s in Scenario.from_table(again, P, duration=4.0)])
+    scenarios = table_scenarios(table, P, duration=4.0)
+    again = pd.DataFrame([scenario_row(s, P) for s in scenarios])
+    twice = pd.DataFrame([scenario_row(s, P) for s in table_scenarios(again, P, duration=4.0)])
     pd.testing.assert_frame_equal(twice, again)
     want = lfc.simulate_many(P, table, duration=4.0, progress=False)
     back = lfc.simulate_many(P, again, duration=4.0, progress=False)
@@ -142,8 +144,8 @@ def test_what_a_table_cannot_hold_is_refused_naming_it():
     ]
     for scenario, match in cases:
         with pytest.raises(ValueError, match=match):
-            scenario.to_row(P)
-    row = Scenario().to_row(P)
+            scenario_row(scenario, P)
+    row = scenario_row(Scenario(), P)
     assert row["waveform"] == "none" and math.isnan(row["alpha"])
 
 
