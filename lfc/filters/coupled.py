@@ -92,26 +92,21 @@ within it the winners trip nothing there, though ``outside`` is flagged
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
 from lfc._validate import (ParameterTypeError, as_float, check_array, check_index,
-                           check_nonnegative, check_number, check_positive, check_range)
-from lfc.estimation import check_noise_std
-from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, METHOD_IDS, OUTSIDE, built_once,
-                              check_limits)
+                           check_number, check_range)
+from lfc.filters.base import ACTIVE, BIND_CERT, INVALID, METHOD_IDS, OUTSIDE, built_once
 from lfc.filters.coupled_kernel import decide_once
-from lfc.filters.coupled_set import CoupledSet
+from lfc.filters.coupled_set import CoupledOptions, CoupledSet
 from lfc.multiarea import MultiAreaParams, discretize_grid
 from lfc.relays import RelaySettings
 
 METHOD_ID = METHOD_IDS["coupled"]   # the engine's code for it (lfc.engine.generator_period)
-TERMINALS = ("auto", "lyapunov", "sdp")
 AUTO_HORIZONS = (8.0, 12.0, 16.0, 20.0)   # s: horizon="auto"'s candidates, shortest first
 AUTO_HELD_MAX = 1.0   # s: how long "auto" lets a legitimate step leave AGC waiting (it restores
                       # in about 20 s on the grids of docs/coupled-certificate.md)
-HELD_LEVELS = ("sharp", "widened", "strict")
 OUTSIDE_WHY = {   # what an outside flag may mean: the exact state, then each held level
     None: "the loads moved by more than the bounds",
     "sharp": "the loads moved by more than the bounds, or the estimator has not yet seen a "
@@ -120,127 +115,6 @@ OUTSIDE_WHY = {   # what an outside flag may mean: the exact state, then each he
                "ellipsoid",
     "strict": "the loads moved by more than the bounds, the estimator has not yet seen a "
               "load change, or the estimate's noise left its ellipsoid"}
-
-
-@dataclass(frozen=True)
-class CoupledOptions:
-    """Options of the coupled certificate (module docstring).
-
-    Parameters
-    ----------
-    load_bound : float
-        Total variation of the loads, summed over the areas, that a new vector
-        of commands leaves room for from its certification on (pu), >= 0.
-        Default 0.06 pu: a held vector's re-check absorbs ``load_bound -
-        recheck_bound`` = 0.05 pu since its certification, one 0.05 pu step in
-        any area.
-    recheck_bound : float
-        Total variation of the loads within one control period that the held
-        vector's re-check covers (pu), in [0, ``load_bound``]; the guarantee's
-        assumption.  Default 0.01 pu.
-    horizon : float
-        Look-ahead before the terminal ellipsoid (s), in [0.2, 20].  Default 8 s.
-        On the estimate, a horizon that builds may still leave new vectors almost
-        no radius (``data[RHO_NEW]``), which holds legitimate AGC after a load
-        step: Kundur as fitted to ANDES needs 16 s, not the 12 that build
-        (:meth:`held_after_step` measures it; ``docs/coupled-certificate.md``,
-        "With estimates", Cost).  :class:`CoupledFilter` also takes ``"auto"``:
-        the shortest of :data:`AUTO_HORIZONS` whose certificate builds and holds
-        a legitimate step at most :data:`AUTO_HELD_MAX` (1 s;
-        :meth:`~CoupledFilter.held_after_step`).
-    tightening : float
-        How far (fraction of each limit) an output may move between two
-        certificate samples, in [1e-4, 0.1]; sets their spacing.  Default 0.005.
-    margin : float
-        Extra fractional tightening of every limit, in [0, 1).  Default 0.
-    u_min, u_max : float
-        Limits on every area's command (pu), ``u_min <= 0 <= u_max``.
-        :class:`CoupledFilter`'s default: ``∓params.command_range`` (the range
-        its design model holds in, :class:`lfc.multiarea.MultiAreaParams`; ∓∞
-        but for a model fitted to ANDES).
-    control_period : float
-        Period of the calls (s), in (0, 1].  Default 0.01 s.
-    noise_std : (float, float) or None
-        The measurement noise (std of every area's ``dw_meas``, pu, and
-        ``rocof_meas``, pu/s) of the grid Kalman estimate the filters are given
-        (:class:`~lfc.filters.coupled_set.GridKalman`); None (default): the exact state and loads.  Each
-        entry 0 or in :data:`lfc.estimation.STD`.
-    confidence : float
-        Probability, in (0, 1), that the estimate's error lies in the ellipsoid
-        the certificate covers (chi-square of the error covariance's dimension).
-        Default 0.9999.  Only with ``noise_std``.
-    held_level : {"sharp", "widened", "strict"}
-        The held re-check's level on the estimate (``docs/coupled-certificate.md``,
-        "With estimates").  ``"sharp"`` (default): the exact state's, tightened by
-        the noise's part of the error; it flags ``outside`` early when the loads
-        move beyond the bounds, and sometimes with nothing wrong (just after a
-        load step the estimator has not yet seen).  ``"widened"``: widened by what
-        the error may move the re-check; proven never to flag ``outside`` while the
-        loads' total variation is at most ``load_bound - recheck_bound`` and the
-        noise's part lies in its ellipsoid (theorem C'), but blind to moderate
-        excesses (a 0.1 pu step that trips, unflagged).  ``"strict"``: the sharp
-        level, and on the rows of the coming control period (new and held) less
-        what the loads may have moved the error if every period's load variation
-        has been at most ``recheck_bound``; proven (theorem B') that a vector
-        applied there keeps every output within its limit over the coming period
-        while every period's variation is at most ``recheck_bound`` and the
-        noise's part lies in its ellipsoid.  Only with ``noise_std``.
-    terminal : {"auto", "lyapunov", "sdp"}
-        The terminal ellipsoid: ``"lyapunov"`` solves ``A'P + PA = -W`` (W from
-        the relay limits); ``"sdp"`` shapes it (:func:`~lfc.filters.coupled_set.shaped_terminal`) so that a
-        load moves the state at the horizon as little as possible in its norm;
-        ``"auto"`` (default) takes the Lyapunov one and the shaped one where the
-        Lyapunov one leaves no room (a lightly damped area, chains of areas).
-    """
-
-    load_bound: float = 0.06
-    recheck_bound: float = 0.01
-    horizon: float = 8.0
-    tightening: float = 0.005
-    margin: float = 0.0
-    u_min: float = -math.inf
-    u_max: float = math.inf
-    control_period: float = 0.01
-    noise_std: tuple[float, float] | None = None
-    confidence: float = 0.9999
-    held_level: str = "sharp"
-    terminal: str = "auto"
-
-    def __post_init__(self) -> None:
-        if self.terminal not in TERMINALS:
-            raise ValueError(f"terminal must be one of {TERMINALS}, got {self.terminal!r}")
-        check_nonnegative("load_bound", self.load_bound)
-        check_nonnegative("recheck_bound", self.recheck_bound)
-        if self.recheck_bound > self.load_bound:
-            raise ValueError(f"recheck_bound={self.recheck_bound!r} must be <= load_bound="
-                             f"{self.load_bound!r}: a new vector's first period is covered "
-                             f"by load_bound")
-        check_range("horizon", self.horizon, 0.2, 20.0, closed=True)
-        check_range("tightening", self.tightening, 1e-4, 0.1, closed=True)
-        check_number("margin", self.margin)
-        if not 0.0 <= self.margin < 1.0:
-            raise ValueError(f"margin must be in [0, 1), got {self.margin!r}")
-        check_limits(self.u_min, self.u_max)
-        if not self.u_min <= 0.0 <= self.u_max:
-            raise ValueError(f"u_min <= 0 <= u_max is required (the filters start by holding "
-                             f"the equilibrium commands 0), got u_min={self.u_min!r}, "
-                             f"u_max={self.u_max!r}")
-        check_positive("control_period", self.control_period)
-        if self.control_period > 1.0:
-            raise ValueError(f"control_period must lie in (0, 1] s, got "
-                             f"{self.control_period!r}")
-        if self.noise_std is not None:
-            object.__setattr__(self, "noise_std", check_noise_std("noise_std", self.noise_std))
-        check_range("confidence", self.confidence, 0.0, 1.0)
-        if self.held_level not in HELD_LEVELS:
-            raise ValueError(f"held_level must be one of {HELD_LEVELS}, got "
-                             f"{self.held_level!r}")
-        if self.noise_std is None and self.held_level != "sharp":
-            raise ValueError(f"held_level={self.held_level!r} has no effect without noise_std "
-                             f"(the exact state): leave it at its default")
-        if self.noise_std is None and self.confidence != 0.9999:
-            raise ValueError(f"confidence={self.confidence!r} has no effect without noise_std "
-                             f"(the exact state): leave it at its default")
 
 
 def auto_horizon(params: MultiAreaParams, relays: RelaySettings,

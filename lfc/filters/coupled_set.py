@@ -1,8 +1,8 @@
 """The coupled certificate's sets, built once per grid: :class:`CoupledSet`.
 
-The reduced model of the grid (:func:`reduced_model`: the tie-line flows' reachable
-subspace), the held grid a vector of commands drives, the grid-wide Kalman filter
-(:class:`GridKalman`), the rows of the certificate's sample checks with their
+Its options (:class:`CoupledOptions`), the reduced model of the grid
+(:func:`reduced_model`: the tie-line flows' reachable subspace), the held grid a
+vector of commands drives, the grid-wide Kalman filter (:class:`GridKalman`), the rows of the certificate's sample checks with their
 tightenings, its terminal ellipsoid (:func:`shaped_terminal`) and the bound on the
 estimate's error that a load leaves (:class:`LoadErrors`).  The proofs:
 ``docs/coupled-certificate.md``; the filter that uses them:
@@ -14,12 +14,13 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.linalg import expm, solve_continuous_lyapunov
 
-from lfc.estimation import LOAD_STD, measurement_std, steady_state_kalman
+from lfc._validate import check_nonnegative, check_number, check_positive, check_range
+from lfc.estimation import LOAD_STD, check_noise_std, measurement_std, steady_state_kalman
+from lfc.filters.base import check_limits
 from lfc.filters.bounds import curvature_gains, expm_at, intersample, merge_intervals, pair
 from lfc.filters.certified import NUMERIC_MARGIN, grid, rate_bound
 from lfc.filters.coupled_kernel import DW, HEAD, LIFT, ROCOF
@@ -28,13 +29,133 @@ from lfc.model import zoh
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams, multiarea_matrices
 from lfc.relays import RelaySettings
 
-if TYPE_CHECKING:
-    from lfc.filters.coupled import CoupledOptions
-
 EXPORT_STD = 1e-4    # pu: the grid Kalman filter's noise model of the metered tie-line exports
 ERROR_OFFSETS = 11   # instants in a control period at which the error lemma steps a load
 BENDS = 11            # instants in a control period at which it bounds the steps' curvature
 Q_FLOORS = (1e-12, 1e-6, 1e-5, 1e-4)   # shaped_terminal's floors on Q's eigenvalues, in turn
+TERMINALS = ("auto", "lyapunov", "sdp")
+HELD_LEVELS = ("sharp", "widened", "strict")
+
+
+@dataclass(frozen=True)
+class CoupledOptions:
+    """Options of the coupled certificate (module docstring).
+
+    Parameters
+    ----------
+    load_bound : float
+        Total variation of the loads, summed over the areas, that a new vector
+        of commands leaves room for from its certification on (pu), >= 0.
+        Default 0.06 pu: a held vector's re-check absorbs ``load_bound -
+        recheck_bound`` = 0.05 pu since its certification, one 0.05 pu step in
+        any area.
+    recheck_bound : float
+        Total variation of the loads within one control period that the held
+        vector's re-check covers (pu), in [0, ``load_bound``]; the guarantee's
+        assumption.  Default 0.01 pu.
+    horizon : float
+        Look-ahead before the terminal ellipsoid (s), in [0.2, 20].  Default 8 s.
+        On the estimate, a horizon that builds may still leave new vectors almost
+        no radius (``data[RHO_NEW]``), which holds legitimate AGC after a load
+        step: Kundur as fitted to ANDES needs 16 s, not the 12 that build
+        (:meth:`lfc.filters.coupled.CoupledFilter.held_after_step` measures it;
+        ``docs/coupled-certificate.md``, "With estimates", Cost).  :class:`~lfc.filters.coupled.CoupledFilter` also
+        takes ``"auto"``: the shortest of :data:`lfc.filters.coupled.AUTO_HORIZONS`
+        whose certificate builds and holds a legitimate step at most
+        :data:`lfc.filters.coupled.AUTO_HELD_MAX` (1 s).
+    tightening : float
+        How far (fraction of each limit) an output may move between two
+        certificate samples, in [1e-4, 0.1]; sets their spacing.  Default 0.005.
+    margin : float
+        Extra fractional tightening of every limit, in [0, 1).  Default 0.
+    u_min, u_max : float
+        Limits on every area's command (pu), ``u_min <= 0 <= u_max``.
+        :class:`~lfc.filters.coupled.CoupledFilter`'s default:
+        ``∓params.command_range`` (the range its design model holds in, :class:`lfc.multiarea.MultiAreaParams`; ∓∞
+        but for a model fitted to ANDES).
+    control_period : float
+        Period of the calls (s), in (0, 1].  Default 0.01 s.
+    noise_std : (float, float) or None
+        The measurement noise (std of every area's ``dw_meas``, pu, and
+        ``rocof_meas``, pu/s) of the grid Kalman estimate the filters are given
+        (:class:`GridKalman`); None (default): the exact state and loads.  Each
+        entry 0 or in :data:`lfc.estimation.STD`.
+    confidence : float
+        Probability, in (0, 1), that the estimate's error lies in the ellipsoid
+        the certificate covers (chi-square of the error covariance's dimension).
+        Default 0.9999.  Only with ``noise_std``.
+    held_level : {"sharp", "widened", "strict"}
+        The held re-check's level on the estimate (``docs/coupled-certificate.md``,
+        "With estimates").  ``"sharp"`` (default): the exact state's, tightened by
+        the noise's part of the error; it flags ``outside`` early when the loads
+        move beyond the bounds, and sometimes with nothing wrong (just after a
+        load step the estimator has not yet seen).  ``"widened"``: widened by what
+        the error may move the re-check; proven never to flag ``outside`` while the
+        loads' total variation is at most ``load_bound - recheck_bound`` and the
+        noise's part lies in its ellipsoid (theorem C'), but blind to moderate
+        excesses (a 0.1 pu step that trips, unflagged).  ``"strict"``: the sharp
+        level, and on the rows of the coming control period (new and held) less
+        what the loads may have moved the error if every period's load variation
+        has been at most ``recheck_bound``; proven (theorem B') that a vector
+        applied there keeps every output within its limit over the coming period
+        while every period's variation is at most ``recheck_bound`` and the
+        noise's part lies in its ellipsoid.  Only with ``noise_std``.
+    terminal : {"auto", "lyapunov", "sdp"}
+        The terminal ellipsoid: ``"lyapunov"`` solves ``A'P + PA = -W`` (W from
+        the relay limits); ``"sdp"`` shapes it (:func:`shaped_terminal`) so that a
+        load moves the state at the horizon as little as possible in its norm;
+        ``"auto"`` (default) takes the Lyapunov one and the shaped one where the
+        Lyapunov one leaves no room (a lightly damped area, chains of areas).
+    """
+
+    load_bound: float = 0.06
+    recheck_bound: float = 0.01
+    horizon: float = 8.0
+    tightening: float = 0.005
+    margin: float = 0.0
+    u_min: float = -math.inf
+    u_max: float = math.inf
+    control_period: float = 0.01
+    noise_std: tuple[float, float] | None = None
+    confidence: float = 0.9999
+    held_level: str = "sharp"
+    terminal: str = "auto"
+
+    def __post_init__(self) -> None:
+        if self.terminal not in TERMINALS:
+            raise ValueError(f"terminal must be one of {TERMINALS}, got {self.terminal!r}")
+        check_nonnegative("load_bound", self.load_bound)
+        check_nonnegative("recheck_bound", self.recheck_bound)
+        if self.recheck_bound > self.load_bound:
+            raise ValueError(f"recheck_bound={self.recheck_bound!r} must be <= load_bound="
+                             f"{self.load_bound!r}: a new vector's first period is covered "
+                             f"by load_bound")
+        check_range("horizon", self.horizon, 0.2, 20.0, closed=True)
+        check_range("tightening", self.tightening, 1e-4, 0.1, closed=True)
+        check_number("margin", self.margin)
+        if not 0.0 <= self.margin < 1.0:
+            raise ValueError(f"margin must be in [0, 1), got {self.margin!r}")
+        check_limits(self.u_min, self.u_max)
+        if not self.u_min <= 0.0 <= self.u_max:
+            raise ValueError(f"u_min <= 0 <= u_max is required (the filters start by holding "
+                             f"the equilibrium commands 0), got u_min={self.u_min!r}, "
+                             f"u_max={self.u_max!r}")
+        check_positive("control_period", self.control_period)
+        if self.control_period > 1.0:
+            raise ValueError(f"control_period must lie in (0, 1] s, got "
+                             f"{self.control_period!r}")
+        if self.noise_std is not None:
+            object.__setattr__(self, "noise_std", check_noise_std("noise_std", self.noise_std))
+        check_range("confidence", self.confidence, 0.0, 1.0)
+        if self.held_level not in HELD_LEVELS:
+            raise ValueError(f"held_level must be one of {HELD_LEVELS}, got "
+                             f"{self.held_level!r}")
+        if self.noise_std is None and self.held_level != "sharp":
+            raise ValueError(f"held_level={self.held_level!r} has no effect without noise_std "
+                             f"(the exact state): leave it at its default")
+        if self.noise_std is None and self.confidence != 0.9999:
+            raise ValueError(f"confidence={self.confidence!r} has no effect without noise_std "
+                             f"(the exact state): leave it at its default")
 
 
 def reduced_model(params: MultiAreaParams) -> tuple[np.ndarray, ...]:
