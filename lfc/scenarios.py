@@ -17,7 +17,7 @@ import numpy as np
 from lfc._validate import ParameterTypeError, check_flag, check_seed
 from lfc.engine import (CHANNELS, LOAD, METRICS, N_CHANNELS, N_CTRL, N_KF, Estimators,
                         FilterTables, Outputs, Plants, RelayTables, Rows, SignalSamples, Timing,
-                        Work, check_area_keys, check_attacks, check_coupled, check_load_measured,
+                        Work, check_area_keys, check_coupled, check_load_measured,
                         check_noise, make_estimator, make_noise, run_kernel, scenario_signals)
 from lfc.filters import SafetyFilter
 from lfc.filters.coupled import CoupledFilter
@@ -117,7 +117,7 @@ class Scenarios:
                                      f"{type(scenario).__name__}")
         else:
             fields = vars(scenario)
-        check_attacks(fields.get("attacks"), n)
+        check_area_keys(fields.get("attacks"), n, "attacks")   # the rest: Scenario's own
         check_area_keys(fields.get("loads"), n, "loads")
         check_area_keys(fields.get("filters"), n, "filters")
         scenario = Scenario(**keywords) if scenario is None else scenario
