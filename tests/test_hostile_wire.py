@@ -220,3 +220,27 @@ def test_the_dnp3_master_starts_up_as_a_master_does():
         centre.close()
         loop.run(station.stop())
         loop.close()
+
+
+def test_the_setpoint_range_holds_at_its_corners(modbus, dnp3):
+    """±1e6 pu (``MAX_ABS_INPUT``) is applied, the next float beyond it refused; a
+    sequence number 0 and 65535 is applied, -1 and 65536 refused — on both protocols
+    (Modbus's sequence register is 16 bits: it cannot carry the others)."""
+    from lfc.filters.base import MAX_ABS_INPUT
+    station, client = modbus
+    edge, beyond = MAX_ABS_INPUT, math.nextafter(MAX_ABS_INPUT, math.inf)
+    for sign in (1.0, -1.0):
+        values = {**COMMAND, "wref": sign * edge}
+        assert not client.write_registers(0, command_registers(values, 65535),
+                                          device_id=1).isError()
+        assert station.take() == (values, 65535)
+        reply = client.write_registers(0, encode([0.0, sign * beyond, 0.0]) + [0],
+                                       device_id=1)
+        assert reply.isError() and reply.exception_code == 3 and station.take() is None
+    for point, value, status in ((1, edge, 0), (1, -edge, 0), (1, beyond, 12),
+                                 (1, -beyond, 12), (3, 0.0, 0), (3, 65535.0, 0),
+                                 (3, -1.0, 12), (3, 65536.0, 12)):
+        points = list(WHOLE)
+        points[point] = (point, value)
+        assert operate(dnp3, points)[point] == status, (point, value)
+        assert (dnp3.take() is None) == (status != 0)
