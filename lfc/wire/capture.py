@@ -73,6 +73,39 @@ def write_pcap(frames: list[tuple[float, str, bytes, int]], path: str | Path,
     return path
 
 
+def read_frames(path: str | Path) -> list[tuple[float, str, bytes, int]]:
+    """The frames of a capture :func:`write_pcap` wrote, as a run holds them
+    (time s, leg, bytes, area: :attr:`lfc.wire.run.WireResult.frames`; the time is
+    the capture's), for the detector (:func:`lfc.wire.detect.detect`).  A packet
+    between other addresses, or without a payload, is not one of the run's legs and
+    is left out."""
+    from scapy.layers.inet import IP, TCP
+    from scapy.utils import rdpcap
+
+    def area_of(address: str) -> int | None:
+        head, _, last = address.rpartition(".")
+        return int(last) - 3 if head == "10.0.0" and last.isdigit() and int(last) >= 3 \
+            else None
+
+    out = []
+    for pkt in rdpcap(str(path)):
+        if IP not in pkt or TCP not in pkt or not bytes(pkt[TCP].payload):
+            continue
+        src, dst = pkt[IP].src, pkt[IP].dst
+        if src == CENTRE and dst == RELAY:
+            leg, area = "centre>relay", (pkt[TCP].sport - 40001) // 2
+        elif src == RELAY and dst == CENTRE:
+            leg, area = "relay>centre", (pkt[TCP].dport - 40001) // 2
+        elif src == RELAY and area_of(dst) is not None:
+            leg, area = "relay>generator", area_of(dst)
+        elif dst == RELAY and area_of(src) is not None:
+            leg, area = "generator>relay", area_of(src)
+        else:
+            continue
+        out.append((float(pkt.time), leg, bytes(pkt[TCP].payload), area))
+    return out
+
+
 def read_commands(path: str | Path, protocol: str = "modbus",
                   area: int = 0) -> list[tuple[dict, int]]:
     """Every command ``area``'s generator received, ``(values, seq)``, read back

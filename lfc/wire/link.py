@@ -73,7 +73,7 @@ class Link:
             return None if out is None else (out, seq)
 
         def on_report(report):
-            j = self.clocks[a]
+            j = max(self.clocks[a], 0)   # before the first command (DNP3's startup poll): 0
             return {**report, **self.policies[a].report(j, self.times[min(j, len(self.times) - 1)],
                                                         self.period, report)}
         return on_command, on_report
