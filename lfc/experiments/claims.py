@@ -9,6 +9,9 @@ names are the figures': Fig. 4 ``a`` (no SCC), ``b`` and ``c`` (SCC at two
 
 from __future__ import annotations
 
+import pandas as pd
+
+from lfc.experiments.scenarios import ATTACK_START
 from lfc.relays import RelaySettings
 from lfc.simulate import SimResult
 
@@ -205,4 +208,31 @@ def wire_claims(wire: dict, sim: dict, estimate: dict, truth: dict) -> dict[str,
             estimate["family"] == "sinusoid"
             and abs(estimate["amplitude"] - truth["amplitude"]) <= 0.01 * truth["amplitude"]
             and abs(estimate["freq_hz"] - truth["freq_hz"]) < 1e-9,
+    })
+
+
+def detection_claims(detection: pd.DataFrame) -> dict[str, bool]:
+    """The wire chapter's detector section: ``detection`` is
+    :func:`lfc.experiments.detection.detection_table` in lockstep over every named
+    attack and both protocols."""
+    by = detection.set_index(["protocol", "attack"])
+    clean = by.xs("none", level="attack")
+    attacked = detection[detection.attack != "none"]
+    command = attacked[attacked.attack.isin(["fig4", "fig4-weak", "fig5", "drop"])]
+    hidden = attacked[attacked.attack.isin(["fig5-told", "delay-2"])]
+    return _bools({
+        "clean lockstep runs (a legitimate load step) raise no alert at either tap nor "
+        "any SCC alarm": (clean["substation alerts"] == 0).all()
+            and clean["end-to-end (s)"].isna().all() and clean["SCC alarm (s)"].isna().all(),
+        "the substation tap sees every attack on the command it receives (fig4 and its weak "
+        "version, fig5's reference, drop), from the attack's start":
+            command["substation (s)"].notna().all()
+            and (command["substation (s)"] >= ATTACK_START - 1e-9).all(),
+        "the substation tap sees fig4-weak, on which the filter never alarms":
+            (by.xs("fig4-weak", level="attack")["detected by"] == "traffic only").all(),
+        "the filter alarms on the falsified frequency report (fig5-told), which the "
+        "substation tap does not see; a delay is seen only end to end":
+            (by.xs("fig5-told", level="attack")["detected by"] == "SCC only").all()
+            and hidden["substation (s)"].isna().all()
+            and hidden["end-to-end (s)"].notna().all(),
     })

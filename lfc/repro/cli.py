@@ -163,6 +163,24 @@ def _parser() -> argparse.ArgumentParser:
                     help="the plant at the wall clock (default: lockstep, one control period "
                          "per exchanged command)")
     wr.add_argument("--pcap", type=Path, help="write the last run's traffic here")
+    dt = sub.add_parser(
+        "detect", help="the network detector (lfc.wire.detect) over a capture written by "
+        "lfc wire --pcap: its alerts per area, tap and rule",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="example: the drop attack, captured, then read by the detector\n"
+               "  python -m lfc wire --attack drop --agc centre --filter none "
+               "--pcap build/drop.pcap\n"
+               "  python -m lfc detect build/drop.pcap --csv build/drop-alerts.csv\n"
+               "thresholds: the default area's (lfc.LFCParams, lfc.RelaySettings): wref within "
+               "the relays'\nband, pc moving at most k_i x 0.058 pu/s (Rules.for_area).")
+    dt.add_argument("capture", type=Path, help="a pcap written by lfc wire --pcap")
+    dt.add_argument("--protocol", choices=("modbus", "dnp3"), default="modbus")
+    dt.add_argument("--taps", nargs="+", choices=("substation", "centre"),
+                    default=["substation", "centre"],
+                    help="the taps the detector has (end-to-end needs both; default both)")
+    dt.add_argument("--period", type=float, default=0.01,
+                    help="the control period the capture was made at (s; default 0.01)")
+    dt.add_argument("--csv", type=Path, help="write every alert here")
     ft = sub.add_parser("fit", help="fit the committed design models to ANDES again on this "
                         "machine and compare them with lfc/testbed/fitted/ (about 5 min)")
     ft.add_argument("--write", action="store_true",
@@ -241,6 +259,27 @@ def _wire(args) -> int:
         args.pcap.parent.mkdir(parents=True, exist_ok=True)
         write_pcap(run.frames, args.pcap, args.protocol)
         print(f"capture of the last run ({len(run.frames)} frames): {args.pcap}")
+    return 0
+
+
+def _detect(args) -> int:
+    from lfc.model import LFCParams
+    from lfc.wire.capture import read_frames
+    from lfc.wire.detect import Rules, detect
+    if not args.capture.is_file():
+        raise ValueError(f"capture: no such file {args.capture}")
+    rules = Rules.for_area(args.period, LFCParams().k_i)
+    frames = read_frames(args.capture)
+    alerts = detect(frames, args.protocol, rules, taps=tuple(args.taps))
+    print(f"{len(frames)} frames of the run's legs in {args.capture}; {len(alerts)} alerts")
+    if not alerts.empty:
+        summary = alerts.groupby(["area", "tap", "rule"]).agg(
+            alerts=("t", "size"), first_s=("t", "min"), first=("detail", "first"))
+        print(summary.to_string())
+    if args.csv:
+        args.csv.parent.mkdir(parents=True, exist_ok=True)
+        alerts.to_csv(args.csv, index=False)
+        print(f"every alert: {args.csv}")
     return 0
 
 
@@ -364,6 +403,8 @@ def main(argv: list[str] | None = None) -> int:
             return _fit(args.write)
         if args.command == "wire":
             return _wire(args)
+        if args.command == "detect":
+            return _detect(args)
         if args.command == "plot-sweep":
             return _plot_sweep(args)
         if args.command == "book":
