@@ -175,6 +175,51 @@ def test_dnp3_keeps_serving_its_master_while_an_outsider_connects():
         loop.close()
 
 
+def test_dnp3_drops_a_request_whose_direction_bit_is_an_outstations():
+    """A DIRECT_OPERATE in a link frame marked as coming from an outstation (DIR = 0)
+    was applied (dnp3py's runner drops the link header before the outstation sees
+    it); it is now logged and dropped, and the same request with DIR = 1 is applied."""
+    import socket
+
+    pytest.importorskip("dnp3")
+    from dnp3.application.builder import build_direct_operate_request
+    from dnp3.application.fragment import ObjectBlock
+    from dnp3.application.qualifiers import ObjectHeader
+    from dnp3.datalink.builder import build_unconfirmed_user_data
+
+    from lfc.wire import dnp3 as dn
+    data = bytes([len(WHOLE)]) + b"".join(bytes([i]) + struct.pack("<d", v) + b"\x00"
+                                          for i, v in WHOLE)
+
+    def frame(seq: int, from_master: bool) -> bytes:
+        request = build_direct_operate_request(
+            objects=(ObjectBlock(header=ObjectHeader(group=41, variation=4, qualifier=0x17),
+                                 data=data),), seq=seq)
+        return build_unconfirmed_user_data(
+            destination=dn.OUTSTATION, source=dn.MASTER, dir_from_master=from_master,
+            user_data=bytes([0xC0 | seq]) + request.to_bytes()).to_bytes()
+
+    loop = dn.EventLoop()
+    station = dn.Outstation()
+    port = loop.run(station.start())
+    try:
+        with socket.create_connection(("127.0.0.1", port), timeout=2.0) as sock:
+            sock.sendall(frame(1, from_master=False))
+            sock.settimeout(0.3)
+            with pytest.raises(TimeoutError):
+                sock.recv(4096)                   # no answer
+            assert station.take() is None
+            assert station.rejected[-1][1:] == ("a frame from address 2",
+                                                "direction bit 0 (an outstation's) on a request")
+            sock.settimeout(2.0)
+            sock.sendall(frame(2, from_master=True))
+            assert sock.recv(4096)[:2] == b"\x05\x64"
+            assert station.take() == (COMMAND, 7)
+    finally:
+        loop.run(station.stop())
+        loop.close()
+
+
 @pytest.mark.parametrize("protocol", ["dnp3", "modbus"])
 def test_a_forged_answer_looks_like_the_sessions_own(protocol):
     """The ``drop`` attack answers the commands it swallows itself.  Its DNP3 answers

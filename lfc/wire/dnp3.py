@@ -40,7 +40,8 @@ frame gets new CRCs; a dropped command is answered with a forged RESPONSE
 echoing it with status SUCCESS, carrying the session's internal indications and
 next transport sequence number (the outstation's later frames renumbered after it).
 
-The outstation answers only the control centre's link address, applies a command
+The outstation answers only the control centre's link address and frames whose
+direction bit says they come from a master, applies a command
 whole or not at all and refuses a setpoint out of range with the protocol's status
 codes (:class:`Outstation`); it serves each TCP connection on its own.
 """
@@ -304,7 +305,7 @@ class Outstation:
         for i in range(len(REPORT_POINTS)):
             self.database.add_analog_input(i, AnalogInputConfig(event_class=EventClass.NONE))
         station = self._station(self.database, self._handler())
-        self.runner = _runner()(outstation=station, host="127.0.0.1", port=0)
+        self.runner = _runner(self)(outstation=station, host="127.0.0.1", port=0)
         self.task = asyncio.create_task(self.runner.run())
         for _ in range(500):
             if self.runner.local_address is not None:
@@ -332,17 +333,63 @@ class Outstation:
         asyncio.run_coroutine_threadsafe(update(), self.loop).result(5.0)
 
 
-def _runner():
+class _Checked:
+    """A connection's channel as the outstation reads it: each link frame's direction
+    bit is checked before dnp3py's parser (which drops the link header) sees it.  A
+    frame marked as coming from an outstation (DIR = 0) is logged in ``owner``'s
+    ``rejected`` and dropped; bytes that are not DNP3 link frames pass to dnp3py's
+    parser, which resynchronizes on the next start bytes."""
+
+    def __init__(self, channel, owner: Outstation) -> None:
+        self.channel, self.owner, self.buffer = channel, owner, bytearray()
+
+    async def read(self, n: int) -> bytes:
+        while True:
+            data = await self.channel.read(n)
+            if not data:
+                return data
+            self.buffer.extend(data)
+            try:
+                frames = Codec.cut(self.buffer)
+            except ValueError:             # not a link frame: dnp3py's parser skips it
+                out = bytes(self.buffer)
+                self.buffer.clear()
+                return out
+            kept = [f for f in frames if self._from_a_master(f)]
+            if kept:
+                return b"".join(kept)
+
+    def _from_a_master(self, frame: bytes) -> bool:
+        if frame[3] & 0x80:
+            return True
+        source = struct.unpack("<H", frame[6:8])[0]
+        with self.owner.lock:
+            self.owner.rejected.append((time.perf_counter(), f"a frame from address {source}",
+                                        "direction bit 0 (an outstation's) on a request"))
+        return False
+
+    async def write_all(self, data: bytes) -> None:
+        await self.channel.write_all(data)
+
+    async def close(self) -> None:
+        await self.channel.close()
+
+
+def _runner(owner: Outstation):
     """dnp3py's TCP runner serving every connection on its own: its own closes the
     connection it holds when another arrives (DNP3 over TCP is point to point), so
     anyone who connects to the port hangs up the control centre.  Each connection
     has its own link and transport state and its own peer id (the outstation tells
-    its masters apart by them)."""
+    its masters apart by them), and its frames' direction bits are checked
+    (:class:`_Checked`, logged in ``owner``)."""
     from dnp3.outstation import OutstationTcpRunner
     from dnp3.transport_io.channel import ChannelClosedError
     from dnp3.transport_io.tcp_server import serve
 
     class EveryConnection(OutstationTcpRunner):
+        async def _handle_connection(self, channel) -> None:
+            await super()._handle_connection(_Checked(channel, owner))
+
         async def run(self) -> None:
             self._shutdown.clear()
             self._server = await serve(self.host, self.port)
