@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 
 import lfc
 from lfc.wire import run_wire
-from lfc.wire.detect import COLUMNS, RULES, Rules, detect
+from lfc.wire.detect import COLUMNS, LEGS, RULES, Rules, detect
 from lfc.wire.registers import command_registers
 
 pytest.importorskip("pymodbus")
@@ -97,7 +97,7 @@ def test_the_capture_gives_the_detector_the_same_frames_on_a_grid(tmp_path):
     from lfc.wire.capture import read_frames, write_pcap
     grid = lfc.MultiAreaParams.two_area()
     run = run_wire(grid, duration=1.5, attack={1: "drop"}, protocol="dnp3")
-    frames = read_frames(write_pcap(run.frames, tmp_path / "grid.pcap", protocol="dnp3"))
+    frames = read_frames(write_pcap(run.frames, tmp_path / "grid.pcap", protocol="dnp3"), "dnp3")
     assert [f[1:] for f in frames] == [f[1:] for f in run.frames]
     alerts = detect(frames, "dnp3", RULES_10MS)
     assert alerts.equals(detect(run.frames, "dnp3", RULES_10MS))
@@ -274,3 +274,88 @@ def test_an_attacker_under_the_rate_limit_evades_the_substation_tap():
     assert alerts[alerts.tap == "substation"].empty
     assert (alerts.rule == "end-to-end").any()
     assert run.exchanges.received.max() == pytest.approx(0.2, abs=0.002)
+
+
+def _can_sniff() -> bool:
+    import socket
+    try:
+        socket.socket(socket.AF_PACKET, socket.SOCK_RAW).close()
+        return True
+    except (PermissionError, AttributeError, OSError):
+        return False
+
+
+needs_sniff = pytest.mark.skipif(not _can_sniff(), reason="a raw packet socket needs root "
+                                 "or CAP_NET_RAW (Linux)")
+
+
+@needs_sniff
+@pytest.mark.parametrize("protocol", ["modbus", "dnp3"])
+def test_a_capture_of_the_loopback_interface_holds_the_runs_own_frames(protocol, tmp_path):
+    """``run_wire(capture=...)`` records the sockets' traffic from ``lo``: every party
+    at its own address, each TCP connection opened by a handshake and closed by FINs,
+    nothing dropped, and the frames read back from the segments equal the relay's log
+    leg by leg, in order (across legs the kernel's order and the relay's may differ
+    by a frame in flight), so the detector raises the same alerts from either."""
+    from scapy.layers.inet import IP, TCP
+    from scapy.utils import rdpcap
+
+    from lfc.wire.capture import read_frames
+    path = tmp_path / "run.pcap"
+    run = wire("drop", protocol, duration=1.5, capture=path)
+    frames = read_frames(path, protocol)
+
+    def legs(frames: list) -> dict:
+        return {leg: [f[2] for f in frames if f[1] == leg] for leg in sorted(LEGS)}
+
+    def alerts(frames: list) -> list:
+        table = detect(frames, protocol, RULES_10MS)
+        return sorted(zip(table.area, table.tap, table.rule, table.detail))
+
+    assert legs(frames) == legs(run.frames) and len(frames) == len(run.frames)
+    assert alerts(frames) == alerts(run.frames)
+    packets = rdpcap(str(path))
+    syn = [p for p in packets if p[TCP].flags == "S"]
+    fin = [p for p in packets if "F" in str(p[TCP].flags)]
+    assert {(p[IP].src, p[IP].dst) for p in syn} == {("127.0.0.1", "127.0.1.1"),
+                                                     ("127.0.1.1", "127.0.2.1")}
+    assert len(fin) >= 2 and packets[0][TCP].flags == "S"
+    assert sorted(p[TCP].dport for p in syn) == sorted(run.settings["ports"][0])
+    assert len({p[IP].id for p in packets}) > len(packets) // 2      # the kernel's IP ids
+
+
+@needs_sniff
+@pytest.mark.skipif(__import__("shutil").which("tshark") is None,
+                    reason="tshark (Debian's tshark package) is not installed")
+@pytest.mark.parametrize("protocol, dissector", [("modbus", "mbtcp"), ("dnp3", "dnp3")])
+def test_tshark_decodes_the_capture_with_no_malformed_frame(protocol, dissector, tmp_path):
+    """Wireshark's own dissectors (tshark, told the run's ports) decode every frame the
+    relay logged, and find nothing malformed and no expert error."""
+    import subprocess
+
+    path = tmp_path / "run.pcap"
+    run = wire("fig4", protocol, duration=1.0, capture=path)
+    decode = ["-o", f"{dissector}.tcp.port:" + ",".join(map(str, run.settings["ports"][0]))]
+
+    def lines(display_filter: str) -> list[str]:
+        out = subprocess.run(["tshark", "-r", str(path), *decode, "-Y", display_filter],
+                             capture_output=True, text=True, check=True).stdout
+        return out.splitlines()
+
+    decoded = lines(dissector)
+    assert len(decoded) == len(run.frames)
+    assert not any("Unable to classify" in line for line in decoded)   # query or response
+    assert lines("_ws.malformed || _ws.expert.severity >= error") == []
+
+
+def test_a_capture_without_the_right_to_sniff_says_what_to_do_instead(monkeypatch, tmp_path):
+    import socket as socket_module
+
+    def refused(*args, **kwargs):
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(socket_module, "socket", refused)
+    with pytest.raises(PermissionError, match="write_pcap"):
+        wire("none", "modbus", duration=0.1, capture=tmp_path / "x.pcap")
+    with pytest.raises(ValueError, match="capture"):
+        wire("none", "modbus", duration=0.1, capture=7)

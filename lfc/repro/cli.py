@@ -162,7 +162,12 @@ def _parser() -> argparse.ArgumentParser:
     wr.add_argument("--realtime", action="store_true",
                     help="the plant at the wall clock (default: lockstep, one control period "
                          "per exchanged command)")
-    wr.add_argument("--pcap", type=Path, help="write the last run's traffic here")
+    wr.add_argument("--pcap", type=Path,
+                    help="write the last run's traffic here, made from the relay's log")
+    wr.add_argument("--capture", type=Path,
+                    help="capture the last run's traffic from the loopback interface here "
+                         "(root or CAP_NET_RAW): handshakes, ports, IP ids and times are the "
+                         "kernel's")
     dt = sub.add_parser(
         "detect", help="the network detector (lfc.wire.detect) over a capture written by "
         "lfc wire --pcap: its alerts per area, tap and rule",
@@ -248,17 +253,25 @@ def _wire(args) -> int:
     filters = {"none": None, "paper": lambda: SafetyFilter(params, relays, alpha=20.0),
                "certified": lambda: SafetyFilter(params, relays, method="certified")}
     rows, run = [], None
-    for name in args.filter:
+    for k, name in enumerate(args.filter):
         scc = filters[name]() if filters[name] else None
+        last = k == len(args.filter) - 1
         run = run_wire(params, duration=args.duration, attack=attack, scc=scc,
                        protocol=args.protocol, agc=args.agc,
-                       mode="realtime" if args.realtime else "lockstep")
+                       mode="realtime" if args.realtime else "lockstep",
+                       capture=args.capture if last else None)
         rows.append(run.table())
     print(pd.concat(rows, ignore_index=True).to_string(index=False))
     if args.pcap:
         args.pcap.parent.mkdir(parents=True, exist_ok=True)
         write_pcap(run.frames, args.pcap, args.protocol)
         print(f"capture of the last run ({len(run.frames)} frames): {args.pcap}")
+    if args.capture:
+        dissector = "mbtcp" if args.protocol == "modbus" else "dnp3"
+        ports = ",".join(str(p) for pair in run.settings["ports"] for p in pair)
+        ports = f"-o {dissector}.tcp.port:{ports}"
+        print(f"the last run captured from the loopback interface: {args.capture}\n"
+              f"decode it with: tshark -r {args.capture} {ports}")
     return 0
 
 
@@ -269,7 +282,7 @@ def _detect(args) -> int:
     if not args.capture.is_file():
         raise ValueError(f"capture: no such file {args.capture}")
     rules = Rules.for_area(args.period, LFCParams().k_i)
-    frames = read_frames(args.capture)
+    frames = read_frames(args.capture, args.protocol)
     alerts = detect(frames, args.protocol, rules, taps=tuple(args.taps))
     print(f"{len(frames)} frames of the run's legs in {args.capture}; {len(alerts)} alerts")
     if not alerts.empty:

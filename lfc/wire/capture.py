@@ -25,6 +25,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from lfc.wire.relay import CENTRE as LOOPBACK_CENTRE
+
 CENTRE, RELAY = "10.0.0.1", "10.0.0.2"
 BACK = {"centre>relay": "relay>centre", "relay>centre": "centre>relay",
         "relay>generator": "generator>relay", "generator>relay": "relay>generator"}
@@ -73,37 +75,62 @@ def write_pcap(frames: list[tuple[float, str, bytes, int]], path: str | Path,
     return path
 
 
-def read_frames(path: str | Path) -> list[tuple[float, str, bytes, int]]:
-    """The frames of a capture :func:`write_pcap` wrote, as a run holds them
-    (time s, leg, bytes, area: :attr:`lfc.wire.run.WireResult.frames`; the time is
-    the capture's), for the detector (:func:`lfc.wire.detect.detect`).  A packet
-    between other addresses, or without a payload, is not one of the run's legs and
-    is left out."""
+def read_frames(path: str | Path, protocol: str = "modbus") -> list[tuple[float, str, bytes, int]]:
+    """The frames of a capture of a run over ``protocol`` — one :func:`write_pcap`
+    wrote from the relay's log, or one taken from the loopback interface
+    (``run_wire(capture=...)``) — as a run holds them (time s, leg, bytes, area:
+    :attr:`lfc.wire.run.WireResult.frames`; the time is the capture's, of the packet
+    that completed the frame), for the detector (:func:`lfc.wire.detect.detect`).
+    Each TCP stream's payload is joined in capture order and cut into the protocol's
+    frames, so a frame split over segments, or segments holding several, read the
+    same.  A packet between addresses of neither plan is left out."""
     from scapy.layers.inet import IP, TCP
     from scapy.utils import rdpcap
 
-    def area_of(address: str) -> int | None:
-        head, _, last = address.rpartition(".")
-        return int(last) - 3 if head == "10.0.0" and last.isdigit() and int(last) >= 3 \
-            else None
-
+    codec = _protocol(protocol).Codec
+    streams: dict[tuple, bytearray] = {}
     out = []
     for pkt in rdpcap(str(path)):
-        if IP not in pkt or TCP not in pkt or not bytes(pkt[TCP].payload):
+        if IP not in pkt or TCP not in pkt:
             continue
-        src, dst = pkt[IP].src, pkt[IP].dst
-        if src == CENTRE and dst == RELAY:
-            leg, area = "centre>relay", (pkt[TCP].sport - 40001) // 2
-        elif src == RELAY and dst == CENTRE:
-            leg, area = "relay>centre", (pkt[TCP].dport - 40001) // 2
-        elif src == RELAY and area_of(dst) is not None:
-            leg, area = "relay>generator", area_of(dst)
-        elif dst == RELAY and area_of(src) is not None:
-            leg, area = "generator>relay", area_of(src)
-        else:
+        payload = bytes(pkt[TCP].payload)
+        where = _leg(pkt[IP].src, pkt[IP].dst, pkt[TCP].sport, pkt[TCP].dport)
+        if not payload or where is None:
             continue
-        out.append((float(pkt.time), leg, bytes(pkt[TCP].payload), area))
+        key = (pkt[IP].src, pkt[TCP].sport, pkt[IP].dst, pkt[TCP].dport)
+        buffer = streams.setdefault(key, bytearray())
+        buffer.extend(payload)
+        out += [(float(pkt.time), *where[:1], frame, where[1]) for frame in codec.cut(buffer)]
     return out
+
+
+def _leg(src: str, dst: str, sport: int, dport: int) -> tuple[str, int] | None:
+    """The leg and area of a packet from ``src:sport`` to ``dst:dport``: the synthesized
+    capture's addresses (module docstring) or the loopback plan's
+    (:mod:`lfc.wire.relay`: centre 127.0.0.1, relays 127.0.1.x, generators 127.0.2.x)."""
+    def last(address: str, prefix: str, first: int) -> int | None:
+        head, _, tail = address.rpartition(".")
+        return int(tail) - first if head == prefix and tail.isdigit() \
+            and int(tail) >= first else None
+
+    if src == CENTRE and dst == RELAY:                     # synthesized
+        return "centre>relay", (sport - 40001) // 2
+    if src == RELAY and dst == CENTRE:
+        return "relay>centre", (dport - 40001) // 2
+    if src == RELAY and last(dst, "10.0.0", 3) is not None:
+        return "relay>generator", last(dst, "10.0.0", 3)
+    if dst == RELAY and last(src, "10.0.0", 3) is not None:
+        return "generator>relay", last(src, "10.0.0", 3)
+    relay_of = {"src": last(src, "127.0.1", 1), "dst": last(dst, "127.0.1", 1)}
+    if src == LOOPBACK_CENTRE and relay_of["dst"] is not None:          # the loopback plan
+        return "centre>relay", relay_of["dst"]
+    if dst == LOOPBACK_CENTRE and relay_of["src"] is not None:
+        return "relay>centre", relay_of["src"]
+    if relay_of["src"] is not None and last(dst, "127.0.2", 1) == relay_of["src"]:
+        return "relay>generator", relay_of["src"]
+    if relay_of["dst"] is not None and last(src, "127.0.2", 1) == relay_of["dst"]:
+        return "generator>relay", relay_of["dst"]
+    return None
 
 
 def read_commands(path: str | Path, protocol: str = "modbus",

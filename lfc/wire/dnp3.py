@@ -296,8 +296,8 @@ class Outstation:
         return Bounded(database=database, handler=handler,
                        config=OutstationConfig(address=OUTSTATION, master_address=MASTER))
 
-    async def start(self) -> int:
-        """Listen on 127.0.0.1 (a port the kernel chooses); return the port."""
+    async def start(self, host: str = "127.0.0.1") -> int:
+        """Listen on ``host`` (a port the kernel chooses); return the port."""
         from dnp3.database import AnalogInputConfig, Database
         from dnp3.database.point import EventClass
         self.loop = asyncio.get_running_loop()
@@ -305,7 +305,7 @@ class Outstation:
         for i in range(len(REPORT_POINTS)):
             self.database.add_analog_input(i, AnalogInputConfig(event_class=EventClass.NONE))
         station = self._station(self.database, self._handler())
-        self.runner = _runner(self)(outstation=station, host="127.0.0.1", port=0)
+        self.runner = _runner(self)(outstation=station, host=host, port=0)
         self.task = asyncio.create_task(self.runner.run())
         for _ in range(500):
             if self.runner.local_address is not None:
@@ -415,7 +415,7 @@ def _runner(owner: Outstation):
 
 
 class Centre:
-    """The control centre's DNP3 master (address 2), connected to ``port`` through
+    """The control centre's DNP3 master (address 2), connected to ``host:port`` through
     ``loop`` (an :class:`~lfc.wire.relay.EventLoop`).
 
     On connecting it does what a master does (IEEE 1815 5.1): an integrity poll,
@@ -424,12 +424,13 @@ class Centre:
     of g80v1 index 7).  ``startup_iin`` holds the indications it found, ``iin`` the
     latest response's."""
 
-    def __init__(self, port: int, loop: EventLoop, timeout: float = 10.0) -> None:
+    def __init__(self, port: int, loop: EventLoop, timeout: float = 10.0,
+                 host: str = "127.0.0.1") -> None:
         from dnp3.master import DefaultSOEHandler, Master, MasterConfig, MasterTcpRunner
         self.loop, self.handler = loop, DefaultSOEHandler()
         self.master = Master(handler=self.handler,
                              config=MasterConfig(address=MASTER, outstation_address=OUTSTATION))
-        self.runner = MasterTcpRunner(master=self.master, host="127.0.0.1", port=port,
+        self.runner = MasterTcpRunner(master=self.master, host=host, port=port,
                                       response_timeout=timeout)
         loop.run(self.runner.open())
         self.iin = self.startup_iin = self._request(self.master.build_integrity_poll())

@@ -21,6 +21,7 @@ import pandas as pd
 
 from lfc.engine import CTRL_COLUMNS, agc_step
 from lfc.filters.base import ACTIVE, ALARM_BITS, binding_names
+from lfc.wire.relay import generator_address, relay_address
 
 U_COL, FLAG_COL = CTRL_COLUMNS.index("u_ref"), CTRL_COLUMNS.index("flags")
 
@@ -63,6 +64,7 @@ class Link:
         self.centre_rows: dict = {}
         self.log: list = []
         self.loop = self.stations = self.relays = self.centres = None
+        self.ports: list[tuple[int, int]] = []
 
     def _hooks(self, a: int):
         def on_command(values, seq):
@@ -79,17 +81,22 @@ class Link:
         return on_command, on_report
 
     def open(self) -> None:
-        """Start every outstation, relay and connection (127.0.0.1, kernel-chosen ports)."""
+        """Start every outstation, relay and connection (on loopback, each party at its
+        own address: :mod:`lfc.wire.relay`; kernel-chosen ports, kept in ``ports`` as
+        ``(relay's, outstation's)`` per area)."""
         tr = self.transport
         self.loop = tr.EventLoop()
         self.stations, self.relays, self.centres = [], [], []
         for a in range(self.n_areas):
             station = tr.Outstation()
-            port = self.loop.run(station.start())
-            relay = tr.Relay(port, tr.Codec, *self._hooks(a))
+            port = self.loop.run(station.start(generator_address(a)))
+            relay = tr.Relay(port, tr.Codec, *self._hooks(a), host=relay_address(a),
+                             upstream_host=generator_address(a))
             self.stations.append(station)
             self.relays.append(relay)
-            self.centres.append(tr.Centre(self.loop.run(relay.start()), self.loop))
+            self.ports.append((self.loop.run(relay.start()), port))
+            self.centres.append(tr.Centre(self.ports[-1][0], self.loop,
+                                          host=relay_address(a)))
 
     def close(self) -> None:
         """Hang up, stop the relays and outstations, stop the event loop."""

@@ -88,8 +88,8 @@ class Outstation:
             got, self.inbox = self.inbox, None
         return None if got is None else read_command(got[0])
 
-    async def start(self) -> int:
-        """Listen on 127.0.0.1 (a port the kernel chooses); return the port."""
+    async def start(self, host: str = "127.0.0.1") -> int:
+        """Listen on ``host`` (a port the kernel chooses); return the port."""
         from pymodbus.server import ModbusTcpServer
         from pymodbus.simulator import DataType, SimData, SimDevice
 
@@ -99,7 +99,7 @@ class Outstation:
         bits = [SimData(0, count=1, datatype=DataType.BITS)]
         device = SimDevice(id=1, simdata=(bits, bits, block(N_COMMAND), block(N_REPORT)),
                            action=self._action)
-        self.server = ModbusTcpServer(device, address=("127.0.0.1", 0))
+        self.server = ModbusTcpServer(device, address=(host, 0))
         await self.server.listen()
         return self.server.transport.sockets[0].getsockname()[1]
 
@@ -193,17 +193,18 @@ class Codec:
 
 
 class Centre:
-    """The control centre's Modbus client (a connection to ``port``; ``loop`` is
+    """The control centre's Modbus client (a connection to ``host:port``; ``loop`` is
     not used: the client is synchronous).  A command the outstation refuses (an
     exception response: what reached it was not what was sent) is kept in
     ``refused`` (its period's ``seq`` and the exception), and the run goes on: the
     generator holds its last command, as a real master's would."""
 
-    def __init__(self, port: int, loop: EventLoop | None = None, timeout: float = 10.0) -> None:
+    def __init__(self, port: int, loop: EventLoop | None = None, timeout: float = 10.0,
+                 host: str = "127.0.0.1") -> None:
         from pymodbus.client import ModbusTcpClient
-        self.client = ModbusTcpClient("127.0.0.1", port=port, timeout=timeout, retries=0)
+        self.client = ModbusTcpClient(host, port=port, timeout=timeout, retries=0)
         if not self.client.connect():
-            raise ConnectionError(f"the control centre could not connect to 127.0.0.1:{port}")
+            raise ConnectionError(f"the control centre could not connect to {host}:{port}")
         self.refused: list[tuple[int, str]] = []
 
     def send(self, values: dict[str, float], seq: int) -> None:

@@ -28,6 +28,22 @@ import time
 from typing import Callable
 
 
+#: where each party listens or connects from on loopback (all of 127.0.0.0/8 is this
+#: machine's): the control centre, then each area's relay and generator, so that a
+#: capture of the loopback interface tells the parties and areas apart by address
+CENTRE = "127.0.0.1"
+
+
+def relay_address(area: int) -> str:
+    """The address area ``area``'s relay listens on and connects upstream from."""
+    return f"127.0.1.{area + 1}"
+
+
+def generator_address(area: int) -> str:
+    """The address area ``area``'s outstation listens on."""
+    return f"127.0.2.{area + 1}"
+
+
 class EventLoop:
     """An asyncio event loop in a daemon thread, for the servers of one run."""
 
@@ -60,6 +76,9 @@ class Relay:
         (None: drop the frame and answer it).
     on_report : callable
         ``report -> report``: a report (dict of its fields) as returned.
+    host, upstream_host : str
+        The address the relay listens on and connects upstream from, and the
+        outstation's (default: 127.0.0.1 both).
 
     Attributes
     ----------
@@ -70,15 +89,16 @@ class Relay:
     """
 
     def __init__(self, upstream: int, codec, on_command: Callable,
-                 on_report: Callable) -> None:
+                 on_report: Callable, host: str = CENTRE, upstream_host: str = CENTRE) -> None:
         self.upstream, self.codec = upstream, codec
+        self.host, self.upstream_host = host, upstream_host
         self.on_command, self.on_report = on_command, on_report
         self.log: list[tuple[float, str, bytes]] = []
         self.server, self.tasks = None, set()
 
     async def start(self) -> int:
-        """Listen on 127.0.0.1 (a port the kernel chooses); return the port."""
-        self.server = await asyncio.start_server(self._serve, "127.0.0.1", 0)
+        """Listen on ``host`` (a port the kernel chooses); return the port."""
+        self.server = await asyncio.start_server(self._serve, self.host, 0)
         return self.server.sockets[0].getsockname()[1]
 
     async def stop(self) -> None:
@@ -93,7 +113,8 @@ class Relay:
 
     async def _serve(self, c_reader, c_writer) -> None:
         self.tasks.add(asyncio.current_task())
-        g_reader, g_writer = await asyncio.open_connection("127.0.0.1", self.upstream)
+        g_reader, g_writer = await asyncio.open_connection(self.upstream_host, self.upstream,
+                                                           local_addr=(self.host, 0))
         session: dict = {}
         try:
             await asyncio.gather(self._down(c_reader, c_writer, g_writer, session),

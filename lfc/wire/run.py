@@ -36,7 +36,9 @@ from __future__ import annotations
 
 import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -150,7 +152,7 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
              load=None, noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0,
              dt: float = 0.001, control_period: float = 0.01, relays=None,
              anti_windup: bool = False, agc: str = "generator", mode: str = "lockstep",
-             feedforward: bool | None = None) -> WireResult:
+             feedforward: bool | None = None, capture: str | Path | None = None) -> WireResult:
     """Run one area, or every area of a grid, over the wire (module docstring).
 
     Parameters
@@ -187,6 +189,11 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
         Give each filter its area's true net disturbance (load plus tie-line
         export), as :func:`lfc.simulate` does by default for a grid (True) and not
         for one area (False): the default follows it.
+    capture : str or Path, optional
+        Write the run's traffic as the loopback interface carried it to this pcap
+        (:class:`lfc.wire.sniff.LoopbackCapture`: root or ``CAP_NET_RAW``, else a
+        ``PermissionError``); the ports it needs to be decoded are in
+        ``settings["ports"]``.
 
     Returns
     -------
@@ -206,12 +213,14 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
         raise ValueError(f"agc must be one of {AGC}, got {agc!r}")
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+    if capture is not None and not isinstance(capture, str | Path):
+        raise ValueError(f"capture must be a path (str or Path) or None, got {capture!r}")
     check_seed("seed", seed)
     if testbed is not None:
         return _on_andes(params, testbed, duration=duration, attack=attack, scc=scc,
                          protocol=protocol, load=load, noise_std=noise_std, seed=seed,
                          control_period=control_period, relays=relays,
-                         anti_windup=anti_windup, agc=agc, mode=mode)
+                         anti_windup=anti_windup, agc=agc, mode=mode, capture=capture)
     single = isinstance(params, LFCParams)
     grid = as_grid(params)
     n_a = grid.n_areas
@@ -268,8 +277,7 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
         for a, gen in enumerate(gens):   # what each measured at the sample
             link.publish(j, a, gen, seen[a, :5], links[a], bits[a], lateness)
 
-    try:
-        link.open()
+    with _captured(link, capture):
         if mode == "lockstep":
             for j in range(n_ctrl):
                 link.send(j)
@@ -277,8 +285,6 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
                 link.read(j)
         else:
             _realtime(n_ctrl, period, link.send, generate, link.read, link.skip)
-    finally:
-        link.close()
     if not np.isfinite(plant.xs).all():
         raise ValueError("the plant became non-finite: an attack (a bias or a factor so large "
                          "that the plant overflows) or a load signal gives a non-finite value, "
@@ -291,14 +297,15 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
                 "filter": ",".join("none" if filters.get(a) is None else
                                    getattr(filters[a], "method", "?") for a in range(n_a)),
                 "scc": repr(filters), "load": repr(loads), "anti_windup": anti_windup,
-                "agc": agc, "mode": mode, "feedforward": feedforward}
+                "agc": agc, "mode": mode, "feedforward": feedforward,
+                "capture": None if capture is None else str(capture), "ports": link.ports}
     sim = plant.result(single, tc, [gen.ctrl for gen in gens], filters, settings)
     return WireResult(sim, *link.outcome(n_ctrl), settings)
 
 
 def _on_andes(case, kind: str, *, duration: float, attack, scc, protocol: str, load,
               noise_std, seed: int, control_period: float, relays, anti_windup: bool,
-              agc: str, mode: str) -> WireResult:
+              agc: str, mode: str, capture) -> WireResult:
     """:func:`run_wire` on an ANDES case: the microgrid (one area) or a grid (one
     link per area), in lockstep, the integrator at the generators; the
     generator sides and their attacks are :func:`lfc.simulate`'s on the case."""
@@ -323,21 +330,39 @@ def _on_andes(case, kind: str, *, duration: float, attack, scc, protocol: str, l
                   control_period=control_period, anti_windup=anti_windup, case=case,
                   network=link)
     design = design_model(case) if kind == "microgrid" else grid_design(case)  # fitted first:
-    try:                                  # an idle connection may be closed by the server
-        link.open()
+    with _captured(link, capture):     # opened after the fit: the server closes idle links
         if kind == "microgrid":
             sim = simulate_microgrid(design, scc=scc, load=load, **common)
         else:
             sim = simulate_andes_grid(design, filters=scc, loads=load, **common)
-    finally:
-        link.close()
     settings = {"plant": repr(case), "duration": duration, "control_period": control_period,
                 "seed": seed, "noise_std": list(noise_std), "protocol": protocol,
                 "attack": repr([pol.spec for pol in policies]),
                 "attack_name": attack if isinstance(attack, str) else "custom",
                 "filter": repr(scc), "load": repr(load), "anti_windup": anti_windup,
-                "agc": agc, "mode": mode}
+                "agc": agc, "mode": mode,
+                "capture": None if capture is None else str(capture), "ports": link.ports}
     return WireResult(sim, *link.outcome(n_ctrl), settings)
+
+
+@contextmanager
+def _captured(link: Link, capture: str | Path | None):
+    """``link`` opened for the block and closed after it, its traffic captured from the
+    loopback interface into ``capture`` (a pcap) if given."""
+    sniffer = None
+    if capture is not None:
+        from lfc.wire.sniff import LoopbackCapture
+        sniffer = LoopbackCapture().__enter__()
+    try:
+        link.open()
+        yield
+    finally:
+        try:
+            link.close()
+        finally:
+            if sniffer is not None:
+                sniffer.__exit__(None, None, None)
+                sniffer.write(capture, {p for pair in link.ports for p in pair})
 
 
 def _now() -> float:
