@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 
 import lfc
 from lfc.wire import run_wire
+from lfc.wire.run import transport
 from lfc.wire.detect import COLUMNS, LEGS, RULES, Rules, detect
 from lfc.wire.registers import command_registers
 
@@ -359,3 +360,52 @@ def test_a_capture_without_the_right_to_sniff_says_what_to_do_instead(monkeypatc
         wire("none", "modbus", duration=0.1, capture=tmp_path / "x.pcap")
     with pytest.raises(ValueError, match="capture"):
         wire("none", "modbus", duration=0.1, capture=7)
+
+
+# ---- the network between the centre and the substation (lfc.wire.Impairment) -------
+
+@pytest.mark.parametrize("kwargs, name", [
+    ({"delay": -0.001}, "delay"), ({"delay": 11.0}, "delay"), ({"delay": math.nan}, "delay"),
+    ({"delay": 0.01, "jitter": 0.02}, "jitter"), ({"loss": 1.0}, "loss"),
+    ({"loss": -0.1}, "loss"), ({"rto": 0.0}, "rto"), ({"seed": -1}, "seed")])
+def test_bad_network_settings_are_refused_naming_them(kwargs, name):
+    from lfc.wire import Impairment
+    with pytest.raises(ValueError, match=name):
+        Impairment(**kwargs)
+    with pytest.raises(ValueError, match="impairment"):
+        wire("none", "modbus", duration=0.1, impairment={"delay": 0.01})
+
+
+@pytest.mark.parametrize("protocol", ["modbus", "dnp3"])
+def test_in_lockstep_the_network_changes_nothing_but_time(protocol):
+    """Delay, jitter and loss (each lost frame sent again 20 ms later) at their
+    corners: the run, its frames and its alarms equal the run without them."""
+    from lfc.wire import Impairment
+    scc = lfc.SafetyFilter(PARAMS, RELAYS, alpha=20.0)
+    base = wire("fig4", protocol, "generator", duration=1.5, scc=scc)
+    slow = wire("fig4", protocol, "generator", duration=1.5, scc=scc,
+                impairment=Impairment(delay=0.002, jitter=0.002, loss=0.3, rto=0.02))
+    assert slow.sim.trace.equals(base.sim.trace)
+    codec = transport(protocol).Codec
+
+    def carried(run, leg: str) -> list:     # the commands and reports (DNP3's time
+        return [codec.command(f[2]) or codec.report(f[2])     # sync carries the clock)
+                for f in run.frames if f[1] == leg]
+
+    for leg in LEGS:               # leg by leg: a held frame lets the other legs' pass
+        assert carried(slow, leg) == carried(base, leg)
+    assert slow.alarm_log.equals(base.alarm_log)
+    assert slow.exchanges.write_ms.median() > base.exchanges.write_ms.median() + 2.0
+
+
+def test_in_real_time_a_delay_of_half_a_period_loses_every_command():
+    """The measured effect on the outcome (a finding, pinned): the centre writes half
+    a period before each tick, so a one-way delay of 6 ms at a 10 ms period brings
+    every command after its tick — the generator holds its last command throughout,
+    Fig. 4's attack never reaches it, and the link flag is up every period."""
+    from lfc.wire import Impairment
+    run = wire("fig4", "modbus", "generator", duration=1.0, mode="realtime",
+               impairment=Impairment(delay=0.006))
+    assert (run.exchanges.link == 1).all()
+    assert run.exchanges.received.abs().max() == 0.0
+    assert run.exchanges.write_ms.median() >= 12.0          # a round trip: twice the delay

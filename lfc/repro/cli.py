@@ -162,6 +162,14 @@ def _parser() -> argparse.ArgumentParser:
     wr.add_argument("--realtime", action="store_true",
                     help="the plant at the wall clock (default: lockstep, one control period "
                          "per exchanged command)")
+    wr.add_argument("--delay", type=float, default=0.0,
+                    help="the network's one-way delay between the centre and the substation "
+                         "(ms; made in the relay, as tc netem would)")
+    wr.add_argument("--jitter", type=float, default=0.0,
+                    help="a uniform draw in [-jitter, jitter] added to each frame's delay (ms)")
+    wr.add_argument("--loss", type=float, default=0.0,
+                    help="the share of frames lost once and sent again after TCP's 200 ms "
+                         "retransmission timeout (%%)")
     wr.add_argument("--pcap", type=Path,
                     help="write the last run's traffic here, made from the relay's log")
     wr.add_argument("--capture", type=Path,
@@ -249,6 +257,9 @@ def _wire(args) -> int:
             attack = json.loads(path.read_text())
         except json.JSONDecodeError as err:
             raise ValueError(f"cannot read the attack {path}: {err}") from err
+    from lfc.wire import Impairment
+    impairment = Impairment(delay=args.delay / 1e3, jitter=args.jitter / 1e3,
+                            loss=args.loss / 100) if args.delay or args.loss else None
     params, relays = LFCParams(), RelaySettings()
     filters = {"none": None, "paper": lambda: SafetyFilter(params, relays, alpha=20.0),
                "certified": lambda: SafetyFilter(params, relays, method="certified")}
@@ -259,7 +270,7 @@ def _wire(args) -> int:
         run = run_wire(params, duration=args.duration, attack=attack, scc=scc,
                        protocol=args.protocol, agc=args.agc,
                        mode="realtime" if args.realtime else "lockstep",
-                       capture=args.capture if last else None)
+                       capture=args.capture if last else None, impairment=impairment)
         rows.append(run.table())
     print(pd.concat(rows, ignore_index=True).to_string(index=False))
     if args.pcap:

@@ -9,6 +9,7 @@ detector over them (:mod:`lfc.wire.detect`).  Needs
 ``pymodbus`` or ``dnp3py`` (imported when a run starts) and ``scapy`` for captures."""
 
 from lfc.wire.attacks import ATTACKS, WireAttack
+from lfc.wire.relay import Impairment
 from lfc.wire.run import WireResult, run_wire
 
-__all__ = ["ATTACKS", "WireAttack", "WireResult", "run_wire"]
+__all__ = ["ATTACKS", "Impairment", "WireAttack", "WireResult", "run_wire"]

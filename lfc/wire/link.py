@@ -49,14 +49,17 @@ class Link:
         area), or None: the integrators run at the generators.
     anti_windup : bool
         The centre's AGC does not integrate while the filter holds against it.
+    impairment : Impairment, optional
+        The network's delay, jitter and loss (:class:`lfc.wire.relay.Impairment`).
     """
 
     def __init__(self, n_areas: int, transport, policies: list, times: np.ndarray,
                  period: float, agc_gain: float | None = None,
-                 anti_windup: bool = False) -> None:
+                 anti_windup: bool = False, impairment=None) -> None:
         self.n_areas, self.transport, self.policies = n_areas, transport, policies
         self.times, self.period = times, period
         self.agc_gain, self.anti_windup = agc_gain, anti_windup
+        self.impairment = impairment
         self.g = np.zeros(1)        # the centre's AGC integrator (pu)
         self.clocks = [-1] * n_areas
         self.last = [{"pc": 0.0, "wref": 0.0, "ace": 0.0} for _ in range(n_areas)]
@@ -91,7 +94,8 @@ class Link:
             station = tr.Outstation()
             port = self.loop.run(station.start(generator_address(a)))
             relay = tr.Relay(port, tr.Codec, *self._hooks(a), host=relay_address(a),
-                             upstream_host=generator_address(a))
+                             upstream_host=generator_address(a), impairment=self.impairment,
+                             area=a)
             self.stations.append(station)
             self.relays.append(relay)
             self.ports.append((self.loop.run(relay.start()), port))

@@ -1,6 +1,8 @@
-"""What every protocol shares: the event loop the servers run on, and the man in
-the middle — a TCP relay that cuts the byte stream into the protocol's frames
-and lets a policy rewrite the commands and reports it finds in them.
+"""What every protocol shares: the event loop the servers run on, the parties'
+loopback addresses, the man in the middle — a TCP relay that cuts the byte stream
+into the protocol's frames and lets a policy rewrite the commands and reports it
+finds in them — and the network's delay, jitter and loss it can add
+(:class:`Impairment`).
 
 A protocol module (:mod:`lfc.wire.modbus`, :mod:`lfc.wire.dnp3`) provides a
 ``Codec`` with one signature:
@@ -23,9 +25,13 @@ Every frame on both legs is logged with its wall-clock time, for the capture
 from __future__ import annotations
 
 import asyncio
+import random
 import threading
 import time
+from dataclasses import dataclass
 from typing import Callable
+
+from lfc._validate import check_number, check_seed
 
 
 #: where each party listens or connects from on loopback (all of 127.0.0.0/8 is this
@@ -62,6 +68,84 @@ class EventLoop:
         self.thread.join(5.0)
 
 
+@dataclass(frozen=True)
+class Impairment:
+    """The wide-area network between the control centre and the substation, made in
+    the relay as ``tc netem`` makes it in a kernel (this one has no ``sch_netem``):
+    every frame the relay sends on, either way, leaves ``delay`` s after it arrived,
+    plus a uniform draw in [-``jitter``, ``jitter``] s; with probability ``loss`` it
+    is lost once, and TCP sends it again after its retransmission timeout ``rto`` s
+    (Linux's least, 0.2 s).  TCP delivers in order, so a late frame holds back the
+    ones behind it.  Draws are seeded (``seed``, the area, the direction).
+
+    Parameters
+    ----------
+    delay, jitter : float
+        s, ``0 <= jitter <= delay <= 10``.
+    loss : float
+        In [0, 1).
+    rto : float
+        s, in (0, 10].
+    seed : int
+    """
+
+    delay: float = 0.0
+    jitter: float = 0.0
+    loss: float = 0.0
+    rto: float = 0.2
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("delay", "jitter", "loss", "rto"):
+            check_number(name, getattr(self, name))
+        if not 0.0 <= self.delay <= 10.0:
+            raise ValueError(f"delay must lie in [0, 10] s, got {self.delay!r}")
+        if not 0.0 <= self.jitter <= self.delay:
+            raise ValueError(f"jitter must lie in [0, delay] = [0, {self.delay:g}] s, got "
+                             f"{self.jitter!r}")
+        if not 0.0 <= self.loss < 1.0:
+            raise ValueError(f"loss must lie in [0, 1), got {self.loss!r}")
+        if not 0.0 < self.rto <= 10.0:
+            raise ValueError(f"rto must lie in (0, 10] s, got {self.rto!r}")
+        check_seed("seed", self.seed)
+
+    def __bool__(self) -> bool:
+        return bool(self.delay or self.loss)
+
+
+class _Impaired:
+    """A writer behind an :class:`Impairment`: frames queued with their release time,
+    written by a task of their own when it comes (``relay._note``d then)."""
+
+    def __init__(self, writer, relay: Relay, leg: str, rng: random.Random) -> None:
+        self.writer, self.relay, self.leg, self.rng = writer, relay, leg, rng
+        self.queue: asyncio.Queue = asyncio.Queue()
+        self.last = 0.0
+        self.task = asyncio.create_task(self._pump())
+
+    def put(self, frame: bytes) -> None:
+        imp, now = self.relay.impairment, asyncio.get_running_loop().time()
+        wait = imp.delay + (self.rng.uniform(-imp.jitter, imp.jitter) if imp.jitter else 0.0)
+        if imp.loss and self.rng.random() < imp.loss:
+            wait += imp.rto
+        self.last = max(now + wait, self.last)
+        self.queue.put_nowait((self.last, frame))
+
+    async def _pump(self) -> None:
+        loop = asyncio.get_running_loop()
+        while (item := await self.queue.get()) is not None:
+            release, frame = item
+            await asyncio.sleep(max(0.0, release - loop.time()))
+            self.relay._note(self.leg, frame)
+            self.writer.write(frame)
+            await self.writer.drain()
+
+    async def close(self) -> None:
+        """Send what is queued, then stop."""
+        self.queue.put_nowait(None)
+        await asyncio.gather(self.task, return_exceptions=True)
+
+
 class Relay:
     """The man in the middle, between the control centre and the outstation.
 
@@ -79,6 +163,10 @@ class Relay:
     host, upstream_host : str
         The address the relay listens on and connects upstream from, and the
         outstation's (default: 127.0.0.1 both).
+    impairment : Impairment, optional
+        The network's delay, jitter and loss on what the relay sends on.
+    area : int
+        The area whose link this is (the impairment's draws).
 
     Attributes
     ----------
@@ -89,9 +177,11 @@ class Relay:
     """
 
     def __init__(self, upstream: int, codec, on_command: Callable,
-                 on_report: Callable, host: str = CENTRE, upstream_host: str = CENTRE) -> None:
+                 on_report: Callable, host: str = CENTRE, upstream_host: str = CENTRE,
+                 impairment: Impairment | None = None, area: int = 0) -> None:
         self.upstream, self.codec = upstream, codec
         self.host, self.upstream_host = host, upstream_host
+        self.impairment, self.area = impairment or None, area
         self.on_command, self.on_report = on_command, on_report
         self.log: list[tuple[float, str, bytes]] = []
         self.server, self.tasks = None, set()
@@ -116,14 +206,32 @@ class Relay:
         g_reader, g_writer = await asyncio.open_connection(self.upstream_host, self.upstream,
                                                            local_addr=(self.host, 0))
         session: dict = {}
+        c_out, g_out = c_writer, g_writer
+        if self.impairment:
+            seed = self.impairment.seed
+            c_out = _Impaired(c_writer, self, "relay>centre",
+                              random.Random(f"{seed}:{self.area}:up"))
+            g_out = _Impaired(g_writer, self, "relay>generator",
+                              random.Random(f"{seed}:{self.area}:down"))
         try:
-            await asyncio.gather(self._down(c_reader, c_writer, g_writer, session),
-                                 self._up(g_reader, c_writer, session))
+            await asyncio.gather(self._down(c_reader, c_out, g_out, session),
+                                 self._up(g_reader, c_out, session))
         except (ConnectionError, asyncio.IncompleteReadError):
             pass
         finally:
+            if self.impairment:
+                await asyncio.gather(c_out.close(), g_out.close(), return_exceptions=True)
             for w in (c_writer, g_writer):
                 w.close()
+
+    async def _send(self, out, leg: str, frame: bytes) -> None:
+        """Send ``frame`` on ``leg``: now, or through the impairment (noted as it leaves)."""
+        if isinstance(out, _Impaired):
+            out.put(frame)
+            return
+        self._note(leg, frame)
+        out.write(frame)
+        await out.drain()
 
     async def _down(self, c_reader, c_writer, g_writer, session: dict) -> None:
         """Centre to generator: commands (rewritten or dropped) and the rest."""
@@ -136,16 +244,14 @@ class Relay:
                 if command is not None:
                     forwarded = self.on_command(*command)
                     if forwarded is None:
-                        ack = codec.ack(frame, session)
-                        self._note("relay>centre", ack)
-                        c_writer.write(ack)
-                        await c_writer.drain()
+                        await self._send(c_writer, "relay>centre", codec.ack(frame, session))
                         continue
                     frame = codec.with_command(frame, *forwarded)
-                self._note("relay>generator", frame)
-                g_writer.write(frame)
-                await g_writer.drain()
-        g_writer.close()          # the centre hung up: so does the relay, upstream
+                await self._send(g_writer, "relay>generator", frame)
+        if isinstance(g_writer, _Impaired):    # the centre hung up: so does the relay,
+            await g_writer.close()            # upstream, once what it holds has left
+            g_writer = g_writer.writer
+        g_writer.close()
 
     async def _up(self, g_reader, c_writer, session: dict) -> None:
         """Generator to centre: reports (rewritten) and the rest."""
@@ -158,6 +264,4 @@ class Relay:
                 report = codec.report(frame)
                 if report is not None:
                     frame = codec.with_report(frame, self.on_report(report))
-                self._note("relay>centre", frame)
-                c_writer.write(frame)
-                await c_writer.drain()
+                await self._send(c_writer, "relay>centre", frame)

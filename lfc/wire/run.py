@@ -56,6 +56,7 @@ from lfc.simulate import SimResult, check_timing
 from lfc.simulate_multiarea import MultiAreaResult, area_filter
 from lfc.wire.attacks import WireAttack
 from lfc.wire.link import Link
+from lfc.wire.relay import Impairment
 
 PROTOCOLS = ("modbus", "dnp3")
 AGC = ("generator", "centre")
@@ -152,7 +153,8 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
              load=None, noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0,
              dt: float = 0.001, control_period: float = 0.01, relays=None,
              anti_windup: bool = False, agc: str = "generator", mode: str = "lockstep",
-             feedforward: bool | None = None, capture: str | Path | None = None) -> WireResult:
+             feedforward: bool | None = None, capture: str | Path | None = None,
+             impairment: Impairment | None = None) -> WireResult:
     """Run one area, or every area of a grid, over the wire (module docstring).
 
     Parameters
@@ -194,6 +196,11 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
         (:class:`lfc.wire.sniff.LoopbackCapture`: root or ``CAP_NET_RAW``, else a
         ``PermissionError``); the ports it needs to be decoded are in
         ``settings["ports"]``.
+    impairment : Impairment, optional
+        The network's delay, jitter and loss between the centre and the substation,
+        made in the relay (:class:`lfc.wire.relay.Impairment`).  In lockstep it
+        slows the run and changes nothing else; in real time a command that arrives
+        after its tick is not waited for.
 
     Returns
     -------
@@ -215,12 +222,16 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
     if capture is not None and not isinstance(capture, str | Path):
         raise ValueError(f"capture must be a path (str or Path) or None, got {capture!r}")
+    if impairment is not None and not isinstance(impairment, Impairment):
+        raise ValueError(f"impairment must be an lfc.wire.relay.Impairment or None, got "
+                         f"{impairment!r}")
     check_seed("seed", seed)
     if testbed is not None:
         return _on_andes(params, testbed, duration=duration, attack=attack, scc=scc,
                          protocol=protocol, load=load, noise_std=noise_std, seed=seed,
                          control_period=control_period, relays=relays,
-                         anti_windup=anti_windup, agc=agc, mode=mode, capture=capture)
+                         anti_windup=anti_windup, agc=agc, mode=mode, capture=capture,
+                         impairment=impairment)
     single = isinstance(params, LFCParams)
     grid = as_grid(params)
     n_a = grid.n_areas
@@ -264,7 +275,7 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
     plant = LinearGrid(grid, loads, n_steps, ratio, dt, relays)
 
     link = Link(n_a, transport(protocol), policies, np.arange(n_ctrl) * ratio * dt, period,
-                None if local else k_freq[0] * period, anti_windup)
+                None if local else k_freq[0] * period, anti_windup, impairment)
 
     def generate(j: int, lateness: float) -> None:
         """Every generator at control sample j: take the command, filter, then the
@@ -298,14 +309,15 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
                                    getattr(filters[a], "method", "?") for a in range(n_a)),
                 "scc": repr(filters), "load": repr(loads), "anti_windup": anti_windup,
                 "agc": agc, "mode": mode, "feedforward": feedforward,
-                "capture": None if capture is None else str(capture), "ports": link.ports}
+                "capture": None if capture is None else str(capture), "ports": link.ports,
+                "impairment": repr(impairment)}
     sim = plant.result(single, tc, [gen.ctrl for gen in gens], filters, settings)
     return WireResult(sim, *link.outcome(n_ctrl), settings)
 
 
 def _on_andes(case, kind: str, *, duration: float, attack, scc, protocol: str, load,
               noise_std, seed: int, control_period: float, relays, anti_windup: bool,
-              agc: str, mode: str, capture) -> WireResult:
+              agc: str, mode: str, capture, impairment) -> WireResult:
     """:func:`run_wire` on an ANDES case: the microgrid (one area) or a grid (one
     link per area), in lockstep, the integrator at the generators; the
     generator sides and their attacks are :func:`lfc.simulate`'s on the case."""
@@ -325,7 +337,7 @@ def _on_andes(case, kind: str, *, duration: float, attack, scc, protocol: str, l
     policies = [WireAttack(attacks.get(a, [])) for a in range(n_a)]
     n_ctrl = int(np.ceil(duration / control_period - 1e-9))
     link = Link(n_a, transport(protocol), policies, np.arange(n_ctrl) * control_period,
-                control_period)
+                control_period, impairment=impairment)
     common = dict(duration=duration, relays=relays, noise_std=noise_std, seed=seed,
                   control_period=control_period, anti_windup=anti_windup, case=case,
                   network=link)
@@ -341,7 +353,8 @@ def _on_andes(case, kind: str, *, duration: float, attack, scc, protocol: str, l
                 "attack_name": attack if isinstance(attack, str) else "custom",
                 "filter": repr(scc), "load": repr(load), "anti_windup": anti_windup,
                 "agc": agc, "mode": mode,
-                "capture": None if capture is None else str(capture), "ports": link.ports}
+                "capture": None if capture is None else str(capture), "ports": link.ports,
+                "impairment": repr(impairment)}
     return WireResult(sim, *link.outcome(n_ctrl), settings)
 
 
