@@ -49,10 +49,17 @@ def test_modbus_applies_a_command_only_whole(modbus):
     assert reply.isError() and reply.exception_code == 2
     assert station.take() == ({**COMMAND, "pc": 0.5}, 8)              # the last whole one
     assert station.take() is None
-    # logged by the outstation: all but the write past the block's end, which pymodbus
-    # itself refuses (exception 2) before the device sees it
-    assert [r[2] for r in station.rejected] == ["not the whole command (function 16 of "
-                                                f"{N_COMMAND} registers at 0)"] * 4
+    # logged by the outstation, the write past the block's end too (13 registers at 1),
+    # which pymodbus itself refuses (exception 2) before the device sees it (it was not
+    # logged before)
+    whole_only = f"not the whole command (function 16 of {N_COMMAND} registers at 0)"
+    assert [r[1:] for r in station.rejected] == [
+        ("function 16: 1 register(s) at 0", whole_only),
+        (f"function 16: {N_COMMAND} register(s) at 1", "refused by pymodbus itself (exception "
+         "2: outside the device's registers or functions)"),
+        ("function 16: 4 register(s) at 4", whole_only),
+        ("function 16: 12 register(s) at 0", whole_only),
+        ("function 6: 1 register(s) at 12", whole_only)]
 
 
 @pytest.mark.parametrize("value", [math.nan, math.inf, -1e300, 2e6])

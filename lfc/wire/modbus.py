@@ -38,8 +38,9 @@ class Outstation:
     whose values pass :func:`~lfc.wire.registers.setpoint_problem`.  Any other write
     is refused with Modbus exception 2 (illegal data address: a partial write, one
     elsewhere, a single-register write) or 3 (illegal data value) and logged in
-    ``rejected`` (wall-clock time, what was written, reason); the command slot keeps
-    what it held."""
+    ``rejected`` (wall-clock time, what was written, reason), as is every exception
+    pymodbus answers itself (a write past the registers' end, an unknown function);
+    the command slot keeps what it held."""
 
     def __init__(self) -> None:
         self.inbox: tuple[list[int], float] | None = None
@@ -47,12 +48,30 @@ class Outstation:
         self.lock = threading.Lock()
         self.server = None
         self.rejected: list[tuple[float, str, str]] = []
+        self._request: tuple[int, int, int] = (0, 0, 0)
+        self._refused = False             # the request under way was refused and logged
 
     def _refuse(self, function_code: int, address: int, count: int, reason: str, code):
         what = f"function {function_code}: {count} register(s) at {address}"
         with self.lock:
             self.rejected.append((time.perf_counter(), what, reason))
+        self._refused = True
         return code
+
+    def _trace(self, sending: bool, pdu):
+        """pymodbus' view of every request and answer: an exception answered to a
+        request :meth:`_action` did not refuse (one pymodbus refused itself, e.g. a
+        write past the registers' end) is logged in ``rejected`` too."""
+        if not sending:
+            self._request = (pdu.function_code, getattr(pdu, "address", 0),
+                             getattr(pdu, "count", 0))
+            self._refused = False
+        elif pdu.isError() and not self._refused:
+            function_code, address, count = self._request
+            self._refuse(function_code, address, count,
+                         f"refused by pymodbus itself (exception {int(pdu.exception_code)}: "
+                         f"outside the device's registers or functions)", None)
+        return pdu
 
     async def _action(self, function_code: int, start_address: int, address: int, count: int,
                       current_registers: list[int], set_values):
@@ -99,7 +118,7 @@ class Outstation:
         bits = [SimData(0, count=1, datatype=DataType.BITS)]
         device = SimDevice(id=1, simdata=(bits, bits, block(N_COMMAND), block(N_REPORT)),
                            action=self._action)
-        self.server = ModbusTcpServer(device, address=(host, 0))
+        self.server = ModbusTcpServer(device, address=(host, 0), trace_pdu=self._trace)
         await self.server.listen()
         return self.server.transport.sockets[0].getsockname()[1]
 
