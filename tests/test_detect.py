@@ -399,10 +399,12 @@ def test_in_lockstep_the_network_changes_nothing_but_time(protocol):
 
 
 def test_in_real_time_a_delay_of_half_a_period_loses_every_command():
-    """The measured effect on the outcome (a finding, pinned): the centre writes half
-    a period before each tick, so a one-way delay of 6 ms at a 10 ms period brings
-    every command after its tick — the generator holds its last command throughout,
-    Fig. 4's attack never reaches it, and the link flag is up every period."""
+    """The measured effect on the outcome (a finding, pinned): the centre reads the
+    last report, then writes, each a round trip, from half a period before each tick,
+    so a one-way delay of 6 ms at a 10 ms period brings every command after its tick
+    (2 ms already brings 499 of 500: docs/wire.md) — the generator holds its last
+    command throughout, Fig. 4's attack never reaches it, the link flag is up every
+    period."""
     from lfc.wire import Impairment
     run = wire("fig4", "modbus", "generator", duration=1.0, mode="realtime",
                impairment=Impairment(delay=0.006))
