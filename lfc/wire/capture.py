@@ -18,7 +18,9 @@ leg).
 
 Every frame is one TCP segment (sequence and acknowledgement numbers follow the
 bytes sent), stamped with the wall-clock time it crossed the relay.  Written
-with ``scapy`` (imported here only).
+with ``scapy`` (imported here only).  This capture is made from the relay's log;
+``run_wire(capture=...)`` takes one from the loopback interface instead
+(:mod:`lfc.wire.sniff`), and :func:`read_frames` reads either back.
 """
 
 from __future__ import annotations

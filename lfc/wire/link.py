@@ -21,7 +21,7 @@ import pandas as pd
 
 from lfc.engine import CTRL_COLUMNS, agc_step
 from lfc.filters.base import ACTIVE, ALARM_BITS, binding_names
-from lfc.wire.relay import generator_address, relay_address
+from lfc.wire.relay import Impairment, generator_address, relay_address
 
 U_COL, FLAG_COL = CTRL_COLUMNS.index("u_ref"), CTRL_COLUMNS.index("flags")
 
@@ -55,7 +55,7 @@ class Link:
 
     def __init__(self, n_areas: int, transport, policies: list, times: np.ndarray,
                  period: float, agc_gain: float | None = None,
-                 anti_windup: bool = False, impairment=None) -> None:
+                 anti_windup: bool = False, impairment: Impairment | None = None) -> None:
         self.n_areas, self.transport, self.policies = n_areas, transport, policies
         self.times, self.period = times, period
         self.agc_gain, self.anti_windup = agc_gain, anti_windup

@@ -152,7 +152,7 @@ class Relay:
     Parameters
     ----------
     upstream : int
-        The outstation's port on 127.0.0.1.
+        The outstation's port (on ``upstream_host``).
     codec : object
         The protocol's frame codec (module docstring).
     on_command : callable
