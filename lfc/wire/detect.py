@@ -144,19 +144,25 @@ def _modbus(data: bytes) -> dict:
             struct.unpack(">H", data[4:6])[0] != len(data) - 6:
         return {"malformed": f"not a Modbus/TCP frame ({data[:8].hex()})"}
     out: dict = {"counter": struct.unpack(">H", data[:2])[0], "modulus": 65536}
-    if len(data) >= 8 and data[6] != 1:
+    if data[6] != 1:
         out["stranger"] = f"Modbus unit id {data[6]} (the generator's is 1)"
     if len(data) >= 9 and data[7] & 0x80:
         out["exception"] = data[8]
-    command = modbus.Codec.command(data)
-    report = modbus.Codec.report(data)
-    if command is not None:
-        out.update(kind="command", values=command[0], seq=command[1])
-    elif report is not None:
-        out.update(kind="report", values=report, seq=report["seq"])
-    elif len(data) >= 8 and data[7] == modbus.WRITE and len(data) == 12:
+    out.update(_carried(modbus.Codec, data))
+    if "kind" not in out and data[7] == modbus.WRITE and len(data) == 12:
         out.update(kind="ack")
     return out
+
+
+def _carried(codec, data: bytes) -> dict:
+    """The command or report a frame carries, as ``_Frame`` fields (none: ``{}``)."""
+    command = codec.command(data)
+    if command is not None:
+        return {"kind": "command", "values": command[0], "seq": command[1]}
+    report = codec.report(data)
+    if report is not None:
+        return {"kind": "report", "values": report, "seq": report["seq"]}
+    return {}
 
 
 def _dnp3(data: bytes, direction: str) -> dict:
@@ -177,16 +183,12 @@ def _dnp3(data: bytes, direction: str) -> dict:
         return {**out, "malformed": f"DNP3 frame refused by the parser: {err}"}
     if user:
         out["counter"] = user[0] & 0x3F
-    command = dnp3.Codec.command(data)
-    report = dnp3.Codec.report(data)
-    if command is not None:
-        out.update(kind="command", values=command[0], seq=command[1])
-    elif report is not None:
-        out.update(kind="report", values=report, seq=report["seq"])
+    out.update(_carried(dnp3.Codec, data))
     if len(user) >= 5 and user[2] == dnp3.RESPONSE:
         out["iin"] = user[3] << 8 | user[4]
         # the echo of a command: g41v4, then point 3 (seq) at 9 + 30: index, value, status
-        if tuple(user[5:8]) == (41, 4, 0x17) and len(user) >= 49 and user[39] == 3:
+        if out.get("kind") is None and tuple(user[5:8]) == (41, 4, 0x17) \
+                and len(user) >= 49 and user[39] == 3:
             echo = struct.unpack("<d", user[40:48])[0]
             out.update(kind="ack", seq=int(echo) if math.isfinite(echo) else None)
     return out
@@ -258,13 +260,14 @@ def _one_tap(stream: list[_Frame], area: int, tap: str, rules: Rules) -> list[tu
     last_command: _Frame | None = None
     counters: dict[str, int] = {}
     restarted: bool | None = None
+
+    def alert(rule: str, detail: str) -> None:      # at the period under way
+        if rule in on:
+            out.append((period, area, tap, rule, detail))
+
     for f in stream:
         if f.seq is not None and f.kind == "command":
             period = f.seq
-
-        def alert(rule: str, detail: str, at: int | None = None) -> None:
-            if rule in on:
-                out.append((period if at is None else at, area, tap, rule, detail))
 
         if f.malformed is not None:
             alert("malformed", f.malformed)

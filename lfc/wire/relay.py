@@ -31,7 +31,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
-from lfc._validate import check_number, check_seed
+from lfc._validate import check_number, check_range, check_seed
 
 
 #: where each party listens or connects from on loopback (all of 127.0.0.0/8 is this
@@ -96,13 +96,10 @@ class Impairment:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        for name in ("delay", "jitter", "loss", "rto"):
+        check_range("delay", self.delay, 0.0, 10.0, closed=True)
+        check_range("jitter", self.jitter, 0.0, self.delay, closed=True)   # at most delay
+        for name in ("loss", "rto"):
             check_number(name, getattr(self, name))
-        if not 0.0 <= self.delay <= 10.0:
-            raise ValueError(f"delay must lie in [0, 10] s, got {self.delay!r}")
-        if not 0.0 <= self.jitter <= self.delay:
-            raise ValueError(f"jitter must lie in [0, delay] = [0, {self.delay:g}] s, got "
-                             f"{self.jitter!r}")
         if not 0.0 <= self.loss < 1.0:
             raise ValueError(f"loss must lie in [0, 1), got {self.loss!r}")
         if not 0.0 < self.rto <= 10.0:

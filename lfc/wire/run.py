@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import threading
 import time
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -361,21 +361,18 @@ def _on_andes(case, kind: str, *, duration: float, attack, scc, protocol: str, l
 @contextmanager
 def _captured(link: Link, capture: str | Path | None):
     """``link`` opened for the block and closed after it, its traffic captured from the
-    loopback interface into ``capture`` (a pcap) if given."""
-    sniffer = None
-    if capture is not None:
-        from lfc.wire.sniff import LoopbackCapture
-        sniffer = LoopbackCapture().__enter__()
-    try:
+    loopback interface into ``capture`` (a pcap) if given: the capture stops after the
+    link has closed (its FINs in it), then is written, whatever the block raised."""
+    with ExitStack() as stack:                   # exits in reverse: close, stop, write
+        if capture is not None:
+            from lfc.wire.sniff import LoopbackCapture
+            sniffer = LoopbackCapture()
+            stack.callback(lambda: sniffer.write(capture, {p for pair in link.ports
+                                                          for p in pair}))
+            stack.enter_context(sniffer)
+        stack.callback(link.close)
         link.open()
         yield
-    finally:
-        try:
-            link.close()
-        finally:
-            if sniffer is not None:
-                sniffer.__exit__(None, None, None)
-                sniffer.write(capture, {p for pair in link.ports for p in pair})
 
 
 def _now() -> float:
