@@ -74,7 +74,7 @@ Prints, from one run:
   as fitted; the fitted IEEE 39-bus model's battery with steps of 0.05 and 0.11 pu
   (the whole re-check budget);
 * with ``--andes``: each fitted model's command range (the ladder of
-  ``lfc.testbed.grid_fit.validated_range``), then the red team's coordinated
+  ``lfc.testbed.fit.validated_range``), then the red team's coordinated
   search (every family of ``MULTI_FAMILIES``, both areas at once) against the
   contract, the coupled certificate (its commands within the range), the
   coupled certificate without the range and the coupled certificate on its grid

@@ -30,7 +30,7 @@ an edit of one file would leave its callers' machine code stale.  Importing this
 module registers a cache locator for this package's functions whose stamp is a
 hash of every source file that compiles code: any edit recompiles them all
 (:mod:`lfc.warmup` compiles the loops once).  It applies to functions in this package
-only.
+only; so does the guard it installs against a damaged cache file (:mod:`lfc._numba_cache`).
 """
 
 from __future__ import annotations
@@ -43,6 +43,8 @@ import numba as nb
 from llvmlite import ir
 from numba.core import caching, types
 from numba.extending import intrinsic
+
+from lfc import _numba_cache
 
 _PACKAGE = Path(__file__).resolve().parent
 
@@ -73,6 +75,7 @@ class _PackageCacheLocator(caching.InTreeCacheLocator):
 
 if _PackageCacheLocator not in caching.CacheImpl._locator_classes:
     caching.CacheImpl._locator_classes.insert(0, _PackageCacheLocator)
+_numba_cache.install()   # a damaged cache file of a compiled function: compiled again
 
 jit = nb.njit(cache=True, nogil=True)
 inline = nb.njit(cache=True, nogil=True, inline="always")

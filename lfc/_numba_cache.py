@@ -9,7 +9,7 @@ compiled again and the file rewritten.  A file that names a class or module of t
 package that no longer exists (renamed or moved since numba wrote it: its index keys
 the compiled types, a kernel's named tuples among them) is stale, not damaged: a miss
 without a warning.  Files of other packages are left to numba.
-:mod:`lfc.engine`, through which every compiled run goes, installs it.
+:mod:`lfc._jit`, through which every compiled function of the package goes, installs it.
 """
 
 from __future__ import annotations

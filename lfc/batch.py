@@ -40,7 +40,7 @@ from tqdm.auto import tqdm
 from lfc._files import code_digest, write_atomic
 from lfc._pool import completed
 from lfc._validate import (ParameterTypeError, check_count, check_flag, check_folder,
-                           in_engine_types, is_finite, is_sequence)
+                           is_finite, is_sequence)
 from lfc.engine import METRICS
 from lfc.estimation import STD
 from lfc.filters import (CONFLICT_RULES, METHODS, OUTSIDE_RULES, PREDICTIONS, SafetyFilter,
@@ -383,7 +383,7 @@ def table_results(params: LFCParams, scenarios: pd.DataFrame, *, duration: float
     scenarios = check_scenarios(scenarios)
     check_timing(duration, dt, control_period)
     check_flag("progress", progress)
-    relays = in_engine_types(relays_or_default(relays))
+    relays = relays_or_default(relays)
     scenarios = scenarios.drop(columns=[c for c in METRIC_KEYS if c in scenarios.columns])
     built: dict = {}
     out = []
@@ -527,7 +527,7 @@ def simulate_table(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
                       stacklevel=3)
     if out is not None:
         check_folder("out", out)
-    relays = in_engine_types(relays_or_default(relays))
+    relays = relays_or_default(relays)
     args = (params, duration, relays, dt, control_period, lanes)
     chunks = [scenarios.iloc[i:i + chunk_size] for i in range(0, len(scenarios), chunk_size)]
     folder = Path(out) if out is not None else None
@@ -694,7 +694,7 @@ def table_scenarios(table: pd.DataFrame, params: LFCParams, *, duration: float,
     checks them) as an :class:`lfc.Scenario` of the area ``params``, its filter built
     on ``params`` with ``relays`` (default IEEE 1547 Cat. III) for ``control_period``
     (s); ``duration`` (s) ends a chirp."""
-    relays = in_engine_types(relays_or_default(relays))
+    relays = relays_or_default(relays)
     built: dict = {}
     return [row_scenario(params, relays, row, duration, control_period, built)
             for row in check_scenarios(table).to_dict("records")]
@@ -817,7 +817,7 @@ def scenario_list(params: LFCParams, scenarios: list, *, duration: float,
                                  f"scenarios[{bad}] is a {type(scenarios[bad]).__name__}")
     check_timing(duration, dt, control_period)
     check_flag("progress", progress)
-    relays = in_engine_types(relays_or_default(relays))
+    relays = relays_or_default(relays)
     if keep == "results":
         own = next((i for i, s in enumerate(scenarios) if s.plant is not None), None)
         if own is not None:

@@ -29,25 +29,16 @@ from typing import NamedTuple
 
 import numpy as np
 
-from lfc import _numba_cache
 from lfc._jit import inline, kernel
-from lfc._validate import ParameterTypeError, check_flag, check_index
+from lfc._validate import ParameterTypeError, check_index
 from lfc.estimation import (KalmanFilter, check_noise_std, kf_correct, kf_predict,
                             measurement_std)
-from lfc.filters import SafetyFilter
 from lfc.filters.base import ACTIVE, ALARM_BITS, MAX_ABS_INPUT, MEMORY, OUTSIDE
-from lfc.filters.coupled import METHOD_ID as COUPLED
-from lfc.filters.coupled import CoupledFilter
-from lfc.filters.coupled_kernel import N_R as N_R_COUPLED
-from lfc.filters.coupled_kernel import decide as decide_coupled
-from lfc.filters.coupled_kernel import grid_estimate, rows_scratch
-from lfc.filters.dispatch import decide
+from lfc.filters.dispatch import GRID_WIDE, decide, decide_grid, grid_wide
 from lfc.model import LFCParams
-from lfc.multiarea import N_AREA_STATES, MultiAreaParams
+from lfc.multiarea import N_AREA_STATES
 from lfc.relays import relay_sample
 from lfc.signals import GRID, N_PARAMS, NONE, SAMPLES, STEP, Signal, value_at
-
-_numba_cache.install()   # a damaged cache file of a compiled function: compiled again
 
 PC, WREF, LOAD, ACE = range(4)      # signal channels (ACE: an attack on the area control error)
 N_CHANNELS = 4
@@ -193,11 +184,6 @@ def signal_value(channel: int, kinds: np.ndarray, params: np.ndarray, offsets: n
     return value_at(kind, params, channel, t, st, sv, offsets[channel, 0], offsets[channel, 1])
 
 
-# generator_period's and GeneratorSide's name for it: their code is an input of the
-# committed fits (lfc.testbed.fit.FIT_FUNCTIONS), renamed at the next refit
-_signal = signal_value
-
-
 @inline
 def agc_step(gstate: np.ndarray, k_i_period: float, wref: float, y0: float,
              k_tie_period: float, tie: float, anti_windup: bool, u_ref: float,
@@ -212,42 +198,104 @@ def agc_step(gstate: np.ndarray, k_i_period: float, wref: float, y0: float,
         gstate[0] += increment
 
 
+class Channels(NamedTuple):
+    """One area's command channels as its generator side reads them
+    (:func:`scenario_signals`): each channel's signal ``kinds``, ``params`` and
+    ``offsets``, and every sampled signal's ``times`` (s) and ``values``."""
+
+    kinds: np.ndarray
+    params: np.ndarray
+    offsets: np.ndarray
+    times: np.ndarray
+    values: np.ndarray
+
+
+class Estimate(NamedTuple):
+    """An area's Kalman filter: ``index`` (< 0: none, the filter reads the state as
+    it is), its matrices ``a``, ``b``, ``c``, ``gain`` and its ``state`` (2, N_KF:
+    prior, then posterior)."""
+
+    index: int
+    a: np.ndarray
+    b: np.ndarray
+    c: np.ndarray
+    gain: np.ndarray
+    state: np.ndarray
+
+
+class Controller(NamedTuple):
+    """An area's AGC and safety filter: the integrator's gains on frequency and on
+    tie-line export times the control period ``k_freq``, ``k_tie`` (pu per pu),
+    ``feedforward`` (the filter reads the true load), ``anti_windup`` (conditional
+    integration, :func:`agc_step`), the filter's ``method`` (< 0: none) and its
+    packed ``data``."""
+
+    k_freq: float
+    k_tie: float
+    feedforward: bool
+    anti_windup: bool
+    method: int
+    data: np.ndarray
+
+
+class Memory(NamedTuple):
+    """What an area's generator side keeps between samples and writes: the filter's
+    memory ``mem`` (MEMORY,), the integrator ``gstate`` (1,: pu), ``x_hat`` (5,: the
+    state the filter sees) and the control trace ``ctrl`` (a row of N_CTRL values per
+    sample; no rows: no trace)."""
+
+    mem: np.ndarray
+    gstate: np.ndarray
+    x_hat: np.ndarray
+    ctrl: np.ndarray
+
+
+class GridView(NamedTuple):
+    """What the coupled certificate (:mod:`lfc.filters.coupled`) reads of the whole
+    grid at a sample: this ``area``'s index, the grid's state ``x`` (design-model
+    coordinates), every area's latest command ``u`` and load ``p`` (pu), then its
+    grid Kalman filter's measurements and innovations ``ym``, estimate ``xe`` and
+    state ``ks`` (:class:`Work`), and the filter's scratch ``sums``."""
+
+    area: int
+    x: np.ndarray
+    u: np.ndarray
+    p: np.ndarray
+    ym: np.ndarray
+    xe: np.ndarray
+    ks: np.ndarray
+    sums: np.ndarray
+
+
 @inline
-def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise0: float,
-                     noise1: float,
-                     kinds: np.ndarray, params: np.ndarray, offsets: np.ndarray,
-                     st: np.ndarray, sv: np.ndarray, k_i_period: float, est: int,
-                     ka: np.ndarray, kb: np.ndarray, kc: np.ndarray, kg: np.ndarray,
-                     kstate: np.ndarray, feedforward: bool, method: int, fd: np.ndarray,
-                     mem: np.ndarray, gstate: np.ndarray, x_hat: np.ndarray,
-                     ctrl: np.ndarray, tie: float, k_tie_period: float,
-                     anti_windup: bool, grid: tuple) -> tuple:
+def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise: tuple,
+                     tie: float, channels: Channels, estimate: Estimate,
+                     controller: Controller, memory: Memory, grid: GridView) -> tuple:
     """The generator side at control sample ``j`` (time ``t``, s) of one scenario.
 
     ``x`` is the plant's state in design-model coordinates and ``p_true`` the true
-    load (pu); ``noise0``, ``noise1`` the measurement noise of this sample.
+    load (pu); ``noise`` the measurement noise of this sample on ``(dw_meas,
+    rocof_meas)`` (pu, pu/s).
     In an interconnected grid (:mod:`lfc.multiarea`) ``p_true`` is the area's net
     disturbance (load plus tie-line export) and the integrator is the area's AGC:
-    ``gstate[0] += k_i_period (wref - dw_meas) - k_tie_period tie`` with ``tie``
-    the measured tie-line export plus any ACE attack (0 and 0 for one area).
-    With ``anti_windup`` the integrator does not move while the filter's command
-    differs from the incoming one in the direction the increment would widen
+    ``gstate[0] += k_freq (wref - dw_meas) - k_tie tie`` with ``tie`` the measured
+    tie-line export plus any ACE attack (0 and 0 for one area).
+    With ``controller.anti_windup`` the integrator does not move while the filter's
+    command differs from the incoming one in the direction the increment would widen
     (conditional integration): it cannot wind up behind a held command.
-    The coupled certificate (``method`` ``COUPLED``, :mod:`lfc.filters.coupled`)
-    reads the whole grid instead: ``grid`` is ``(area, x, u, p, ym, xe, ks,
-    sums)``, this area's index, the grid's state, every area's latest command and
-    every area's load, then the grid Kalman filter's arrays (:class:`Work`) and
-    the filter's scratch (one argument: a call with more than 30 is packed by
-    Python in a way numba cannot inline).
-    ``est`` >= 0 selects the Kalman filter ``(ka, kb, kc, kg)`` with state
-    ``kstate`` (prior, then posterior; 2 x N_KF); ``method`` < 0 runs without a
-    filter.
-    ``gstate[0]`` is the local integrator (pu); ``x_hat`` (5,) receives the state
-    the filter sees.  Writes ``ctrl[j]`` (N_CTRL values, if ``ctrl`` has rows) and
-    returns ``(u, flags, |u - u_ref|)``.
+    A grid-wide filter (:func:`lfc.filters.dispatch.decide_grid`: the coupled
+    certificate) reads the whole grid instead (``grid``; another method ignores it).
+    ``estimate.index`` >= 0 selects the Kalman filter.  Writes ``memory``
+    (:class:`Memory`; ``ctrl[j]`` if ``ctrl`` has rows) and returns ``(u, flags,
+    |u - u_ref|)``.
     """
+    kinds, params, offsets, st, sv = channels
+    est, ka, kb, kc, kg, kstate = estimate
+    k_i_period, k_tie_period, feedforward, anti_windup, method, fd = controller
+    mem, gstate, x_hat, ctrl = memory
+    noise0, noise1 = noise
     y0, y1 = x[3] + noise0, x[4] + noise1
-    if est >= 0 and method != COUPLED:
+    if est >= 0 and not grid_wide(method):
         n = ka.shape[0]
         kf_correct(kg, kc, kstate, (y0, y1), x_hat)     # x_hat: scratch until below
         for r in range(5):
@@ -257,30 +305,19 @@ def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise0: flo
         for r in range(5):
             x_hat[r] = x[r]
         p_hat = p_true if feedforward else 0.0
-    u_ref = gstate[0] + _signal(PC, kinds, params, offsets, st, sv, t, j)
-    wref = _signal(WREF, kinds, params, offsets, st, sv, t, j)
+    u_ref = gstate[0] + signal_value(PC, kinds, params, offsets, st, sv, t, j)
+    wref = signal_value(WREF, kinds, params, offsets, st, sv, t, j)
     nan = math.nan
-    if method == COUPLED:
-        area, grid_x, grid_u, grid_p, ym, xe, ks, sums = grid
-        if est >= 0:       # the grid's Kalman filter (state ks, area 0's), stepped by area 0
-            if area == 0:
-                grid_p = grid_estimate(fd, ka, kb, kc, kg, ks, ym[:kc.shape[0]],
-                                       ym[kc.shape[0]:], grid_u, j > 0, xe)
-            else:
-                grid_p = ks[1, int(fd[N_R_COUPLED]):int(fd[N_R_COUPLED]) + len(grid_u)]
-            grid_x = xe
-            for r in range(5):
-                x_hat[r] = xe[N_AREA_STATES * area + r]
-        u, flags, h0, h1, m0, m1, q0, q1, d0, d1 = decide_coupled(fd, grid_x, grid_u, grid_p,
-                                                                  area, u_ref, mem, sums)
-        p_hat = grid_p[area]
+    if grid_wide(method):
+        u, flags, h0, h1, m0, m1, q0, q1, d0, d1, p_hat = decide_grid(
+            method, fd, grid, estimate, j == 0, u_ref, mem, x_hat)
     elif method >= 0:
         u, flags, h0, h1, m0, m1, q0, q1, d0, d1 = decide(method, fd, x_hat, u_ref, p_hat, mem)
     else:
         u, flags, h0, h1, m0, m1, q0, q1, d0, d1 = u_ref, 0, nan, nan, nan, nan, nan, nan, \
             nan, nan
     agc_step(gstate, k_i_period, wref, y0, k_tie_period, tie, anti_windup, u_ref, u)
-    if est >= 0 and method != COUPLED:
+    if est >= 0 and not grid_wide(method):
         kf_predict(ka, kb, kstate, (u,))
     if ctrl.shape[0]:
         vals = (u_ref, u, float(flags), h0, h1, m0, m1, q0, q1, d0, d1, x_hat[3], x_hat[4],
@@ -410,7 +447,7 @@ def run_kernel(timing: Timing, plants: Plants, rows: Rows, samples: SignalSample
             t = k0 * dt
             for a in range(n_a):     # every area's load now (the coupled filter reads all)
                 pl[a] = signal_value(LOAD, kinds[i, a], params[i, a], offsets[i, a], st, sv, t, k0)
-            if method0 == COUPLED and index[i, 0, 0] >= 0:   # what its estimator measures
+            if grid_wide(method0) and index[i, 0, 0] >= 0:   # what its estimator measures
                 for a in range(n_a):
                     q_a = index[i, a, 1]
                     ym[2 * a] = x[m * a + 3] + (noise[q_a, j, 0] if q_a >= 0 else 0.0)
@@ -438,11 +475,12 @@ def run_kernel(timing: Timing, plants: Plants, rows: Rows, samples: SignalSample
                     tie += inc[a, line] * x[m * n_a + line]
                 ace = signal_value(ACE, kinds_a, params_a, offsets_a, st, sv, t, j)
                 ua, flags, mod = generator_period(
-                    j, t, x_a, pl[a] + tie, noise[q_i, j, 0] if q_i >= 0 else 0.0,
-                    noise[q_i, j, 1] if q_i >= 0 else 0.0, kinds_a, params_a, offsets_a, st,
-                    sv, k_freq[a], e_i, ka_a, kb_a, kc_a, kg_a, ks_a, ff == 1, method, fd,
-                    mem_a, gs_a, x_hat, ctrl_a, tie + ace, k_tie[a], aw,
-                    (a, x, u, pl, ym, xe, ks_0, sums))
+                    j, t, x_a, pl[a] + tie, (noise[q_i, j, 0] if q_i >= 0 else 0.0,
+                                             noise[q_i, j, 1] if q_i >= 0 else 0.0),
+                    tie + ace, Channels(kinds_a, params_a, offsets_a, st, sv),
+                    Estimate(e_i, ka_a, kb_a, kc_a, kg_a, ks_a),
+                    Controller(k_freq[a], k_tie[a], ff == 1, aw, method, fd),
+                    Memory(mem_a, gs_a, x_hat, ctrl_a), GridView(a, x, u, pl, ym, xe, ks_0, sums))
                 u[a] = ua
                 met[a, 4] += (flags & ACTIVE) != 0
                 met[a, 5] += (flags & ALARM_BITS) != 0
@@ -660,7 +698,7 @@ def check_load_measured(filters: dict, estimator, feedforward: bool) -> None:
     if feedforward or estimator is not None:
         return
     for a, scc in filters.items():
-        if isinstance(scc, CoupledFilter):
+        if getattr(scc, "method_id", None) in GRID_WIDE:
             continue
         bound = getattr(getattr(scc, "options", None), "recheck_bound", 0.0)
         if bound > 0:
@@ -669,166 +707,3 @@ def check_load_measured(filters: dict, estimator, feedforward: bool) -> None:
                              f"period-by-period hold needs the load measured: give "
                              f"load_feedforward=True (feedforward=True for a grid), an "
                              f"estimator, or build the filter with recheck_bound=0")
-
-
-def check_coupled(filters: dict, grid: MultiAreaParams, estimator,
-                  noise_std: tuple[float, float] = (0.0, 0.0)) -> None:
-    """``ValueError`` unless a coupled filter (:mod:`lfc.filters.coupled`), if any,
-    is the same one at every area, built for a grid of the design's areas and
-    tie-lines, and given what its certificate covers: the exact state
-    (``estimator=None``) if it was built without ``noise_std``, its own grid
-    Kalman filter (``estimator="kalman"``) if with it, on measurement noise no
-    larger than it was built for (its guarantee needs all three)."""
-    coupled = [f for f in filters.values() if isinstance(f, CoupledFilter)]
-    if not coupled:
-        return
-    if len(filters) != grid.n_areas or any(f is not coupled[0] for f in filters.values()):
-        raise ValueError("a coupled filter must be the same CoupledFilter at every area (its "
-                         "certificate holds every other area's command; an area without it "
-                         "would move its command freely)")
-    built = coupled[0].params
-    if built.n_areas != grid.n_areas or [t[:2] for t in built.tie] != [t[:2] for t in grid.tie]:
-        raise ValueError(f"the coupled filter was built for {built!r}, not for this grid's "
-                         f"{grid.n_areas} areas and tie-lines {grid.tie}")
-    check_coupled_estimator(coupled[0], estimator, noise_std)
-
-
-def check_coupled_estimator(filt: CoupledFilter, estimator,
-                            noise_std: tuple[float, float]) -> None:
-    """``ValueError`` unless ``filt`` (a :class:`~lfc.filters.coupled.CoupledFilter`)
-    is given what its certificate covers: the exact state (``estimator=None``) if
-    built without ``noise_std``; its own grid Kalman filter (``"kalman"``) on
-    measurement noise no larger than it was built for, if with it."""
-    estimates = filt.kalman is not None
-    if estimator is None and estimates:
-        raise ValueError("the coupled filter was built with noise_std (it covers its grid "
-                         "Kalman estimate): give estimator='kalman'")
-    if estimator is not None and not (estimates and isinstance(estimator, str)
-                                      and estimator == "kalman"):
-        raise ValueError(f"estimator={estimator!r}: the coupled filter reads the grid's exact "
-                         f"state (a wide-area measurement); give estimator=None, or build it "
-                         f"with noise_std and give estimator='kalman' (its own grid-wide "
-                         f"Kalman filter)")
-    built_for = filt.options.noise_std
-    if estimates and any(s > b for s, b in zip(noise_std, built_for)):
-        raise ValueError(f"noise_std={tuple(noise_std)} exceeds the noise the coupled filter "
-                         f"was built for ({built_for}): its error bound would not hold; build "
-                         f"it with noise_std={tuple(noise_std)}")
-
-
-class GeneratorSide:
-    """The generator side of one scenario, for a plant that drives time itself
-    (the ANDES testbed): call :meth:`step` at every control sample; it runs
-    :func:`generator_period`, the engine's own code.
-
-    Parameters
-    ----------
-    design : LFCParams
-        Design model (local controller gain, ``"kalman"`` model).
-    scc : SafetyFilter or None
-    estimator, noise_std, seed, pc_attack, wref_attack, load_feedforward, anti_windup
-        As in :func:`lfc.simulate`.
-    tc : ndarray
-        Control sample times (s), uniform with step ``period``.
-    period : float
-        Controller period (s).
-    ace_attack : signal, optional
-        Added to the measured tie-line export the AGC integrates (pu; an
-        interconnected area, :mod:`lfc.multiarea`).
-    k_agc : (float, float), optional
-        The AGC's gains on frequency and on tie-line export (1/s,
-        :meth:`lfc.MultiAreaParams.agc_gains`); default ``(design.k_i, 0)``, the
-        local integral controller of one area; ``(0, 0)`` where the integrator
-        runs elsewhere (a control centre across a network).
-    network : bool
-        The command channels arrive by :meth:`receive` each period (:mod:`lfc.wire`).
-    """
-
-    def __init__(self, design: LFCParams, scc: SafetyFilter | None, estimator,
-                 noise_std: tuple[float, float], seed: int, tc: np.ndarray, pc_attack,
-                 wref_attack, load_feedforward: bool, period: float, *, ace_attack=None,
-                 k_agc: tuple[float, float] | None = None, anti_windup: bool = False,
-                 network: bool = False) -> None:
-        if scc is not None:
-            scc.check_period(period)
-        self.tc, self.scc = tc, scc
-        self.noise = make_noise(noise_std, len(tc), seed)
-        if isinstance(scc, CoupledFilter):     # its grid Kalman filter, if any, shared:
-            check_coupled_estimator(scc, estimator, noise_std)   # state and measurements
-            kf = scc.kalman                    # come with step's grid (area 0 steps it)
-        else:
-            kf = make_estimator(estimator, design, period, noise_std)
-        self.est = -1 if kf is None else 0
-        self.ka, self.kb, self.kc, self.kg = (
-            np.ascontiguousarray(m, float) for m in ((kf.A, kf.B, kf.C, kf.gain) if kf else
-                                                     (np.zeros((0, 0)),) * 4))
-        if network and (pc_attack is not None or wref_attack is not None
-                        or ace_attack is not None):
-            raise ValueError("network=True: the command channels arrive by receive(); give "
-                             "no pc_attack, wref_attack or ace_attack")
-        zero = (lambda t: np.zeros_like(t)) if network else None
-        self.network = network
-        self.signals = scenario_signals(pc_attack or zero, wref_attack or zero, None, tc, tc,
-                                        ace_attack or zero)
-        k_freq, k_tie = (design.k_i, 0.0) if k_agc is None else k_agc
-        self.k_i_period, self.k_tie_period = k_freq * period, k_tie * period
-        self.feedforward = load_feedforward
-        self.anti_windup = check_flag("anti_windup", anti_windup)
-        self.method = scc.method_id if scc is not None else -1
-        self.data = scc.data if scc is not None else np.zeros(0)
-        self.sums = np.zeros(rows_scratch(self.data) if self.method == COUPLED else 0)
-        self.kstate, self.gstate = np.zeros((2, N_KF)), np.zeros(1)
-        self.memory = np.zeros(MEMORY)
-        self.x_hat = np.zeros(5)
-        self.ctrl = np.full((len(tc), N_CTRL), np.nan)
-        self.n_done = 0
-
-    def receive(self, j: int, pc: float, wref: float = 0.0, ace: float = 0.0) -> None:
-        """Control sample ``j``'s command channels as they arrived over a network
-        (:mod:`lfc.wire`; built with ``network=True``): the command ``pc`` added to
-        the integrator's output, the reference ``wref`` and the ACE term ``ace``
-        (pu), in place of ``pc_attack``, ``wref_attack`` and ``ace_attack``."""
-        if not self.network:
-            raise ValueError("receive() needs a generator side built with network=True")
-        _, _, offsets, _, sv = self.signals
-        for channel, value in ((PC, pc), (WREF, wref), (ACE, ace)):
-            sv[offsets[channel, 0] + j] = value
-
-    def step(self, j: int, x: np.ndarray, p_load: float, tie: float = 0.0,
-             grid: tuple | None = None) -> float:
-        """Control sample ``j``: read the plant state ``x`` (design-model
-        coordinates, pu), the true load — in an interconnected area the net
-        disturbance, load plus tie-line export — and the measured tie-line
-        export ``tie`` (pu); return the command to hold (pu).  A coupled filter
-        (:mod:`lfc.filters.coupled`) also reads ``grid``: ``(area, grid state,
-        every area's latest command, every area's load)``; on its grid Kalman
-        estimate (``estimator="kalman"``) also ``(measurements, scratch,
-        estimator state)``, shared by every area: the measurements (3 n_areas
-        values, then as many of scratch: each area's ``dw_meas`` and
-        ``rocof_meas`` with its noise, then each area's metered export), the
-        estimate's grid state (n_states) and the estimator's state (2, its
-        states), which area 0's call steps."""
-        if self.method == COUPLED and (grid is None or len(grid) != (7 if self.est >= 0 else 4)):
-            raise ValueError("the coupled filter needs grid=(area, state, commands, loads), and "
-                             "on its estimate also (measurements, scratch, estimator state)")
-        kinds, params, offsets, st, sv = self.signals
-        t = float(self.tc[j])
-        tie += _signal(ACE, kinds, params, offsets, st, sv, t, j)
-        u, _, _ = generator_period(j, t, np.asarray(x, float), float(p_load),
-                                   float(self.noise[j, 0]), float(self.noise[j, 1]), kinds,
-                                   params, offsets, st, sv, self.k_i_period, self.est, self.ka,
-                                   self.kb, self.kc, self.kg, self.kstate, self.feedforward,
-                                   self.method, self.data, self.memory, self.gstate,
-                                   self.x_hat, self.ctrl, tie, self.k_tie_period,
-                                   self.anti_windup,
-                                   (0, self.x_hat, self.memory[:0], self.memory[:0],
-                                    self.memory[:0], self.memory[:0], self.kstate,
-                                    self.memory[:0])
-                                   if grid is None else
-                                   (int(grid[0]), *(np.ascontiguousarray(v, float)
-                                                    for v in grid[1:4]),
-                                    *(grid[4:] if len(grid) == 7 else
-                                      (self.memory[:0], self.memory[:0], self.kstate)),
-                                    self.sums))
-        self.n_done = j + 1
-        return u

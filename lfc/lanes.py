@@ -16,9 +16,10 @@ from typing import NamedTuple
 import numpy as np
 
 from lfc._jit import choose, inline, kernel
-from lfc.engine import (ACE, LOAD, N_CTRL, Estimators, FilterTables, Outputs, Plants,
-                        RelayTables, Rows, SignalSamples, Timing, generator_period,
-                        scenario_tables, signal_value)
+from lfc.engine import (ACE, LOAD, N_CTRL, Channels, Controller, Estimate, Estimators,
+                        FilterTables, GridView, Memory, Outputs, Plants, RelayTables, Rows,
+                        SignalSamples, Timing, generator_period, scenario_tables,
+                        signal_value)
 from lfc.filters.base import ACTIVE, ALARM_BITS, MEMORY, OUTSIDE
 from lfc.multiarea import N_AREA_STATES
 from lfc.relays import TIME_TOL, relay_sample
@@ -210,12 +211,14 @@ def run_lanes(timing: Timing, plants: Plants, rows: Rows, samples: SignalSamples
                                      t, k0)
                 ace = signal_value(ACE, kinds[i, 0], params[i, 0], offsets[i, 0], st, sv, t, j)
                 ua, flags, mod = generator_period(
-                    j, t, xs, scratch[0] + 0.0, noise[q_i, j, 0] if q_i >= 0 else 0.0,
-                    noise[q_i, j, 1] if q_i >= 0 else 0.0, kinds[i, 0], params[i, 0],
-                    offsets[i, 0], st, sv, k_freq, e_i, ka_i, kb_i, kc_i, kg_i, kstate[l],
-                    index[i, 0, 3] == 1, method, fd, mem[l], gstate[l], x_hat, ctrl,
-                    0.0 + ace, k_tie, index[i, 0, 4] == 1,
-                    (0, xs, scratch, scratch, scratch, scratch, kstate[l], scratch))
+                    j, t, xs, scratch[0] + 0.0, (noise[q_i, j, 0] if q_i >= 0 else 0.0,
+                                                 noise[q_i, j, 1] if q_i >= 0 else 0.0),
+                    0.0 + ace, Channels(kinds[i, 0], params[i, 0], offsets[i, 0], st, sv),
+                    Estimate(e_i, ka_i, kb_i, kc_i, kg_i, kstate[l]),
+                    Controller(k_freq, k_tie, index[i, 0, 3] == 1, index[i, 0, 4] == 1, method,
+                               fd),
+                    Memory(mem[l], gstate[l], x_hat, ctrl),
+                    GridView(0, xs, scratch, scratch, scratch, scratch, kstate[l], scratch))
                 z[Z_U * L + l] = ua
                 met = metrics[i, 0]
                 met[4] += (flags & ACTIVE) != 0

@@ -64,7 +64,7 @@ class MultiAreaParams:
         plant it stands for, > 0.  Default ∞: the model is the plant (the
         presets, any grid simulated on this model).  A model fitted to ANDES
         carries the range it was validated on there
-        (:func:`lfc.testbed.grid_fit.validated_range`: beyond it ANDES' tie-lines
+        (:func:`lfc.testbed.fit.validated_range`: beyond it ANDES' tie-lines
         are far from linear).  The coupled certificate keeps every area's command
         within ``±command_range`` (its ``u_min``, ``u_max``,
         :class:`lfc.filters.coupled.CoupledOptions`).

@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lfc._jit import inline, jit
-from lfc._validate import ParameterTypeError, check_array, check_count, check_number, check_range
+from lfc._validate import (ParameterTypeError, check_array, check_count, check_number,
+                           check_range, in_engine_types)
 
 RELAY_NAMES = ("OF2", "UF2", "ROCOF")
 TIME_TOL = 1e-9  # s, tolerance when comparing elapsed pickup time to a delay
@@ -26,14 +27,16 @@ IEEE1547_ROCOF_HZ_PER_S = {"I": 0.5, "II": 2.0, "III": 3.0}
 
 
 def relays_or_default(relays: object) -> "RelaySettings":
-    """``relays``, or the default ``RelaySettings()`` for None; anything else
-    (``0``, ``"x"``) is a :class:`~lfc._validate.ParameterTypeError`, not the default."""
+    """``relays``, or the default ``RelaySettings()`` for None, its settings in the
+    engine's types (:func:`~lfc._validate.in_engine_types`: a ``Fraction`` or a numpy
+    scalar setting as a float); anything else (``0``, ``"x"``) is a
+    :class:`~lfc._validate.ParameterTypeError`, not the default."""
     if relays is None:
         return RelaySettings()
     if not isinstance(relays, RelaySettings):
         raise ParameterTypeError(f"relays must be a RelaySettings or None, got {relays!r:.80} "
                                  f"({type(relays).__name__})")
-    return relays
+    return in_engine_types(relays)
 
 
 @dataclass(frozen=True)

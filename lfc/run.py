@@ -157,9 +157,9 @@ def simulate(plant, scenario=None, *, duration: float, design=None, **kwargs):
     **kwargs
         The scenario: for an area, :func:`lfc.simulate.simulate_area`'s
         keywords; for a grid, :func:`lfc.simulate_multiarea.simulate_grid_linear`'s;
-        on ANDES also :func:`lfc.testbed.plant.simulate_microgrid`'s (``fault``,
+        on ANDES also :func:`lfc.testbed.microgrid.simulate_microgrid`'s (``fault``,
         ``overcurrent``, ``step``) or
-        :func:`lfc.testbed.grid_plant.simulate_andes_grid`'s (``step``).
+        :func:`lfc.testbed.grids.simulate_andes_grid`'s (``step``).
 
     Returns
     -------

@@ -17,10 +17,10 @@ import numpy as np
 from lfc._validate import ParameterTypeError, check_flag, check_seed
 from lfc.engine import (CHANNELS, LOAD, METRICS, N_CHANNELS, N_CTRL, N_KF, Estimators,
                         FilterTables, Outputs, Plants, RelayTables, Rows, SignalSamples, Timing,
-                        Work, check_area_keys, check_coupled, check_load_measured,
-                        check_noise, make_estimator, make_noise, run_kernel, scenario_signals)
+                        Work, check_area_keys, check_load_measured, check_noise,
+                        make_estimator, make_noise, run_kernel, scenario_signals)
 from lfc.filters import SafetyFilter
-from lfc.filters.coupled import CoupledFilter
+from lfc.filters.coupled import CoupledFilter, check_coupled
 from lfc.filters.dispatch import GRID_WIDE, scratch_size
 from lfc.lanes import LANE_MIN_FILL, LaneWork, lane_blocks, run_lanes
 from lfc.model import LFCParams

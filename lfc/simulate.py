@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from lfc._validate import (ParameterTypeError, check_flag, check_folder, check_multiple,
-                           check_positive, in_engine_types)
+                           check_positive)
 from lfc.engine import CTRL_COLUMNS, N_CTRL, sample_signal
 from lfc.filters import SafetyFilter, binding_names
 from lfc.filters.base import (ACTIVE, ALARM_BITS, INFEASIBLE, INVALID, MAX_ABS_INPUT, OUTSIDE,
@@ -247,7 +247,7 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
     check_timing(duration, dt, control_period)
     if scc is not None and not isinstance(scc, SafetyFilter):
         raise ParameterTypeError(f"scc must be a SafetyFilter or None, got {scc!r}")
-    relays = in_engine_types(relays_or_default(relays))
+    relays = relays_or_default(relays)
     check_flag("load_feedforward", load_feedforward)   # the engine calls it feedforward
     if load_feedforward and (scc is None or estimator is not None):
         raise ValueError("load_feedforward=True gives the filter the true load in place of "

@@ -67,8 +67,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lfc._validate import (ParameterTypeError, check_count, check_folder, check_index,
-                           in_engine_types)
+from lfc._validate import ParameterTypeError, check_count, check_folder, check_index
 from lfc.batch import metrics_frame
 from lfc.estimation import check_noise_std
 from lfc.engine import METRICS, check_area_keys, sample_signal
@@ -226,7 +225,7 @@ def simulate_grid_linear(params: MultiAreaParams, *, duration: float,
         raise ParameterTypeError(f"params must be a MultiAreaParams, got "
                                  f"{type(params).__name__}")
     check_timing(duration, dt, control_period, params.n_areas, params.n_states)
-    relays = in_engine_types(relays_or_default(relays))
+    relays = relays_or_default(relays)
     filters = check_area_keys(filters, params.n_areas, "filters")
     estimate = estimate_noise(estimator, noise_std)
     built = {a: area_filter(params, a, f, relays, control_period, estimate)
@@ -360,7 +359,7 @@ def simulate_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
     check_timing(duration, dt, control_period)
     check_count("jobs", jobs)
     check_grid_scenarios(scenarios)
-    relays = in_engine_types(relays_or_default(relays))
+    relays = relays_or_default(relays)
     cache: dict = {}
     rows = []
     for k, s in enumerate(scenarios):

@@ -12,8 +12,8 @@ pytest.importorskip("andes")
 
 from lfc import _files  # noqa: E402
 from lfc.testbed import fit as fitting  # noqa: E402
-from lfc.testbed.case import MicrogridCase  # noqa: E402
-from lfc.testbed.grid_fit import committed_fits, fit_numbers  # noqa: E402
+from lfc.testbed.fit import committed_fits, fit_numbers  # noqa: E402
+from lfc.testbed.microgrid import MicrogridCase  # noqa: E402
 
 COMMITTED = {fitting.committed_path(c.case, c.kind).stem: c for c in committed_fits()}
 
@@ -147,7 +147,6 @@ def test_python_m_lfc_fit_compares_and_write_replaces(monkeypatch, tmp_path, cap
     import dataclasses
 
     from lfc.repro import cli
-    from lfc.testbed import grid_fit
 
     c = COMMITTED["testbed-fit-microgrid"]
     committed = _read(c)
@@ -155,7 +154,7 @@ def test_python_m_lfc_fit_compares_and_write_replaces(monkeypatch, tmp_path, cap
         committed.params, M=committed.params.M * 1.001))
     shutil.copy(fitting.committed_path(c.case, c.kind), tmp_path)
     monkeypatch.setattr(fitting, "FITTED_DIR", tmp_path)
-    monkeypatch.setattr(grid_fit, "committed_fits",
+    monkeypatch.setattr(fitting, "committed_fits",
                         lambda: (c._replace(kind=c.kind._replace(compute=lambda case: moved)),))
     assert cli.main(["fit"]) == 0
     row = next(line for line in capsys.readouterr().out.splitlines()
@@ -165,3 +164,46 @@ def test_python_m_lfc_fit_compares_and_write_replaces(monkeypatch, tmp_path, cap
     assert cli.main(["fit", "--write"]) == 0
     assert "written" in capsys.readouterr().out
     assert _read(c) == moved
+
+
+def test_python_m_lfc_fit_restamps_only_a_fit_that_computes_what_it_computed(
+        monkeypatch, tmp_path, capsys):
+    """``--save FILE`` writes the fits computed here; ``--restamp FILE`` after a change
+    of the fitting code stamps the committed fits with today's inputs, their numbers
+    untouched, when every fit computed again equals FILE's bit for bit — a fit that
+    moved by one part in 10^16 is not stamped (exit 1, the file as it was): a refit."""
+    import dataclasses
+    import math
+
+    from lfc.repro import cli
+
+    c = COMMITTED["testbed-fit-microgrid"]
+    committed = _read(c)
+    source = fitting.committed_path(c.case, c.kind)
+    shutil.copy(source, tmp_path)
+    monkeypatch.setattr(fitting, "FITTED_DIR", tmp_path)
+    path = tmp_path / source.name
+
+    def fitting_to(value):
+        monkeypatch.setattr(fitting, "committed_fits", lambda: (
+            c._replace(kind=c.kind._replace(compute=lambda case: value)),))
+
+    fitting_to(committed)
+    reference = tmp_path / "before.json"
+    assert cli.main(["fit", "--save", str(reference)]) == 0
+    stored = json.loads(path.read_text())
+    stored["inputs"] = "an older code's"
+    path.write_text(json.dumps(stored, indent=1, sort_keys=True) + "\n")
+    moved = dataclasses.replace(committed, params=dataclasses.replace(
+        committed.params, M=math.nextafter(committed.params.M, math.inf)))
+    fitting_to(moved)
+    assert cli.main(["fit", "--restamp", str(reference)]) == 1
+    assert "not stamped" in capsys.readouterr().out
+    assert json.loads(path.read_text())["inputs"] == "an older code's"
+    fitting_to(committed)
+    assert cli.main(["fit", "--restamp", str(reference)]) == 0
+    after = json.loads(path.read_text())
+    assert after["inputs"] == fitting.fit_inputs()
+    assert {k: v for k, v in after.items() if k != "inputs"} == \
+        {k: v for k, v in stored.items() if k != "inputs"}
+    assert _read(c) == committed

@@ -451,7 +451,7 @@ def test_the_filters_share_one_certificate_and_refuse_what_breaks_it():
         lfc.simulate(grid, duration=1.0, filters={0: filt, 1: filt}, control_period=0.02)
     with pytest.raises(ValueError, match="built for"):
         lfc.simulate(THREE, duration=1.0, filters={a: filt for a in range(3)})
-    from lfc.engine import GeneratorSide
+    from lfc.generator import GeneratorSide, GridReading
     with pytest.raises(ValueError, match="exact state"):
         GeneratorSide(grid.areas[0], filt, "kalman", (1e-4, 1e-3), 0, np.arange(3) * 0.01,
                       None, None, False, 0.01)
@@ -466,8 +466,8 @@ def test_the_filters_share_one_certificate_and_refuse_what_breaks_it():
     side = GeneratorSide(grid.areas[0], estimating, "kalman", (1e-4, 1e-3), 0,
                          np.arange(3) * 0.01, None, None, False, 0.01)
     with pytest.raises(ValueError, match="on its estimate also"):   # the estimator's arrays
-        side.step(0, np.zeros(5), 0.0, 0.0, (0, np.zeros(grid.n_states), np.zeros(2),
-                                             np.zeros(2)))
+        side.step(0, np.zeros(5), 0.0, 0.0, GridReading(0, np.zeros(grid.n_states),
+                                                        np.zeros(2), np.zeros(2)))
 
 
 def test_the_tightest_case_a_search_found_reaches_the_certificates_ceiling_and_holds():
@@ -626,7 +626,7 @@ def test_finding_a_step_four_times_the_bound_during_an_attack_trips_after_outsid
 
 def test_the_commands_stay_within_the_design_models_command_range():
     """A design model that holds only within ``±command_range`` (one fitted to
-    ANDES, :func:`lfc.testbed.grid_fit.validated_range`) gives its coupled filters
+    ANDES, :func:`lfc.testbed.fit.validated_range`) gives its coupled filters
     that range as ``u_min``/``u_max``: under a 1 pu sinusoid on area 0's command
     every applied command stays within it and nothing trips; an explicit
     ``u_min``/``u_max`` overrides it, and a model without a range has none."""
@@ -719,7 +719,7 @@ def test_on_andes_ieee39_the_red_teams_winner_leaves_the_certificate_only_beyond
     fitted to ANDES.
 
     * As built by default, every command within the fitted model's range
-      (±0.2 pu, 1 GW: ``lfc.testbed.grid_fit.validated_range``): its winner
+      (±0.2 pu, 1 GW: ``lfc.testbed.fit.validated_range``): its winner
       trips neither the fitted model (severity 0.32) nor ANDES (18 ``outside``
       samples per area when measured).
     * Finding, pinned — why the range: without it (``u_min``/``u_max`` = ∓∞) the

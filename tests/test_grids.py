@@ -18,7 +18,6 @@ from lfc._files import STORED_FORMAT, read_stored, write_stored
 from lfc.multiarea import MultiAreaParams
 from lfc.testbed import GridCase, build_grid, case_design, grid_fit_report
 from lfc.testbed import fit as fitting
-from lfc.testbed import grid_fit
 
 CASE = GridCase.kundur()
 IEEE39 = GridCase.ieee39()
@@ -38,7 +37,7 @@ def test_the_fit_finds_the_case_inertia_and_reports_its_errors(fit):
     for report, m_case in zip(fit.areas, (13.0, 12.35)):
         assert report.params.M == pytest.approx(m_case, rel=0.10)
         assert (report.params.tau_w, report.params.tau_rocof) == (CASE.tau_w, CASE.tau_rocof)
-        assert report.params.tau_g >= grid_fit.LOWER["tau_g"] - 1e-12
+        assert report.params.tau_g >= fitting.LOWER["tau_g"] - 1e-12
         for out in ("dw", "dw_meas", "rocof_meas"):
             assert report.error[out] < min(0.15, report.initial_error[out]), out
     assert 50 < fit.T < 200 and fit.tie_error < 0.3
@@ -50,14 +49,14 @@ def test_the_fit_cache_round_trips_exactly(fit, tmp_path, monkeypatch):
     monkeypatch.setenv("LFC_CACHE_DIR", str(tmp_path))
     path = fitting._cache_path(CASE, "grid-fit")
     assert path.parent == tmp_path
-    write_stored(path, fit, grid_fit._encode)
-    check = functools.partial(grid_fit._check, CASE)
-    assert read_stored(path, grid_fit._decode, check) == fit
+    write_stored(path, fit, fitting.GRID_FIT.encode)
+    check = functools.partial(fitting.GRID_FIT.check, CASE)
+    assert read_stored(path, fitting.GRID_FIT.decode, check) == fit
     stored = json.loads(path.read_text())
     stored["payload"] = stored["payload"].replace('"T": ', '"T": 1')    # a changed value
     path.write_text(json.dumps(stored))
     with pytest.warns(RuntimeWarning, match="damaged cache file"):
-        assert read_stored(path, grid_fit._decode, check) is None
+        assert read_stored(path, fitting.GRID_FIT.decode, check) is None
 
 
 @pytest.mark.parametrize("damage, reason", [
@@ -73,14 +72,14 @@ def test_a_cached_fit_with_a_valid_checksum_but_insane_values_is_refit(fit, tmp_
     what was written is a model; NaN, -5 or a five-area fit are refused on read."""
     monkeypatch.setenv("LFC_CACHE_DIR", str(tmp_path))
     path = fitting._cache_path(CASE, "grid-fit")
-    data = grid_fit._encode(fit)
+    data = fitting.GRID_FIT.encode(fit)
     damage(data)
     payload = json.dumps({"seal": path.name, "value": data}, sort_keys=True)   # sealed
     path.write_text(json.dumps({"format": STORED_FORMAT, "payload": payload,
                                 "sha256": hashlib.sha256(payload.encode()).hexdigest()}))
     with pytest.warns(RuntimeWarning, match=f"damaged cache file .*{reason}"):
-        assert read_stored(path, grid_fit._decode,
-                                    functools.partial(grid_fit._check, CASE)) is None
+        assert read_stored(path, fitting.GRID_FIT.decode,
+                                    functools.partial(fitting.GRID_FIT.check, CASE)) is None
 
 
 def test_a_grid_case_cannot_put_one_machine_in_two_areas():
@@ -188,7 +187,7 @@ def test_case_values_are_checked():
     with pytest.raises(ValueError, match="at least one machine per area"):
         GridCase(generators=((1, 2), ()))
     with pytest.raises(ValueError, match="the fit handles two areas"):
-        grid_fit.fit_grid(GridCase(generators=((1,), (2,), (3, 4)), meter_buses=(5, 6, 9),
+        fitting.fit_grid(GridCase(generators=((1,), (2,), (3, 4)), meter_buses=(5, 6, 9),
                                    load_buses=(5, 7, 8)))
 
 
@@ -228,7 +227,7 @@ def test_the_ieee39_fit_reports_errors_below_the_case_datas(fit39):
 
 @pytest.mark.parametrize("name, expected", [("kundur", 0.1), ("ieee39", 0.2)])
 def test_the_fitted_models_command_range_is_where_andes_follows_it(name, expected, fit, fit39):
-    """The fitted model's command range (``grid_fit.validated_range``): opposite
+    """The fitted model's command range (``fitting.validated_range``): opposite
     command steps of either sign, doubling from 0.05 pu, until ANDES trips or its
     peak frequency deviation exceeds twice the model's in an area.  Measured:
     Kundur holds to 0.1 pu (ANDES' peak 0.8-1.7 times the model's) and fails at
@@ -241,12 +240,12 @@ def test_the_fitted_models_command_range_is_where_andes_follows_it(name, expecte
     assert report.params.command_range == expected
     *passed, last = report.validation
     assert ({(step, sign) for step, sign, *_ in passed if step <= expected}
-            == {(step, sign) for step in grid_fit.VALID_STEPS if step <= expected
+            == {(step, sign) for step in fitting.VALID_STEPS if step <= expected
                 for sign in (1, -1)})
     for step, sign, ratio, tripped in passed:
-        assert not tripped and max(ratio) <= grid_fit.VALID_RATIO, (step, sign)
+        assert not tripped and max(ratio) <= fitting.VALID_RATIO, (step, sign)
     step, _, ratio, tripped = last
-    assert step == 2 * expected and (tripped or max(ratio) > grid_fit.VALID_RATIO)
+    assert step == 2 * expected and (tripped or max(ratio) > fitting.VALID_RATIO)
     assert "| 0.05 | + / − |" in report.validation_table()
 
 

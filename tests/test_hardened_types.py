@@ -270,7 +270,7 @@ def test_a_fit_cache_is_kept_per_blas_kernel(monkeypatch, tmp_path):
     default kernel (one cache file), which then differed from the regression
     record by 1e-11: each kernel keeps its own file."""
     pytest.importorskip("andes")
-    from lfc.testbed.case import MicrogridCase
+    from lfc.testbed.microgrid import MicrogridCase
     from lfc.testbed.fit import _cache_path
     monkeypatch.setenv("LFC_CACHE_DIR", str(tmp_path))
     monkeypatch.delenv("OPENBLAS_CORETYPE", raising=False)

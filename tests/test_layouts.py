@@ -141,11 +141,6 @@ def test_build_is_the_one_way_to_build_a_filter_by_name():
 
 # -- the package's shape (issue "One"): what a reader can hold in mind -------------------
 PACKAGE = Path(lfc.__file__).parent
-#: code whose every edit makes the committed fits stale (lfc.testbed.fit.FIT_FILES and
-#: FIT_FUNCTIONS: a refit moves every ANDES figure), kept as it is until the next refit
-FROZEN_POSITIONAL = {"lfc/engine.py:generator_period"}
-FROZEN_PRIVATE_IMPORTS = {("lfc/testbed/plant.py", "_same_float"),
-                          ("lfc/testbed/plant.py", "_Recorded")}
 
 
 def _sources():
@@ -159,8 +154,9 @@ def test_no_module_is_longer_than_900_lines():
 
 
 def test_no_function_takes_more_than_12_positional_parameters():
-    """The kernel's arrays travel as named tuples (``lfc.engine.Plants``, ``Rows``, ...),
-    not as positions; the one exception is frozen code (``FROZEN_POSITIONAL``)."""
+    """The kernel's arrays travel as named tuples (``lfc.engine.Plants``, ``Rows``, ...,
+    and the generator side's ``Channels``, ``Estimate``, ``Controller``, ``Memory``), not
+    as positions."""
     wide = set()
     for name, text in _sources():
         for node in ast.walk(ast.parse(text)):
@@ -168,13 +164,12 @@ def test_no_function_takes_more_than_12_positional_parameters():
                 params = [a.arg for a in node.args.posonlyargs + node.args.args]
                 if len([p for p in params if p not in ("self", "cls")]) > 12:
                     wide.add(f"{name}:{node.name}")
-    assert wide == FROZEN_POSITIONAL
+    assert wide == set()
 
 
 def test_no_private_name_is_imported_from_another_module():
     """A name one module keeps to itself (``_name``) is not another module's to use (a
-    module private to the package, ``lfc._jit``, is the package's); the exceptions are
-    frozen code (``FROZEN_PRIVATE_IMPORTS``)."""
+    module private to the package, ``lfc._jit``, is the package's)."""
     found = set()
     for name, text in _sources():
         for node in ast.walk(ast.parse(text)):
@@ -182,4 +177,17 @@ def test_no_private_name_is_imported_from_another_module():
                 found |= {(name, alias.name) for alias in node.names
                           if alias.name.startswith("_") and not alias.name.startswith("__")
                           and not (PACKAGE / f"{alias.name}.py").exists()}
-    assert found == FROZEN_PRIVATE_IMPORTS
+    assert found == set()
+
+
+def test_the_engine_imports_no_particular_filter():
+    """The compiled loop and the generator side reach every filter, an area's or a
+    grid-wide one, through ``lfc.filters.dispatch`` (``decide``, ``decide_grid``,
+    ``GRID_WIDE``): a new filter is its module and its registration, not an edit of
+    the engine."""
+    allowed = {"lfc.filters", "lfc.filters.base", "lfc.filters.dispatch"}
+    for name in ("lfc/engine.py", "lfc/lanes.py", "lfc/generator.py"):
+        tree = ast.parse((PACKAGE.parent / name).read_text())
+        used = {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)
+                and (node.module or "").startswith("lfc.filters")}
+        assert used <= allowed, (name, used - allowed)

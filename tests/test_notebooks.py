@@ -103,7 +103,7 @@ ONE_ALPHA = [3.0]
 # ... and in one process (jobs = 1): pytest-xdist keeps every core busy already, and a
 # second process would only run ahead a scenario that then shares the first one's run
 # (the load step: the filters never act), about 110 s of ANDES' CPU on the IEEE 39-bus
-# system spent for nothing here (lfc.testbed.grid_plant.simulate_andes_grid_table; on
+# system spent for nothing here (lfc.testbed.grids.simulate_andes_grid_table; on
 # Kundur the certified filters act on the step, so both runs are needed either way).
 ONE_PROCESS = 1
 

@@ -220,7 +220,7 @@ def test_the_key_covers_the_plant_side_and_nothing_else(tmp_path, kind):
     assert digest() == before                                     # a docstring: not code
     engine.write_text(text + "\nEDITED = 1\n")                    # elsewhere in the engine
     for name in ("filters/certified.py", "filters/coupled.py", "simulate_multiarea.py",
-                 "testbed/grid_plant.py", "testbed/plant.py"):    # (their other code)
+                 "testbed/grids.py", "testbed/microgrid.py"):    # (their other code)
         path = package / name
         path.write_text(path.read_text() + "\nEDITED = 1\n")
     assert digest() == before
@@ -283,9 +283,9 @@ def test_andes_given_a_recordings_commands_computes_its_record(path):
     import numpy as np
     import regression_set as rs
 
-    from lfc.testbed import grid_plant, plant, stored_runs
+    from lfc.testbed import grids, microgrid, stored_runs
     rec = stored_runs.read_recording(path)
-    run = (grid_plant if rec.kind == "grid" else plant).rerun(rec)
+    run = (grids if rec.kind == "grid" else microgrid).rerun(rec)
     rtol, atol = ((rs.ANDES_RTOL, rs.ATOL) if rec.machine == stored_runs.machine()
                   else rs.CROSS_MACHINE["andes"])
     assert np.array_equal(run.read, rec.run.read)
@@ -324,3 +324,36 @@ def test_a_microgrid_run_is_read_back_bit_for_bit_with_its_fault(tmp_path, monke
             pd.testing.assert_frame_equal(getattr(again, frame), getattr(fresh, frame),
                                           check_exact=True)
     assert len(fresh.line_trips) == 1
+
+
+def test_the_key_follows_what_a_keyed_definition_names_in_its_module(tmp_path):
+    """A keyed definition is hashed with every top-level definition of its module that it
+    names, directly or through another (``stored_runs.source_digest``): an edit of the
+    grid builder's helper ``_bus_kv`` (named by ``_build``, named by ``build_grid``)
+    changes the grids' key; an edit of ``_result``, which builds a result from a run
+    and which no keyed definition names, does not."""
+    import ast
+    import shutil
+
+    from lfc.testbed import stored_runs
+    package = tmp_path / "lfc"
+    shutil.copytree(stored_runs._PACKAGE, package,
+                    ignore=shutil.ignore_patterns("__pycache__", "*.run"))
+    path = package / "testbed" / "grids.py"
+    text = path.read_text()
+    before = stored_runs.plant_digest(package, "grid")
+    names = [n for n, _ in stored_runs._definitions(path, "build_grid")]
+    assert {"_build", "_bus_kv", "GridCase"} <= set(names)
+
+    def edited(definition: str) -> str:
+        node = next(n for n in ast.parse(text).body if getattr(n, "name", "") == definition)
+        lines = text.splitlines(keepends=True)
+        lines.insert(node.end_lineno, f"{' ' * node.body[-1].col_offset}EDITED = 1\n")
+        return "".join(lines)
+
+    path.write_text(edited("_bus_kv"))
+    assert stored_runs.plant_digest(package, "grid") != before
+    path.write_text(edited("_result"))
+    assert stored_runs.plant_digest(package, "grid") == before
+    with pytest.raises(ValueError, match="defines no function, class or assignment"):
+        stored_runs._definitions(path, "no_such_name")

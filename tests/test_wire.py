@@ -335,7 +335,7 @@ def test_on_andes_the_wire_equals_simulate():
         assert np.max(np.abs(w.to_numpy() - s.to_numpy())) < 1e-9
     with pytest.raises(ValueError, match="lockstep only"):
         run_wire(case, duration=1.0, mode="realtime")
-    from lfc.testbed.plant import simulate_microgrid
+    from lfc.testbed.microgrid import simulate_microgrid
     from lfc.testbed import FaultSpec
     with pytest.raises(ValueError, match="fault"):
         simulate_microgrid(design_model(case), duration=1.0, network=object(),

@@ -31,9 +31,11 @@ import numpy as np
 from scipy.optimize import differential_evolution
 
 from lfc._validate import (ParameterTypeError, check_count, check_number, check_positive,
-                           check_seed, in_engine_types)
-from lfc.engine import CTRL_COLUMNS, GeneratorSide, check_area_keys, check_coupled
+                           check_seed)
+from lfc.engine import CTRL_COLUMNS, check_area_keys
 from lfc.filters import SafetyFilter
+from lfc.filters.coupled import check_coupled
+from lfc.generator import GeneratorSide
 from lfc.lockstep import LinearGrid
 from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams, as_grid
@@ -179,7 +181,7 @@ def run_adaptive(params: LFCParams | MultiAreaParams, filters, attack: AdaptiveA
         raise ValueError(f"attack must be an AdaptiveAttack, got {attack!r}")
     check_positive("duration", duration)
     check_seed("seed", seed)
-    relays = in_engine_types(relays_or_default(relays))
+    relays = relays_or_default(relays)
     single = isinstance(params, LFCParams)
     if not single and not isinstance(params, MultiAreaParams):
         raise ParameterTypeError(f"params must be an LFCParams or a MultiAreaParams, got "
@@ -283,7 +285,7 @@ def adaptive_search(params: LFCParams | MultiAreaParams, filters, *, duration: f
     check_count("maxiter", maxiter)
     check_count("popsize", popsize)
     scenario = dict(scenario or {})
-    relays = in_engine_types(relays_or_default(scenario.get("relays")))
+    relays = relays_or_default(scenario.get("relays"))
     cache: dict[tuple, dict] = {}
 
     def run(theta: np.ndarray) -> dict:

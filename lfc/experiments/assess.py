@@ -7,7 +7,7 @@ from typing import Callable
 
 import pandas as pd
 
-from lfc._validate import check_number, check_sizes, in_engine_types
+from lfc._validate import check_number, check_sizes
 from lfc.experiments.redteam import severity
 from lfc.experiments.scenarios import ATTACK_START
 from lfc.filters import SafetyFilter
@@ -37,7 +37,7 @@ def load_step_cost(params: LFCParams, filters: dict[str, FilterFactory], steps: 
     alarm), the frequency nadir (pu), the time to recover within 10 % of F
     (s after the step) and ``final_abs_dw_hat``, the frequency deviation the
     generator side sees at the end (pu; the estimate with ``estimator``)."""
-    relays = in_engine_types(relays_or_default(relays))
+    relays = relays_or_default(relays)
     check_number("duration", duration)
     if not duration > ATTACK_START:
         raise ValueError(f"duration must be > ATTACK_START ({ATTACK_START} s, when the steps "

@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from lfc._validate import (ParameterTypeError, check_array, check_finite, check_nonnegative,
-                           check_positive, check_sizes, in_engine_types)
+                           check_positive, check_sizes)
 from lfc.experiments.redteam import severity
 from lfc.filters import SafetyFilter
 from lfc.model import LFCParams
@@ -71,8 +71,8 @@ def battery(params: LFCParams, scc: SafetyFilter | None, steps: tuple[float, ...
                          f"a step lands, got {instants!r:.80}")
     attacks = ATTACKS if attacks is None else attacks
     _check_attacks(attacks)
-    relays = in_engine_types(relays_or_default(
-        scc.relays if relays is None and scc is not None else relays))
+    relays = relays_or_default(
+        scc.relays if relays is None and scc is not None else relays)
     rows = []
     for (name, attack), size, sign, t in itertools.product(attacks.items(), steps, (1, -1),
                                                            instants):
@@ -95,8 +95,8 @@ def recovery(params: LFCParams, scc: SafetyFilter | None, step: float, *,
     check_finite("step", step)
     if not duration > 1.0:
         raise ValueError(f"duration must be > 1 s (the step lands at 1 s), got {duration!r}")
-    relays = in_engine_types(relays_or_default(
-        scc.relays if relays is None and scc is not None else relays))
+    relays = relays_or_default(
+        scc.relays if relays is None and scc is not None else relays)
     res = simulate(params, duration=duration, load=Step(step, start=1.0), scc=scc,
                    relays=relays)
     tr = res.trace
@@ -131,7 +131,7 @@ def tradeoff(params: LFCParams, filters: dict[str, SafetyFilter | None], bounds:
         check_nonnegative(f"bounds[{name!r}]", bounds[name])
     attacks = ATTACKS if attacks is None else attacks
     _check_attacks(attacks)
-    relays = in_engine_types(relays_or_default(relays))
+    relays = relays_or_default(relays)
     rows = []
     bare = {name: simulate(params, duration=12.0, relays=relays, **a).metrics()["tripped"]
             for name, a in attacks.items()}
@@ -174,7 +174,7 @@ def bound_price(params: LFCParams, bounds: tuple[float, ...], steps: tuple[float
     if options is not None and not isinstance(options, dict):
         raise ParameterTypeError(f"options must be a dict of certified-filter options, got "
                                  f"{options!r:.80}")
-    relays = in_engine_types(relays_or_default(relays))
+    relays = relays_or_default(relays)
     fixed = sorted({"load_bound", "load_kind"} & set(options or {}))
     if fixed:
         raise ValueError(f"options must not set {fixed}: bound_price varies load_bound "

@@ -23,7 +23,7 @@ from scipy import sparse
 from scipy.optimize import linprog
 
 from lfc._validate import (ParameterTypeError, check_finite, check_integer, check_multiple,
-                           check_nonnegative, check_positive, check_range, in_engine_types)
+                           check_nonnegative, check_positive, check_range)
 from lfc.model import LFCParams, discretize
 from lfc.relays import RelaySettings, relays_or_default
 from lfc.signals import Step
@@ -40,7 +40,7 @@ def no_scc_threshold(params: LFCParams, relays: RelaySettings, *, tol: float = 1
     """
     if not isinstance(params, LFCParams):
         raise ParameterTypeError(f"params must be an LFCParams, got {params!r:.80}")
-    relays = in_engine_types(relays_or_default(relays))
+    relays = relays_or_default(relays)
     check_range("tol", tol, 1e-9, 1.0, closed=True)
     check_positive("duration", duration)
     if duration <= 1.0:
@@ -105,7 +105,7 @@ def governor_ride_through(params: LFCParams, relays: RelaySettings, step: float,
     """
     if not isinstance(params, LFCParams):
         raise ParameterTypeError(f"params must be an LFCParams, got {params!r:.80}")
-    relays = in_engine_types(relays_or_default(relays))
+    relays = relays_or_default(relays)
     check_finite("step", step)
     check_positive("u_bound", u_bound)
     ratio = check_multiple("control_period", control_period, "dt", dt)

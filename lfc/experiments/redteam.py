@@ -38,8 +38,7 @@ from scipy.optimize import differential_evolution
 
 from lfc._format import number
 from lfc._validate import (ParameterTypeError, check_array, check_count, check_flag,
-                           check_multiple, check_number, check_positive, check_seed,
-                           in_engine_types)
+                           check_multiple, check_number, check_positive, check_seed)
 from lfc.batch import scenario_signal
 from lfc.engine import check_area_keys
 from lfc.estimation import check_noise_std
@@ -165,7 +164,7 @@ class Search:
 def severity(results, relays: RelaySettings) -> np.ndarray:
     """Per run: max(peak |ROCOF| / rocof_limit, peak |Δω̂| / F).  ``results`` is a
     batch table or one run's metrics (anything indexed by the metric names)."""
-    relays = in_engine_types(relays_or_default(relays))
+    relays = relays_or_default(relays)
     return np.maximum(np.asarray(results["max_abs_rocof_meas"], float) / relays.rocof_limit,
                       np.asarray(results["max_abs_dw_meas"], float) / relays.F)
 
@@ -259,7 +258,7 @@ def family_search(params: LFCParams, defender: Defender, family: str, *,
     if not isinstance(defender, Defender):
         raise ParameterTypeError(f"defender must be a Defender, got {defender!r:.80}")
     check_choice("family", family, tuple(FAMILIES))
-    relays = in_engine_types(relays_or_default(relays))
+    relays = relays_or_default(relays)
     bounds = FAMILIES[family][2]
     theta, sev, row = _search(lambda th: _family_table(family, th, defender), len(bounds),
                               bounds, params, relays, duration, seed, maxiter, popsize, search)
@@ -328,7 +327,7 @@ def freeform_search(params: LFCParams, defender: Defender, *, amplitude: float =
     if attack_duration > duration - ATTACK_START + 1e-9:
         raise ValueError(f"attack_duration ({attack_duration} s) must end within the run: "
                          f"the attack starts at {ATTACK_START} s and duration is {duration} s")
-    relays = in_engine_types(relays_or_default(relays))
+    relays = relays_or_default(relays)
     theta, sev, row = _search(lambda v: _samples_table(v, control_period, defender), n,
                               [(-amplitude, amplitude)] * n, params, relays, duration, seed,
                               maxiter, popsize, search, control_period)
@@ -370,7 +369,7 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
                          f"got keys {sorted(scenario)}")
     check_search(duration=duration, seed=seed, maxiter=maxiter, popsize=popsize, relays=relays)
     check_count("jobs", jobs)
-    relays = in_engine_types(relays_or_default(relays))
+    relays = relays_or_default(relays)
     bounds = MULTI_FAMILIES[family][2]
     k, n = len(bounds), params.n_areas
     filters = {a: area_filter(params, a, f, relays, control_period)     # built once, not

@@ -28,7 +28,7 @@ from dataclasses import fields
 import numpy as np
 
 from lfc._validate import (ParameterTypeError, as_float, check_array, check_number,
-                           check_positive, in_engine_types)
+                           check_positive)
 from lfc.filters.base import (ALARM_BITS, ALARM_FLAGS, MEMORY, Backend, FilterInfo, Options,
                               binding_names, built_once, flag)
 from lfc.filters.certified import CertifiedFilter, CertifiedOptions
@@ -101,7 +101,7 @@ def build(kind: str, plant: LFCParams | MultiAreaParams, area: int = 0,
         An unknown kind (naming the valid ones), or a filter its defaults cannot
         build on this area (naming them and why).
     """
-    relays = in_engine_types(relays_or_default(relays))
+    relays = relays_or_default(relays)
     grid = plant if isinstance(plant, MultiAreaParams) else None
     if grid is None and not isinstance(plant, LFCParams):
         raise ParameterTypeError(f"plant must be an LFCParams or a MultiAreaParams, got "
@@ -210,7 +210,7 @@ class SafetyFilter:
                                  f"{method!r} (give method={owners[0]!r}; {method!r} takes "
                                  f"{', '.join(f.name for f in fields(backend.Options))})")
         self.params = params
-        self.relays = in_engine_types(relays_or_default(relays))
+        self.relays = relays_or_default(relays)
         self.backend = backend(params, self.relays, backend.Options.build(method, options))
         self.method = method
         if self.backend.jit:

@@ -73,7 +73,7 @@ noise's part lies in its ellipsoid, and flags ``outside`` most often.
 
 **Where the model holds.**  Every command stays within ``±command_range`` of
 the design model (:class:`lfc.multiarea.MultiAreaParams`; ∞ but for a model
-fitted to ANDES, whose range :func:`lfc.testbed.grid_fit.validated_range`
+fitted to ANDES, whose range :func:`lfc.testbed.fit.validated_range`
 measures).  Without it the filters certify, on a fitted model, commands that
 push gigawatts over a tie the model treats as linear.
 
@@ -214,6 +214,27 @@ class CoupledFilter:
             if W.size else np.zeros(0)
         return np.concatenate([np.asarray(areas, float).ravel(), flows])
 
+    def check_estimator(self, estimator, noise_std: tuple[float, float]) -> None:
+        """``ValueError`` unless the filter is given what its certificate covers: the
+        exact state (``estimator=None``) if built without ``noise_std``; its own grid
+        Kalman filter (``"kalman"``) on measurement noise ``noise_std`` no larger than
+        it was built for, if with it."""
+        estimates = self.kalman is not None
+        if estimator is None and estimates:
+            raise ValueError("the coupled filter was built with noise_std (it covers its grid "
+                             "Kalman estimate): give estimator='kalman'")
+        if estimator is not None and not (estimates and isinstance(estimator, str)
+                                          and estimator == "kalman"):
+            raise ValueError(f"estimator={estimator!r}: the coupled filter reads the grid's "
+                             f"exact state (a wide-area measurement); give estimator=None, or "
+                             f"build it with noise_std and give estimator='kalman' (its own "
+                             f"grid-wide Kalman filter)")
+        built_for = self.options.noise_std
+        if estimates and any(s > b for s, b in zip(noise_std, built_for)):
+            raise ValueError(f"noise_std={tuple(noise_std)} exceeds the noise the coupled "
+                             f"filter was built for ({built_for}): its error bound would not "
+                             f"hold; build it with noise_std={tuple(noise_std)}")
+
     def check_period(self, control_period: float) -> None:
         """``ValueError`` unless the calls come every ``control_period`` s, the
         period its re-check was built for."""
@@ -311,3 +332,25 @@ class CoupledFilter:
         if flags & ACTIVE and not flags & BIND_CERT:
             return "no new command is certified from this state; last certified command held"
         return "command clipped to the certified interval" if flags & ACTIVE else ""
+
+
+def check_coupled(filters: dict, grid: MultiAreaParams, estimator,
+                  noise_std: tuple[float, float] = (0.0, 0.0)) -> None:
+    """``ValueError`` unless a coupled filter (:mod:`lfc.filters.coupled`), if any,
+    is the same one at every area, built for a grid of the design's areas and
+    tie-lines, and given what its certificate covers: the exact state
+    (``estimator=None``) if it was built without ``noise_std``, its own grid
+    Kalman filter (``estimator="kalman"``) if with it, on measurement noise no
+    larger than it was built for (its guarantee needs all three)."""
+    coupled = [f for f in filters.values() if isinstance(f, CoupledFilter)]
+    if not coupled:
+        return
+    if len(filters) != grid.n_areas or any(f is not coupled[0] for f in filters.values()):
+        raise ValueError("a coupled filter must be the same CoupledFilter at every area (its "
+                         "certificate holds every other area's command; an area without it "
+                         "would move its command freely)")
+    built = coupled[0].params
+    if built.n_areas != grid.n_areas or [t[:2] for t in built.tie] != [t[:2] for t in grid.tie]:
+        raise ValueError(f"the coupled filter was built for {built!r}, not for this grid's "
+                         f"{grid.n_areas} areas and tie-lines {grid.tie}")
+    coupled[0].check_estimator(estimator, noise_std)

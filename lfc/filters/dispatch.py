@@ -1,8 +1,10 @@
-"""One compiled entry point for every filter method: :func:`decide` and :func:`decide_many`.
+"""One compiled entry point for every filter method: :func:`decide` and :func:`decide_many`,
+and :func:`decide_grid` for the methods that read the whole grid (``GRID_WIDE``).
 
 The engine and :class:`lfc.SafetyFilter` both call these, so a filter runs the
 same compiled code whether it is called once, on a batch of states or inside a
-simulation.  A method is a code (``lfc.filters.base.METHOD_IDS``); a filter that is not
+simulation; the engine imports no particular filter, only this module.
+A method is a code (``lfc.filters.base.METHOD_IDS``); a filter that is not
 compiled (``solver="cvxpy"``) is registered here and called back through
 ``numba.objmode``.
 """
@@ -14,16 +16,19 @@ import weakref
 import numba as nb
 import numpy as np
 
-from lfc._jit import jit
+from lfc._jit import inline, jit
 from lfc.filters.base import METHOD_IDS
 from lfc.filters.certified import CertifiedFilter
 from lfc.filters.certified import decide as decide_certified
 from lfc.filters.contract import ContractFilter
 from lfc.filters.contract import decide as decide_contract
 from lfc.filters.coupled import CoupledFilter
-from lfc.filters.coupled_kernel import rows_scratch
+from lfc.filters.coupled_kernel import N_R as N_R_COUPLED
+from lfc.filters.coupled_kernel import decide as decide_coupled
+from lfc.filters.coupled_kernel import grid_estimate, rows_scratch
 from lfc.filters.paper import PaperFilter
 from lfc.filters.paper import decide as decide_paper
+from lfc.multiarea import N_AREA_STATES
 
 PAPER, CERTIFIED, CONTRACT, PYTHON = (PaperFilter.method_id, CertifiedFilter.method_id,
                                      ContractFilter.method_id, METHOD_IDS["python"])
@@ -100,8 +105,43 @@ def decide_many(method: int, fd: np.ndarray, x: np.ndarray, u_ref: np.ndarray, p
 
 
 #: the methods whose decision reads the whole grid (the engine hands them every area's
-#: state, command and load); the lanes, one area at a time, do not run them
-GRID_WIDE = (CoupledFilter.method_id,)
+#: state, command and load: :func:`decide_grid`); the lanes, one area at a time, do not
+#: run them
+COUPLED = CoupledFilter.method_id
+GRID_WIDE = (COUPLED,)
+
+
+@inline
+def grid_wide(method: int) -> bool:
+    """Whether ``method`` is one of ``GRID_WIDE`` (:func:`decide_grid` runs it)."""
+    return method == COUPLED
+
+
+@inline
+def decide_grid(method: int, fd: np.ndarray, grid: tuple, estimate: tuple, first: bool,
+                u_ref: float, mem: np.ndarray, x_hat: np.ndarray) -> tuple:
+    """One call of the grid-wide filter ``method`` (``GRID_WIDE``: the coupled
+    certificate, :mod:`lfc.filters.coupled`) with data ``fd`` at one area of the grid
+    ``grid`` (:class:`lfc.engine.GridView`) and incoming command ``u_ref`` (pu); ``mem``
+    is the area's memory.  On the filter's grid Kalman estimate (``estimate``'s index
+    >= 0, its matrices :class:`lfc.engine.Estimate`'s) area 0's call steps the estimator
+    (predicting from the last sample unless ``first``) and every area reads it; the
+    state the filter sees is written to ``x_hat`` (5,).  Returns :func:`decide`'s ten
+    values and the load the filter assumed for this area (pu)."""
+    area, grid_x, grid_u, grid_p, ym, xe, ks, sums = grid
+    est, ka, kb, kc, kg, _ = estimate
+    if est >= 0:       # the grid's Kalman filter (state ks, area 0's), stepped by area 0
+        if area == 0:
+            grid_p = grid_estimate(fd, ka, kb, kc, kg, ks, ym[:kc.shape[0]],
+                                   ym[kc.shape[0]:], grid_u, not first, xe)
+        else:
+            grid_p = ks[1, int(fd[N_R_COUPLED]):int(fd[N_R_COUPLED]) + len(grid_u)]
+        grid_x = xe
+        for r in range(5):
+            x_hat[r] = xe[N_AREA_STATES * area + r]
+    u, flags, h0, h1, m0, m1, q0, q1, d0, d1 = decide_coupled(fd, grid_x, grid_u, grid_p,
+                                                              area, u_ref, mem, sums)
+    return u, flags, h0, h1, m0, m1, q0, q1, d0, d1, grid_p[area]
 
 
 def scratch_size(filt) -> int:

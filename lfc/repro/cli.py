@@ -7,6 +7,7 @@ computed again on this machine and compared)."""
 from __future__ import annotations
 
 import argparse
+import json
 import re
 import resource
 import sys
@@ -196,8 +197,16 @@ def _parser() -> argparse.ArgumentParser:
     dt.add_argument("--csv", type=Path, help="write every alert here")
     ft = sub.add_parser("fit", help="fit the committed design models to ANDES again on this "
                         "machine and compare them with lfc/testbed/fitted/ (about 5 min)")
-    ft.add_argument("--write", action="store_true",
-                    help="write the fits computed here as the committed ones")
+    how = ft.add_mutually_exclusive_group()
+    how.add_argument("--write", action="store_true",
+                     help="write the fits computed here as the committed ones")
+    how.add_argument("--save", type=Path, metavar="FILE",
+                     help="also write the fits computed here to FILE (JSON), before a change "
+                          "of the fitting code, for --restamp after it")
+    how.add_argument("--restamp", type=Path, metavar="FILE",
+                     help="if every fit computed here equals FILE's (--save) bit for bit, "
+                          "stamp the committed fits with the code as it is now, their numbers "
+                          "left as they are (exit 1 and stamp nothing otherwise)")
     rd = sub.add_parser("readme", help="copy figures/<name>.md into the <!-- name:start --> "
                         "sections of the README and docs/*.md, and the last full reproduce's "
                         "timing (build/reproduce/timing*.md; reproduce never edits them)")
@@ -336,17 +345,23 @@ def _readme(check: bool) -> int:
 INTERRUPTED = 130   # exit code after Ctrl-C (128 + SIGINT)
 
 
-def _fit(write: bool) -> int:
+def _fit(write: bool, save: Path | None = None, restamp: Path | None = None) -> int:
     """``python -m lfc fit``: each committed fit computed again (ANDES), its
     numbers beside the committed ones with their relative difference; with
-    ``write``, the computed fits become the committed ones."""
-    from lfc.testbed.fit import committed_path, read_committed, write_committed
-    from lfc.testbed.grid_fit import committed_fits, fit_numbers
+    ``write``, the computed fits become the committed ones; with ``save``, they are
+    also written to that file; with ``restamp``, the committed fits are stamped with
+    today's code (:func:`lfc.testbed.fit.restamp_committed`) if every computed fit
+    equals that file's, bit for bit (else exit 1, nothing stamped)."""
+    from lfc.testbed.fit import (committed_fits, committed_path, fit_numbers, read_committed,
+                                 restamp_committed, write_committed)
 
+    reference = json.loads(restamp.read_text(encoding="utf-8")) if restamp else None
+    computed_fits, differ = {}, []
     for c in committed_fits():
         name = committed_path(c.case, c.kind).name
         print(f"{name}: fitting on ANDES ...", flush=True)
         computed = c.kind.compute(c.case)
+        computed_fits[name] = json.loads(json.dumps(c.kind.encode(computed)))
         committed = read_committed(c.case, c.kind)
         old = fit_numbers(committed) if committed is not None else {}
         rows = [f"  {k:<24} {old[k] if k in old else float('nan'):>22.15g} {v:>22.15g} "
@@ -356,6 +371,18 @@ def _fit(write: bool) -> int:
         print("\n".join(rows))
         if write:
             print(f"  written: {write_committed(c.case, c.kind, computed)}")
+        if reference is not None and reference.get(name) != computed_fits[name]:
+            differ.append(name)
+    if save:
+        save.write_text(json.dumps(computed_fits, indent=1, sort_keys=True) + "\n")
+        print(f"the fits computed here: {save}")
+    if reference is not None:
+        if differ:
+            print(f"not stamped: the fit of {', '.join(differ)} differs from {restamp}'s "
+                  f"(a refit: python -m lfc fit --write)")
+            return 1
+        for c in committed_fits():
+            print(f"stamped with the code as it is: {restamp_committed(c.case, c.kind)}")
     return 0
 
 
@@ -424,7 +451,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "readme":
             return _readme(args.check)
         if args.command == "fit":
-            return _fit(args.write)
+            return _fit(args.write, args.save, args.restamp)
         if args.command == "wire":
             return _wire(args)
         if args.command == "detect":

@@ -14,12 +14,11 @@ how to run each.
 """
 
 from lfc.testbed.andes_setup import prepare_andes
-from lfc.testbed.case import MicrogridCase, build_system
-from lfc.testbed.grid import GridCase, build_grid, case_design
-from lfc.testbed.grid_fit import GridFit, grid_design, grid_fit_report
+from lfc.testbed.fit import GridFit, grid_design, grid_fit_report
+from lfc.testbed.grids import GridCase, build_grid, case_design
 from lfc.testbed.loop import AndesLoop, AndesPlant, TestbedError
-from lfc.testbed.plant import FaultSpec
-from lfc.testbed.protection import OvercurrentRelay, OvercurrentSettings, phase_a_current
+from lfc.testbed.microgrid import (FaultSpec, MicrogridCase, OvercurrentRelay,
+                                   OvercurrentSettings, build_system, phase_a_current)
 from lfc.testbed.runners import ANDES_PLANT, is_andes_plant   # registers the runners (lfc.run)
 
 __all__ = ["AndesLoop", "AndesPlant", "FaultSpec", "GridCase", "GridFit", "MicrogridCase",

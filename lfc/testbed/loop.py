@@ -4,14 +4,14 @@ ANDES integrates the network (implicit trapezoidal, fixed ``step`` except
 around events).  Before every step it calls back into :class:`AndesLoop`,
 which logs the last accepted state, runs the case's protection and the
 frequency relays, and, when a control sample is due, hands every area's
-generator side (:class:`lfc.engine.GeneratorSide`: noise, estimator, AGC or
+generator side (:class:`lfc.generator.GeneratorSide`: noise, estimator, AGC or
 local integrator, attacks, filter — the engine's own compiled code) the area's
 state in design-model coordinates, and applies the command it returns.
 
 A case plugs in as an :class:`AndesPlant`: it builds its ANDES system, meters
 each area (:meth:`AndesPlant.measure`), applies commands and load changes, and
-may protect its lines.  The microgrid (:mod:`lfc.testbed.plant`) and the
-interconnected grids (:mod:`lfc.testbed.grid_plant`) are the two today; a new
+may protect its lines.  The microgrid (:mod:`lfc.testbed.microgrid`) and the
+interconnected grids (:mod:`lfc.testbed.grids`) are the two today; a new
 ANDES case is one such class.
 """
 
@@ -27,8 +27,9 @@ import numpy as np
 import pandas as pd
 
 from lfc._validate import check_flag
-from lfc.engine import GeneratorSide, sample_signal
+from lfc.engine import sample_signal
 from lfc.filters.coupled import CoupledFilter
+from lfc.generator import GeneratorSide, GridReading
 from lfc.relays import RelayBank, RelaySettings
 from lfc.testbed.andes_setup import quiet_load
 
@@ -178,7 +179,7 @@ class AndesLoop:
         The run is a function of these commands and of its plant, loads, relays
         and times alone: a run whose generator sides return the same commands
         at every sample is this run
-        (:func:`lfc.testbed.grid_plant.simulate_andes_grid_table` shares it, and
+        (:func:`lfc.testbed.grids.simulate_andes_grid_table` shares it, and
         :mod:`lfc.testbed.stored_runs` keeps it on disk).
     """
 
@@ -278,7 +279,7 @@ class AndesLoop:
 class GeneratorSides:
     """Every area's generator side at the control samples of a run: on ANDES
     (:class:`AndesLoop`), or replaying a logged run's samples without it
-    (:func:`lfc.testbed.grid_plant.simulate_andes_grid_table`, the stored runs).
+    (:func:`lfc.testbed.grids.simulate_andes_grid_table`, the stored runs).
 
     Parameters
     ----------
@@ -305,16 +306,15 @@ class GeneratorSides:
         grid = None
         coupled = self.coupled
         if coupled is not None:
-            grid = [0, coupled.grid_state(state[:, :5], state[:, 6]), self.commands,
-                    state[:, 5], *self._estimate(coupled, state, j)]
+            grid = GridReading(0, coupled.grid_state(state[:, :5], state[:, 6]), self.commands,
+                               state[:, 5], *self._estimate(coupled, state, j))
         net = self.network
         if net is not None:
             net.send(j)
             links = net.deliver(j, self.gens)
         for a, gen in enumerate(self.gens):
-            if grid is not None:
-                grid[0] = a
-            self.commands[a] = gen.step(j, state[a, :5], state[a, 7], state[a, 6], grid)
+            self.commands[a] = gen.step(j, state[a, :5], state[a, 7], state[a, 6],
+                                        None if grid is None else grid._replace(area=a))
         if net is not None:
             for a, gen in enumerate(self.gens):
                 net.publish(j, a, gen, state[a, :5], links[a], 0)
@@ -323,7 +323,7 @@ class GeneratorSides:
 
     def _estimate(self, coupled: CoupledFilter, state: np.ndarray, j: int) -> tuple:
         """What a coupled filter on its grid Kalman estimate reads at control sample
-        ``j`` besides the grid (:meth:`lfc.engine.GeneratorSide.step`): each area's
+        ``j`` besides the grid (:meth:`lfc.generator.GeneratorSide.step`): each area's
         metered ``dw_meas`` and ``rocof_meas`` with its generator side's noise, each
         area's metered export, the scratch, and the estimator's state, kept
         across samples; nothing without the estimate."""
@@ -338,6 +338,19 @@ class GeneratorSides:
             ym[2 * a:2 * a + 2] = state[a, 3:5] + gen.noise[j]
             ym[2 * n_a + a] = state[a, 6]
         return self._kalman
+
+
+class RecordedSides:
+    """Generator sides that return recorded commands, one row of ``commands`` (one
+    command per area, pu) per control sample: a recording computed again on ANDES
+    (:func:`lfc.testbed.grids.rerun`, :func:`lfc.testbed.microgrid.rerun`)."""
+
+    def __init__(self, commands: np.ndarray) -> None:
+        self.commands = commands
+
+    def sample(self, j: int, state: np.ndarray) -> np.ndarray:
+        """Control sample ``j``'s recorded commands (a new array); ``state`` is unread."""
+        return self.commands[j].copy()
 
 
 def _by_area(found: list[tuple[str, int, int]], t: np.ndarray, n_areas: int

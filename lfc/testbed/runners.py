@@ -13,8 +13,8 @@ from lfc.engine import check_load_measured
 from lfc.run import Runner, register, register_protocol
 from lfc.scenarios import grid_scenarios
 from lfc.simulate_multiarea import results_table
-from lfc.testbed.case import MicrogridCase
-from lfc.testbed.grid import GridCase
+from lfc.testbed.microgrid import MicrogridCase
+from lfc.testbed.grids import GridCase
 from lfc.testbed.loop import AndesPlant
 
 #: the methods of an ANDES plant (:class:`~lfc.testbed.loop.AndesPlant`)
@@ -24,7 +24,7 @@ ANDES_PLANT = tuple(n for n, v in vars(AndesPlant).items()
 
 def _microgrid(case: MicrogridCase, *, duration: float, design=None, **scenario):
     from lfc.testbed.fit import design_model
-    from lfc.testbed.plant import simulate_microgrid
+    from lfc.testbed.microgrid import simulate_microgrid
     check_load_measured({None: scenario.get("scc")}, scenario.get("estimator"),
                         scenario.get("load_feedforward", False))
     return simulate_microgrid(design if design is not None else design_model(case),
@@ -32,8 +32,8 @@ def _microgrid(case: MicrogridCase, *, duration: float, design=None, **scenario)
 
 
 def _grid_case(case: GridCase, *, duration: float, design=None, **scenario):
-    from lfc.testbed.grid_fit import grid_design
-    from lfc.testbed.grid_plant import simulate_andes_grid
+    from lfc.testbed.fit import grid_design
+    from lfc.testbed.grids import simulate_andes_grid
     check_load_measured(scenario.get("filters") or {}, scenario.get("estimator"),
                         scenario.get("feedforward", True))
     return simulate_andes_grid(design if design is not None else grid_design(case),
@@ -42,8 +42,8 @@ def _grid_case(case: GridCase, *, duration: float, design=None, **scenario):
 
 def _grid_case_many(case: GridCase, scenarios: list[dict], *, duration: float, design=None,
                     keep: str = "metrics", **kwargs):
-    from lfc.testbed.grid_fit import grid_design
-    from lfc.testbed.grid_plant import simulate_andes_grid_table
+    from lfc.testbed.fit import grid_design
+    from lfc.testbed.grids import simulate_andes_grid_table
     results = simulate_andes_grid_table(design if design is not None else grid_design(case),
                                         grid_scenarios(scenarios), duration=duration,
                                         case=case, **kwargs)
@@ -51,7 +51,7 @@ def _grid_case_many(case: GridCase, scenarios: list[dict], *, duration: float, d
 
 
 def _own_plant(plant, *, duration: float, design=None, **scenario):
-    from lfc.testbed.grid_plant import simulate_andes_grid
+    from lfc.testbed.grids import simulate_andes_grid
     if design is None:
         raise ValueError("design is required for an AndesPlant of your own: a "
                          "MultiAreaParams of its n_areas areas")

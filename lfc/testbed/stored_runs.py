@@ -3,7 +3,7 @@
 A grid run on ANDES is a function of its plant-side inputs (the case, loads,
 relays, times) and of the commands its generator sides return at every control
 sample (:attr:`lfc.testbed.loop.AndesLoop.samples`).  A finished run is stored
-under a key of every argument of its :func:`~lfc.testbed.grid_plant.simulate_andes_grid`
+under a key of every argument of its :func:`~lfc.testbed.grids.simulate_andes_grid`
 call but its ``filters`` (:func:`scenario_keys`) and of the code that turns commands
 into the plant's record (:func:`plant_digest`: the ANDES adapter, the grid cases, the
 relays, the load signals, and the versions of ANDES and the numerical packages under
@@ -42,6 +42,7 @@ import io
 import lzma
 import os
 import pickle
+import struct
 import sys
 import types
 import warnings
@@ -73,21 +74,31 @@ _TRUSTED = ("lfc", "numpy", "pandas", "builtins", "copyreg", "collections", "_co
 
 _PACKAGE = Path(__file__).resolve().parents[1]
 #: per kind of plant, the code that turns a run's commands into its record: files of the
-#: package (the ANDES adapter, the case, the relays and the load signals, the compiled
-#: helpers they use) and the functions and classes of other modules (``module:name``:
-#: the plant, its run, the record); ANDES' own code is keyed by its version
-#: (``PLANT_PACKAGES``)
+#: package (the ANDES adapter, the relays and the load signals, the compiled helpers they
+#: use) and definitions of other modules (``module:name``: the case and its builder, the
+#: plant, its run, the record, the microgrid's over-current relay), each with every
+#: top-level definition of its module it names (:func:`source_digest`); ANDES' own code
+#: is keyed by its version (``PLANT_PACKAGES``)
 PLANT_CODE = {
-    "grid": ("_jit.py", "relays.py", "signals.py", "testbed/grid.py", "testbed/loop.py",
-             "lfc.engine:sample_signal", "lfc.testbed.grid_plant:GridPlant",
-             "lfc.testbed.grid_plant:_run", "lfc.testbed.grid_plant:_Shared"),
-    "microgrid": ("_jit.py", "relays.py", "signals.py", "testbed/case.py",
-                  "testbed/protection.py", "testbed/loop.py", "lfc.engine:sample_signal",
-                  "lfc.testbed.plant:MicrogridPlant", "lfc.testbed.plant:_run",
-                  "lfc.testbed.plant:MicrogridRun"),
+    "grid": ("_jit.py", "relays.py", "signals.py", "testbed/loop.py", "lfc.engine:sample_signal",
+             "lfc.testbed.grids:GridCase", "lfc.testbed.grids:build_grid",
+             "lfc.testbed.grids:GridPlant", "lfc.testbed.grids:_run",
+             "lfc.testbed.grids:_Shared"),
+    "microgrid": ("_jit.py", "relays.py", "signals.py", "testbed/loop.py",
+                  "lfc.engine:sample_signal", "lfc.testbed.microgrid:MicrogridCase",
+                  "lfc.testbed.microgrid:build_system", "lfc.testbed.microgrid:MicrogridPlant",
+                  "lfc.testbed.microgrid:_run", "lfc.testbed.microgrid:MicrogridRun",
+                  "lfc.testbed.microgrid:OvercurrentRelay",
+                  "lfc.testbed.microgrid:phase_a_current"),
 }
 #: the installed packages a run depends on
 PLANT_PACKAGES = ("andes", "kvxopt", "numba", "numpy", "scipy", "sympy")
+
+
+def same_float(a: float, b: float) -> bool:
+    """``a`` and ``b`` are the same float, bit for bit (0.0 is not -0.0): a replayed
+    command equals the recorded one."""
+    return struct.pack("<d", a) == struct.pack("<d", b)
 
 
 def enabled() -> bool:
@@ -162,25 +173,43 @@ def _plant_digest(root: str, kind: str) -> str:
 
 def source_digest(root: Path, files: tuple[str, ...], functions: tuple[str, ...] = ()) -> str:
     """SHA-256 of the code of the files ``files`` under ``root`` (the package) and of
-    ``functions`` (``module:name``, a top-level function or class of the package): of
-    their syntax trees without docstrings (an edit of a comment or a docstring leaves
-    it as it is, an edit of the code changes it)."""
+    ``functions`` (``module:name``, a top-level function, class or assignment of the
+    package) with every top-level definition of the same module they name, and those
+    name, and so on: of their syntax trees without docstrings (an edit of a comment or a
+    docstring leaves it as it is, an edit of the code changes it)."""
     digest = hashlib.sha256()
     for name in files:
         digest.update(name.encode() + _code(ast.parse((root / name).read_text())).encode())
     for name in functions:
         module, function = name.split(":")
         path = root / (module.split(".", 1)[1].replace(".", "/") + ".py")
-        digest.update(name.encode() + _code(_definition(path, function)).encode())
+        for used, node in _definitions(path, function):
+            digest.update(f"{module}:{used}".encode() + _code(node).encode())
     return digest.hexdigest()
 
 
-def _definition(path: Path, name: str) -> ast.AST:
-    """The top-level function or class ``name`` of the file ``path``."""
+def _definitions(path: Path, name: str) -> list[tuple[str, ast.AST]]:
+    """The top-level function, class or assignment ``name`` of the file ``path`` and
+    every top-level definition it names, directly or through another, by name."""
+    tops: dict[str, ast.AST] = {}
     for node in ast.parse(path.read_text()).body:
-        if isinstance(node, (ast.FunctionDef, ast.ClassDef)) and node.name == name:
-            return node
-    raise ValueError(f"{path} defines no function or class {name!r}")
+        if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+            tops[node.name] = node
+        elif isinstance(node, (ast.Assign, ast.AnnAssign)):
+            for target in node.targets if isinstance(node, ast.Assign) else [node.target]:
+                if isinstance(target, ast.Name):
+                    tops[target.id] = node
+    if name not in tops:
+        raise ValueError(f"{path} defines no function, class or assignment {name!r}")
+    found, todo = {}, [name]
+    while todo:
+        used = todo.pop()
+        if used in found:
+            continue
+        found[used] = tops[used]
+        todo += [n.id for n in ast.walk(tops[used])
+                 if isinstance(n, ast.Name) and n.id in tops and n.id not in found]
+    return sorted(found.items(), key=lambda item: item[0])
 
 
 def _code(tree: ast.AST) -> str:
@@ -202,7 +231,7 @@ def scenario_keys(call: dict[str, Any], kind: str = "grid") -> tuple[bytes | Non
     -------
     share : bytes or None
         The pickle: calls of one process with equal ones differ in their filters
-        alone, and share a run (:func:`~lfc.testbed.grid_plant.simulate_andes_grid_table`).
+        alone, and share a run (:func:`~lfc.testbed.grids.simulate_andes_grid_table`).
         None for a call that shares with none: one over a ``network`` (its link has
         a state of its own), or one whose arguments do not pickle.
     store : str or None

@@ -17,7 +17,7 @@ filter sits at the generator):
 * the **man in the middle** (:class:`lfc.wire.relay.Relay`) forwards every
   frame and applies the attack (:class:`lfc.wire.attacks.WireAttack`);
 * the **generator** receives the command, runs its safety filter in the
-  engine's generator side (:class:`lfc.engine.GeneratorSide`, ``network=True``:
+  engine's generator side (:class:`lfc.generator.GeneratorSide`, ``network=True``:
   the same compiled code as :func:`lfc.simulate`), holds the command on the
   plant for one control period, watches its relays and publishes its report.
 
@@ -43,10 +43,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lfc._validate import check_seed, in_engine_types
-from lfc.engine import GeneratorSide, check_area_keys
+from lfc._validate import check_seed
+from lfc.engine import check_area_keys
 from lfc.filters import SafetyFilter
 from lfc.filters.coupled import CoupledFilter
+from lfc.generator import GeneratorSide
 from lfc.lockstep import LinearGrid
 from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams, as_grid
@@ -239,7 +240,7 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
         raise ValueError("agc='centre' is for one area: a grid's AGC integrates its area's "
                          "tie-line export, metered at the generator side (agc='generator')")
     ratio = check_timing(duration, dt, control_period, n_a, grid.n_states)
-    relays = in_engine_types(relays_or_default(relays))
+    relays = relays_or_default(relays)
     period = ratio * dt
     attacks = attack if isinstance(attack, dict) else {0: attack}
     check_area_keys(attacks, n_a, "attack")
@@ -328,9 +329,9 @@ def _on_andes(case, kind: str, *, duration: float, attack, scc, protocol: str, l
         raise ValueError("agc: on ANDES the integrators run at the generators "
                          "(agc='generator')")
     from lfc.testbed.fit import design_model
-    from lfc.testbed.grid_fit import grid_design
-    from lfc.testbed.grid_plant import simulate_andes_grid
-    from lfc.testbed.plant import simulate_microgrid
+    from lfc.testbed.fit import grid_design
+    from lfc.testbed.grids import simulate_andes_grid
+    from lfc.testbed.microgrid import simulate_microgrid
     n_a = 1 if kind == "microgrid" else case.n_areas
     attacks = attack if isinstance(attack, dict) else {0: attack}
     check_area_keys(attacks, n_a, "attack")
