@@ -32,8 +32,7 @@ _WHERE = {
     "Chirp": "lfc.signals", "Ramp": "lfc.signals", "Samples": "lfc.signals",
     "Sinusoid": "lfc.signals", "Square": "lfc.signals", "Step": "lfc.signals",
     "Scenario": "lfc.scenarios",
-    "SimResult": "lfc.simulate",
-    "MultiAreaResult": "lfc.simulate_multiarea",
+    "Result": "lfc.result",
     "simulate": "lfc.run", "simulate_many": "lfc.run",
 }
 

@@ -3,7 +3,7 @@
 
 The engine of :func:`lfc.simulate` (:mod:`lfc.engine`) run over a table of
 scenarios, one row each; the result is that table with the
-:meth:`SimResult.metrics` fields added.  Each row may set its own plant, noise
+:meth:`Result.metrics` fields added.  Each row may set its own plant, noise
 (and so a Kalman estimate) and filter.  No trace is kept, so memory grows with
 N, not with N × duration.
 
@@ -52,7 +52,8 @@ from lfc.relays import RELAY_NAMES, RelaySettings, relays_or_default
 from lfc.run import Runner, only_for_metrics, register
 from lfc.scenarios import Scenario, Scenarios
 from lfc.signals import Chirp, Ramp, Samples, Signal, Sinusoid, Square, Step
-from lfc.simulate import METRIC_KEYS, check_timing, simulate_area
+from lfc.simulate import check_timing, simulate_area
+from lfc.result import METRIC_KEYS
 
 WAVEFORMS = ("sinusoid", "square", "chirp", "step", "ramp", "samples", "none")
 CHANNELS = ("pc", "wref", "load")
@@ -377,7 +378,7 @@ def table_results(params: LFCParams, scenarios: pd.DataFrame, *, duration: float
                   relays: RelaySettings | None = None, dt: float = 1e-3,
                   control_period: float = 0.01, progress: bool = True) -> list:
     """Every row of a scenario table run as :func:`lfc.simulate` runs it, with its
-    trace: one :class:`~lfc.simulate.SimResult` per row, in the table's order,
+    trace: one :class:`~lfc.Result` per row, in the table's order,
     whose ``metrics()`` are the row :func:`simulate_table` gives (the same
     numbers).  ``simulate_many(params, table, keep="results")``."""
     scenarios = check_scenarios(scenarios)

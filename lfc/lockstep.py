@@ -132,18 +132,17 @@ class LinearGrid:
 
     def result(self, single: bool, tc: np.ndarray, ctrl: list[np.ndarray], filters: dict,
                settings: dict):
-        """The run as :func:`lfc.simulate` reports it: a ``SimResult`` for one area
-        (``single``), else a ``MultiAreaResult``; ``tc`` the control samples, ``ctrl``
+        """The run as :func:`lfc.simulate` reports it (a :class:`~lfc.Result`, of one
+        area if ``single``); ``tc`` the control samples, ``ctrl``
         each area's generator-side rows, ``filters`` each area's filter."""
         from lfc.model import STATES
-        from lfc.simulate import result
-        from lfc.simulate_multiarea import multiarea_result
+        from lfc.result import area_result, grid_result
         states, trips = self.states(), self.trip_rows()
         if single:
             trace = pd.DataFrame({"t": self.t})
             for i, name in enumerate(STATES):
                 trace[name] = states[:, 0, i]
             trace["p_load"] = self.p[:, 0]
-            return result(trace, tc, ctrl[0], trips[0], filters.get(0), settings)
-        return multiarea_result(self.grid, self.t, states, self.p, self.exports(), trips, tc,
+            return area_result(trace, tc, ctrl[0], trips[0], filters.get(0), settings)
+        return grid_result(self.grid, self.t, states, self.p, self.exports(), trips, tc,
                                 ctrl, filters, settings)

@@ -4,18 +4,19 @@
 Both take the plant first, and the plant decides what a scenario is:
 
 =========================  ==========================================  ===========================
-plant                      ``simulate`` keywords, result               ``simulate_many`` scenarios
+plant                      ``simulate`` keywords                       ``simulate_many`` scenarios
 =========================  ==========================================  ===========================
 ``LFCParams``              ``pc_attack``, ``wref_attack``, ``load``,   a DataFrame, one row each
-                           ``scc``, ... → ``SimResult``                (``lfc.batch``)
+                           ``scc``, ...                                (``lfc.batch``)
 ``MultiAreaParams``        ``attacks``, ``loads``, ``filters``, ...    a list of dicts of those
-                           → ``MultiAreaResult``                       keywords
+                                                                       keywords
 ``MicrogridCase`` (ANDES)  as ``LFCParams``, plus ``design``, ``fault``  —
 ``GridCase`` (ANDES)       as ``MultiAreaParams``, plus ``design``     a list of dicts
 ``AndesPlant`` (yours)     as ``MultiAreaParams``, ``design`` needed   —
 =========================  ==========================================  ===========================
 
-On ANDES the filters and the AGC keep a linear design model, as in the paper:
+Every plant's run returns one type, :class:`lfc.Result` (an area's result is its own
+only area). On ANDES the filters and the AGC keep a linear design model, as in the paper:
 ``design`` (default: the model fitted to the case, cached on disk).
 
 A plant brings its own way to run: a :class:`Runner` registered for its type
@@ -163,7 +164,7 @@ def simulate(plant, scenario=None, *, duration: float, design=None, **kwargs):
 
     Returns
     -------
-    SimResult or MultiAreaResult
+    Result
     """
     runner = runner_of(plant)
     _check_design(runner, design)
@@ -191,8 +192,8 @@ def simulate_many(plant, scenarios, *, duration: float, design=None, keep: str =
         ``GridCase`` only (default the model fitted to the case).
     keep : {"metrics", "results"}
         ``"metrics"`` (default): the metrics table; ``"results"``: a list of one
-        :class:`SimResult` or :class:`MultiAreaResult` per scenario, in their
-        order, whose ``metrics()`` are the table's rows.
+        :class:`lfc.Result` per scenario, in their order, whose ``table()`` rows are
+        the metrics table's.
     **kwargs
         For an area: ``relays``, ``dt``, ``control_period``, ``progress``, and with
         ``keep="metrics"`` ``executor``, ``chunk_size``, ``out``, ``lanes``; for a

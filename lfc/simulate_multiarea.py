@@ -46,7 +46,7 @@ few samples, no trip), a lightly damped area (damping ratio 0.03) flags it
 for seconds, and on Kundur's two-area model as fitted to ANDES (a stiff tie,
 T = 98 pu) a −2.5 pu ACE bias makes one area flag it for about 3 s of
 samples (no trip).  ``outside`` is in the metrics and the alarm log;
-:meth:`MultiAreaResult.disturbance_step` measures assumption (c) on a run.
+:meth:`Result.disturbance_step` measures assumption (c) on a run.
 A stiff tie also widens the default bound: for the default area (M 4 s)
 behind T = 98 pu it leaves the certificate nothing, and ``"certified"``
 raises ``ValueError`` saying so.  With measurement noise and each area's
@@ -59,29 +59,26 @@ filter's error bound does not cover the tie-line flow's inter-area swing
 
 from __future__ import annotations
 
-import json
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from lfc._validate import ParameterTypeError, check_count, check_folder, check_index
+from lfc._validate import ParameterTypeError, check_count
 from lfc.batch import metrics_frame
 from lfc.estimation import check_noise_std
 from lfc.engine import METRICS, check_area_keys, sample_signal
 from lfc.filters import SafetyFilter, build
 from lfc.filters.coupled import CoupledFilter
-from lfc.model import STATES
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams
 from lfc.relays import RELAY_NAMES, RelaySettings, relays_or_default
 from lfc.run import Runner, register
 from lfc.scenarios import Scenarios, grid_scenarios
-from lfc.simulate import METRIC_KEYS, SimResult, check_timing, metrics_table, result
+from lfc.simulate import check_timing
+from lfc.result import METRIC_KEYS, Result, grid_result
 
-__all__ = ["MultiAreaResult", "area_filter", "grid_results", "multiarea_result",
-           "results_table", "simulate_grid_linear", "simulate_grid_table"]
+__all__ = ["area_filter", "grid_results", "results_table", "simulate_grid_linear",
+           "simulate_grid_table"]
 
 
 def area_filter(params: MultiAreaParams, area: int,
@@ -109,78 +106,13 @@ def estimate_noise(estimator: object, noise_std) -> tuple[float, float] | None:
     return None
 
 
-@dataclass
-class MultiAreaResult:
-    """Outcome of one multi-area simulation.
-
-    Attributes
-    ----------
-    areas : tuple of SimResult
-        Area ``i`` as :func:`lfc.simulate` would report it (its trace's
-        ``p_load`` is the area's own load; its alarms are its filter's).
-    trace : DataFrame
-        Every plant step: ``t`` (s) and, for each area ``i``, ``pc_ref_{i}``,
-        ``pc_{i}`` (pu), the states ``dPg_{i}`` ... ``rocof_meas_{i}``,
-        ``p_load_{i}`` (pu), ``p_tie_{i}`` (export deviation, pu), ``p_net_{i}``
-        (load plus export: the area's net disturbance, pu), ``ace_{i}`` (ACE
-        from the measured frequency, pu), ``wref_{i}`` and ``scc_active_{i}``.
-    settings : dict
-    """
-
-    areas: tuple[SimResult, ...]
-    trace: pd.DataFrame
-    settings: dict = field(default_factory=dict)
-
-    def metrics(self) -> dict[int, dict]:
-        """Each area's :meth:`SimResult.metrics` (JSON-serializable)."""
-        return {i: r.metrics() for i, r in enumerate(self.areas)}
-
-    def table(self) -> pd.DataFrame:
-        """The metrics as :func:`lfc.simulate_many` rows, one per area: ``area`` and
-        ``METRIC_KEYS`` (an area's result gives the same, :meth:`SimResult.table`)."""
-        return metrics_table([r.metrics() for r in self.areas])
-
-    @property
-    def tripped(self) -> bool:
-        """Whether a relay tripped in any area."""
-        return any(len(r.trips) for r in self.areas)
-
-    def disturbance_step(self, area: int) -> float:
-        """The largest move of area ``area``'s net disturbance ``p_net`` within
-        one control period, from its value at the period's sample to any plant
-        step up to the next sample (pu).  Assumption (c) of the certified
-        filters' guarantee (module docstring) held on this run where it is at
-        most the filter's ``load_bound``."""
-        area = check_index("area", area, len(self.areas))
-        t = self.trace["t"].to_numpy()
-        w = self.trace[f"p_net_{area}"].to_numpy()
-        period = np.floor(t / self.settings["control_period"] + 1e-9).astype(int)
-        first = np.searchsorted(period, period)          # each step's period's sample
-        starts = np.unique(first)
-        within = np.abs(w - w[first]).max()
-        to_next = np.abs(np.diff(w[starts])).max() if len(starts) > 1 else 0.0
-        return float(max(within, to_next))
-
-    def save(self, directory: str | Path) -> Path:
-        """Write ``trace.csv``, ``metrics.json``, ``settings.json`` and each area's
-        files (:meth:`SimResult.save`) in ``area_{i}/`` under ``directory``."""
-        out = check_folder("directory", directory)
-        out.mkdir(parents=True, exist_ok=True)
-        self.trace.to_csv(out / "trace.csv", index=False)
-        (out / "metrics.json").write_text(json.dumps(self.metrics(), indent=2))
-        (out / "settings.json").write_text(json.dumps(self.settings, indent=2, default=str))
-        for i, r in enumerate(self.areas):
-            r.save(out / f"area_{i}")
-        return out
-
-
 def simulate_grid_linear(params: MultiAreaParams, *, duration: float,
                        attacks: dict | None = None, loads: dict | None = None,
                        filters: dict | None = None, relays: RelaySettings | None = None,
                        estimator=None, noise_std: tuple[float, float] = (0.0, 0.0),
                        seed: int = 0, dt: float = 1e-3, control_period: float = 0.01,
                        stop_on_trip: bool = False, feedforward: bool = True,
-                       relay_noise: bool = False, anti_windup: bool = False) -> MultiAreaResult:
+                       relay_noise: bool = False, anti_windup: bool = False) -> Result:
     """Simulate an interconnected grid from equilibrium.
 
     Parameters
@@ -219,7 +151,7 @@ def simulate_grid_linear(params: MultiAreaParams, *, duration: float,
 
     Returns
     -------
-    MultiAreaResult
+    Result
     """
     if not isinstance(params, MultiAreaParams):
         raise ParameterTypeError(f"params must be a MultiAreaParams, got "
@@ -255,33 +187,8 @@ def simulate_grid_linear(params: MultiAreaParams, *, duration: float,
                 "stop_on_trip": stop_on_trip, "feedforward": feedforward,
                 "anti_windup": anti_windup,
                 "relay_noise": relay_noise}
-    return multiarea_result(params, t, states, p_load, tie, trips, sc.tc,
-                            [run.ctrl[:, a] for a in range(n_a)], built, settings)
-
-
-def multiarea_result(params: MultiAreaParams, t: np.ndarray, states: np.ndarray,
-                     p_load: np.ndarray, p_tie: np.ndarray, trips: list[pd.DataFrame],
-                     tc: np.ndarray, ctrl: list[np.ndarray], filters: dict,
-                     settings: dict, p_net: np.ndarray | None = None) -> MultiAreaResult:
-    """A :class:`MultiAreaResult` from what a plant logged: times ``t`` (s),
-    ``states`` (samples, areas, 5), each area's load and tie-line export
-    (samples, areas; pu), its trips, the control samples ``tc`` and each area's
-    generator-side rows ``ctrl`` (:func:`lfc.simulate.result`); ``p_net`` the
-    net disturbance if metered (default load plus export)."""
-    areas, columns = [], {"t": t}
-    for a in range(params.n_areas):
-        trace = pd.DataFrame({"t": t})
-        for k, name in enumerate(STATES):
-            trace[name] = states[:, a, k]
-        trace["p_load"] = p_load[:, a]
-        res = result(trace, tc, ctrl[a], trips[a], filters.get(a), {**settings, "area": a})
-        areas.append(res)
-        trace = res.trace
-        trace["p_tie"] = p_tie[:, a]
-        trace["p_net"] = trace["p_load"] + trace["p_tie"] if p_net is None else p_net[:, a]
-        trace["ace"] = trace["p_tie"] + params.biases()[a] * trace["dw_meas"]
-        columns.update({f"{c}_{a}": trace[c].to_numpy() for c in trace.columns if c != "t"})
-    return MultiAreaResult(tuple(areas), pd.DataFrame(columns), settings)
+    return grid_result(params, t, states, p_load, tie, trips, sc.tc,
+                       [run.ctrl[:, a] for a in range(n_a)], built, settings)
 
 
 #: the keys of a grid scenario (the keywords of :func:`simulate_grid_linear` it sets)
@@ -304,7 +211,7 @@ def check_grid_scenarios(scenarios: object) -> None:
 
 def grid_results(params: MultiAreaParams, scenarios: list[dict], *, duration: float,
                  relays: RelaySettings | None = None, dt: float = 1e-3,
-                 control_period: float = 0.01, jobs: int = 2) -> list[MultiAreaResult]:
+                 control_period: float = 0.01, jobs: int = 2) -> list[Result]:
     """Each scenario (a dict of ``SCENARIO_KEYS``) run by :func:`simulate_grid_linear`
     with its trace, in ``jobs`` threads (the compiled loop runs without the GIL);
     the results in the scenarios' order, whose ``metrics()`` are the rows
@@ -314,7 +221,7 @@ def grid_results(params: MultiAreaParams, scenarios: list[dict], *, duration: fl
     check_count("jobs", jobs)
     check_grid_scenarios(scenarios)
 
-    def run(s: dict) -> MultiAreaResult:
+    def run(s: dict) -> Result:
         return simulate_grid_linear(params, duration=duration, relays=relays, dt=dt,
                                     control_period=control_period, **s)
 
@@ -322,7 +229,7 @@ def grid_results(params: MultiAreaParams, scenarios: list[dict], *, duration: fl
         return list(pool.map(run, scenarios))
 
 
-def results_table(results: list[MultiAreaResult]) -> pd.DataFrame:
+def results_table(results: list[Result]) -> pd.DataFrame:
     """The metrics of grid results as :func:`simulate_grid_table` returns them: one
     row per scenario and area, ``scenario``, ``area`` and ``METRIC_KEYS``."""
     return pd.DataFrame([{"scenario": i, "area": a, **m} for i, r in enumerate(results)
@@ -353,7 +260,7 @@ def simulate_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
     -------
     DataFrame
         One row per scenario and area: ``scenario``, ``area`` and the metrics
-        :data:`lfc.simulate.METRIC_KEYS` (the keys of
+        :data:`lfc.result.METRIC_KEYS` (the keys of
         ``simulate(...).metrics()[area]``, with the same values).
     """
     check_timing(duration, dt, control_period)

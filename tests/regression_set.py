@@ -60,7 +60,7 @@ def _frame(prefix: str, frame: pd.DataFrame, every: int = 1) -> dict[str, np.nda
 
 
 def _sim(result) -> dict[str, np.ndarray]:
-    """A :class:`lfc.SimResult` as arrays."""
+    """A :class:`lfc.Result` as arrays."""
     out = {}
     out.update(_frame("trace", result.trace, TRACE_EVERY))
     out.update(_frame("controls", result.controls))
@@ -76,7 +76,7 @@ def _sim(result) -> dict[str, np.ndarray]:
 
 
 def _multi(result) -> dict[str, np.ndarray]:
-    """A :class:`lfc.MultiAreaResult` as arrays."""
+    """A :class:`lfc.Result` as arrays."""
     out = _frame("trace", result.trace, TRACE_EVERY)
     for a, area in enumerate(result.areas):
         out.update({f"area{a}.{k}": v for k, v in _sim(area).items()

@@ -2,11 +2,11 @@
 
 import math
 
-from lfc.simulate import METRIC_KEYS
+from lfc.result import METRIC_KEYS
 
 
 def same_metrics(metrics: dict, row) -> bool:
-    """``SimResult.metrics()`` equals a ``simulate_many`` row: the same keys, the
+    """``Result.metrics()`` equals a ``simulate_many`` row: the same keys, the
     same values (floats to 1e-12 relative: the loop sums the modification as it
     goes, pandas pairwise; None where the row has NaN or None: no trip)."""
     if list(metrics) != list(METRIC_KEYS):

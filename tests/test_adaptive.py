@@ -58,7 +58,7 @@ DEFAULT = ("certified", "robust-low-corner", "two-area-coupled")   # replayed in
 
 
 def _verdict(r) -> tuple[float, bool, int]:
-    areas = [r] if isinstance(r, lfc.SimResult) else list(r.areas)
+    areas = r.areas
     metrics = [a.metrics() for a in areas]
     return (float(max(severity(m, RELAYS) for m in metrics)),
             any(m["tripped"] for m in metrics), sum(m["outside"] for m in metrics))

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 import lfc
 from lfc import simulate_many
 from lfc.batch import scenario_signal
-from lfc.simulate import METRIC_KEYS
+from lfc.result import METRIC_KEYS
 from same_metrics import same_metrics
 from lfc.experiments.redteam import piecewise_attack_table
 

@@ -18,7 +18,7 @@ from lfc.repro import runner
 from lfc.repro.cli import main
 from lfc.repro.manifest import CHAPTERS, chapter
 from lfc.repro.notebook import check_parameters, record_claims
-from lfc.simulate import METRIC_KEYS
+from lfc.result import METRIC_KEYS
 
 PANELS = {"tutorial": {"no_scc", "scc"}, "fig4": {"a", "b", "c", "d"},
           "fig5": {"no_scc", "scc"}, "fig6": {"no_scc", "scc"}, "fig7": {"no_scc", "scc"},

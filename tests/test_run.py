@@ -17,7 +17,7 @@ ATTACK = lfc.Sinusoid(0.5, 1.0, start=1.0)
 def test_simulate_dispatches_on_the_plant():
     area = lfc.simulate(P, duration=2.0, pc_attack=ATTACK)
     grid = lfc.simulate(TWO, duration=2.0, attacks={0: {"pc": ATTACK}})
-    assert isinstance(area, lfc.SimResult) and isinstance(grid, lfc.MultiAreaResult)
+    assert type(area) is lfc.Result and type(grid) is lfc.Result
     one = lfc.simulate(lfc.MultiAreaParams(areas=(P,)), duration=2.0,
                        attacks={0: {"pc": ATTACK}}, feedforward=False)
     pd.testing.assert_frame_equal(one.areas[0].trace[area.trace.columns], area.trace)
@@ -62,7 +62,7 @@ def test_simulate_many_keeps_the_metrics_table_or_the_results_for_every_plant():
                           "seed": [0, 3, 0]})
     metrics = lfc.simulate_many(P, table, duration=3.0, progress=False)
     results = lfc.simulate_many(P, table, duration=3.0, progress=False, keep="results")
-    assert all(isinstance(r, lfc.SimResult) for r in results) and results[2].metrics()["tripped"]
+    assert all(isinstance(r, lfc.Result) for r in results) and results[2].metrics()["tripped"]
     _same(metrics, results, areas=False)
     scenarios = [{}, {"filters": {0: "certified", 1: "certified"}}]
     shared = {"attacks": {0: {"pc": lfc.Sinusoid(1.0, 0.5, start=1.0)}}, "anti_windup": True}
@@ -151,3 +151,44 @@ def test_a_plant_brings_its_runner_and_an_andes_plant_is_known_by_its_methods():
     assert runner_of(Mine()).name == "area"              # a subclass runs as its base
     with pytest.raises(TypeError, match="register takes a type and a Runner"):
         register(Mine(), Runner("area", "x", "an x", lfc.simulate))
+
+
+def test_one_result_type_an_area_is_its_own_only_area_and_a_grid_holds_its_areas(tmp_path):
+    """Issue "One": every plant's run returns :class:`lfc.Result`.  An area's result is
+    its own only area; a grid's holds each area's, and its controls, trips, alarms and
+    line trips are every area's after an ``area`` column, in area order; its first trip
+    names its area; ``table()`` is one row per area on both; ``save`` writes an area's
+    frames, a grid's per area."""
+    attacks = {0: {"pc": lfc.Square(2.0, 0.5, start=0.5)}, 1: {"pc": ATTACK}}
+    filters = {0: lfc.SafetyFilter(TWO.areas[0], alpha=20.0)}
+    grid = lfc.simulate(TWO, duration=4.0, attacks=attacks, filters=filters)
+    area = grid.areas[0]
+    assert area.areas == (area,) and area.n_areas == 1 and grid.n_areas == 2
+    assert area.grid == () and grid.grid == grid.areas
+    for name in ("controls", "trips", "alarms", "line_trips"):
+        frame = getattr(grid, name)
+        assert list(frame.columns) == ["area", *getattr(area, name).columns], name
+        parts = [getattr(r, name) for r in grid.areas]
+        assert list(frame.area) == [a for a, p in enumerate(parts) for _ in range(len(p))]
+        for a, part in enumerate(parts):
+            got = frame[frame.area == a].drop(columns="area").reset_index(drop=True)
+            pd.testing.assert_frame_equal(got, part.reset_index(drop=True), check_dtype=False)
+    assert grid.tripped and len(grid.alarms) == len(area.alarms) > 0
+    first = min((float(r.trips.t.min()), a) for a, r in enumerate(grid.areas) if r.tripped)
+    assert (grid.first_trip["t"], grid.first_trip["area"]) == first
+    assert set(grid.areas[first[1]].first_trip) == {"relay", "t"}
+    pd.testing.assert_frame_equal(grid.table(), pd.concat(
+        [r.table().assign(area=a) for a, r in enumerate(grid.areas)], ignore_index=True))
+    assert grid.metrics() == {a: r.metrics() for a, r in enumerate(grid.areas)}
+    grid.save(tmp_path / "grid")
+    area.save(tmp_path / "area")
+    assert {p.name for p in (tmp_path / "grid").iterdir()} == {
+        "trace.csv", "metrics.json", "settings.json", "area_0", "area_1"}
+    assert {p.name for p in (tmp_path / "area").iterdir()} == {
+        "trace.csv", "metrics.json", "settings.json", "controls.csv", "trips.csv",
+        "alarms.csv", "line_trips.csv"}
+    assert grid.disturbance_step(1) > 0.0            # the tie-line flow moves p_net_1
+    with pytest.raises(ValueError, match="area"):
+        grid.disturbance_step(2)
+    step = lfc.simulate(P, duration=2.0, load=lfc.Step(0.05, 0.505))
+    assert step.disturbance_step() == pytest.approx(0.05)

@@ -19,7 +19,7 @@ from test_lanes import mixed
 import lfc
 from lfc.batch import scenario_row, table_scenarios
 from lfc.scenarios import Scenario
-from lfc.simulate import METRIC_KEYS
+from lfc.result import METRIC_KEYS
 
 P, TWO = lfc.LFCParams(), lfc.MultiAreaParams.two_area()
 ATTACK = lfc.Sinusoid(1.0, 0.5, start=0.5)

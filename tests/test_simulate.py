@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from lfc import KalmanFilter, LFCParams, Samples, SafetyFilter, Sinusoid, Step, simulate
-from lfc.simulate import ALARM_COLUMNS, METRIC_KEYS
+from lfc.result import ALARM_COLUMNS, METRIC_KEYS
 
 P = LFCParams()
 

@@ -10,7 +10,7 @@ import lfc
 from lfc._files import read_stored, write_stored
 from lfc.experiments.scenarios import ATTACK_START, FIG4_AMPLITUDE
 from lfc.model import STATES
-from lfc.simulate import METRIC_KEYS
+from lfc.result import METRIC_KEYS
 from lfc.testbed import (FaultSpec, MicrogridCase, OvercurrentSettings, TestbedError,
                          build_system, phase_a_current)
 from lfc.testbed import fit as fitting

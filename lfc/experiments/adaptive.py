@@ -40,12 +40,9 @@ from lfc.lockstep import LinearGrid
 from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams, as_grid
 from lfc.relays import RelaySettings, relays_or_default
-from lfc.simulate import SimResult, check_timing
-from lfc.simulate_multiarea import (
-    MultiAreaResult,
-    area_filter,
-    estimate_noise,
-)
+from lfc.simulate import check_timing
+from lfc.result import Result
+from lfc.simulate_multiarea import area_filter, estimate_noise
 
 PROBE = 1e3      # pu: a command beyond every interval, which each filter clips to its edge
 U_REF = CTRL_COLUMNS.index("u_ref")
@@ -146,7 +143,7 @@ def run_adaptive(params: LFCParams | MultiAreaParams, filters, attack: AdaptiveA
                  loads: dict | None = None, relays: RelaySettings | None = None,
                  estimator=None, noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0,
                  dt: float = 1e-3, control_period: float = 0.01, anti_windup: bool = True,
-                 load_feedforward: bool | None = None) -> SimResult | MultiAreaResult:
+                 load_feedforward: bool | None = None) -> Result:
     """Run the adaptive attacker against ``filters``.
 
     Parameters
@@ -174,7 +171,7 @@ def run_adaptive(params: LFCParams | MultiAreaParams, filters, attack: AdaptiveA
 
     Returns
     -------
-    SimResult (one area) or MultiAreaResult
+    Result
         As :func:`lfc.simulate` returns; ``settings["attack"]`` names the policy.
     """
     if not isinstance(attack, AdaptiveAttack):
@@ -294,7 +291,7 @@ def adaptive_search(params: LFCParams | MultiAreaParams, filters, *, duration: f
             attack = AdaptiveAttack(lookahead=int(round(theta[0])), inset=float(theta[1]),
                                     frequency_weight=float(theta[2]))
             r = run_adaptive(params, filters, attack, duration=duration, **scenario)
-            areas = [r] if isinstance(r, SimResult) else list(r.areas)
+            areas = r.areas
             metrics = [a.metrics() for a in areas]
             cache[key] = {"theta": [float(v) for v in theta],
                           "severity": float(max(severity(m, relays) for m in metrics)),

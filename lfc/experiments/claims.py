@@ -1,5 +1,5 @@
 """The paper's claims, each defined once: a function per figure from its runs
-(name -> :class:`~lfc.simulate.SimResult`) to ``{claim: holds}``.
+(name -> :class:`~lfc.Result`) to ``{claim: holds}``.
 
 The notebooks call them in their last cell (and ``record_claims`` asserts them);
 ``tests/test_paper_claims.py`` checks them on the notebooks' own runs.  Panel
@@ -13,16 +13,16 @@ import pandas as pd
 
 from lfc.experiments.scenarios import ATTACK_START
 from lfc.relays import RelaySettings
-from lfc.simulate import SimResult
+from lfc.result import Result
 
-Runs = dict[str, SimResult]
+Runs = dict[str, Result]
 
 
 def _bools(claims: dict) -> dict[str, bool]:
     return {k: bool(v) for k, v in claims.items()}
 
 
-def _first_relay(run: SimResult) -> str | None:
+def _first_relay(run: Result) -> str | None:
     return (run.first_trip or {}).get("relay")
 
 
@@ -72,7 +72,7 @@ def fig5_claims(runs: Runs, relays: RelaySettings) -> dict[str, bool]:
     })
 
 
-def _plant_trace(run: SimResult):
+def _plant_trace(run: Result):
     """The trace without the filter's own barrier values (NaN without a filter)."""
     return run.trace.drop(columns=["h_freq", "h_rocof"])
 
@@ -91,7 +91,7 @@ def fig6_claims(runs: Runs) -> dict[str, bool]:
     })
 
 
-def recovered_after_clearing(run: SimResult) -> bool:
+def recovered_after_clearing(run: Result) -> bool:
     """Whether, after the breaker opened, the measured frequency deviation ends
     below half its peak and the generator voltage within 0.95–1.05 pu."""
     after = run.trace[run.trace.t > run.line_trips.open_t.iloc[0]]

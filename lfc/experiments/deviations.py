@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from lfc._format import count, number
-from lfc.simulate import SimResult
+from lfc.result import Result
 
 __all__ = ["DEVIATIONS", "Deviation", "multiarea_records"]
 
@@ -28,7 +28,7 @@ class Deviation:
     ``matches(metrics)`` says whether the run failed the claim in the documented
     way (which relay, within what range); ``explain(metrics)`` says why, with the
     run's numbers.  ``metrics`` maps each run of the notebook to its
-    :meth:`SimResult.metrics` (as in ``metrics.json``).  A failure that does not
+    :meth:`Result.metrics` (as in ``metrics.json``).  A failure that does not
     match, or a documented deviation that no longer occurs, fails the notebook.
     """
 
@@ -114,23 +114,23 @@ DEVIATIONS = (
 
 
 def multiarea_records(load_runs: dict, attack_runs: dict[str, dict], model_runs: dict,
-                      load_bounds: dict[int, float]) -> tuple[dict[str, SimResult], dict]:
+                      load_bounds: dict[int, float]) -> tuple[dict[str, Result], dict]:
     """Notebook 09's runs, one record per area, for ``metrics.json`` and the deviations.
 
     Parameters
     ----------
-    load_runs : dict of str to MultiAreaResult
+    load_runs : dict of str to Result
         Load steps, by filter setting.
-    attack_runs : dict of str to dict of str to MultiAreaResult
+    attack_runs : dict of str to dict of str to Result
         Attack name -> filter setting -> run (on the notebook's plant).
-    model_runs : dict of str to MultiAreaResult
+    model_runs : dict of str to Result
         Attack name -> the certified filters' run on the fitted design model itself.
     load_bounds : dict of int to float
         Each area's certified filter's ``load_bound`` (pu).
 
     Returns
     -------
-    areas : dict of str to SimResult
+    areas : dict of str to Result
         ``"<load|attack>/<setting>/area<i>"`` (and ``"model/<attack>/certified/area<i>"``)
         -> that area's result.
     extra : dict of str to dict

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Callable
 if TYPE_CHECKING:
     from lfc.model import LFCParams
     from lfc.relays import RelaySettings
-    from lfc.simulate import SimResult
+    from lfc.result import Result
 
 PLANTS = ("linear", "testbed")   # single-area chapters: the linear model, the ANDES microgrid
 # Notebook 09 runs on all three: the linear model; on ANDES "testbed" is Kundur's two-area
@@ -64,7 +64,7 @@ def check_plant(plant: str, plants: tuple[str, ...] = PLANTS) -> None:
         raise ValueError(f"plant must be one of {plants}, got {plant!r}")
 
 
-def simulator(plant: str) -> Callable[..., SimResult]:
+def simulator(plant: str) -> Callable[..., Result]:
     """The simulation function of ``plant``, called ``(params, **keywords)``:
     :func:`lfc.simulate` of ``params``, or of the ANDES microgrid with the
     design model ``params``."""
@@ -76,7 +76,7 @@ def simulator(plant: str) -> Callable[..., SimResult]:
     return partial(_on_microgrid, MicrogridCase())
 
 
-def _on_microgrid(case, params: LFCParams, **kwargs) -> SimResult:
+def _on_microgrid(case, params: LFCParams, **kwargs) -> Result:
     """:func:`lfc.simulate` of the microgrid with the design model ``params``."""
     from lfc.run import simulate
     return simulate(case, design=params, **kwargs)

@@ -20,7 +20,7 @@ from lfc.experiments.deviations import DEVIATIONS
 from lfc.experiments.scenarios import ALL_PLANTS, PLANTS, check_plant, design_params
 from lfc.model import LFCParams
 from lfc.relays import RelaySettings
-from lfc.simulate import SimResult
+from lfc.result import Result
 
 __all__ = ["PLANTS", "PLANT_LABELS", "cached_frame", "check_parameters", "check_plant",
            "figure_name", "markdown_table", "notebook_parameters", "readme_mismatches",
@@ -191,9 +191,9 @@ def figure_name(base: str, plant: str) -> str:
     return base if plant == "linear" else f"{base}_{plant}"
 
 
-def write_metrics(results_dir: str | Path, runs: dict[str, SimResult],
+def write_metrics(results_dir: str | Path, runs: dict[str, Result],
                   parameters: dict, extra: dict[str, dict] | None = None) -> Path:
-    """Write ``metrics.json``: each run name -> ``SimResult.metrics()`` plus
+    """Write ``metrics.json``: each run name -> ``Result.metrics()`` plus
     ``parameters`` and that run's ``extra`` entries (e.g. ``oc_trip_t``)."""
     out = Path(results_dir)
     out.mkdir(parents=True, exist_ok=True)

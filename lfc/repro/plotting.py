@@ -21,7 +21,7 @@ from matplotlib.ticker import NullFormatter, ScalarFormatter
 from lfc._files import note_written, replace_atomic
 from lfc.experiments.surface import scc_label
 from lfc.relays import RelaySettings
-from lfc.simulate import SimResult
+from lfc.result import Result
 
 TITLE_WIDTH = 90   # characters per line of a title above a legend column: longer ones wrap
 FREQUENCY_RELAYS = {"OF2": "over-frequency", "UF2": "under-frequency"}
@@ -48,7 +48,7 @@ def _limits(ax, values: list[float], label: str) -> None:
         ax.axhline(v, color="k", ls="--", lw=1, label=label if i == 0 else None)
 
 
-def _command(ax, runs: dict[str, SimResult], labels: dict[str, str]) -> None:
+def _command(ax, runs: dict[str, Result], labels: dict[str, str]) -> None:
     for key, label in labels.items():
         tr = runs[key].trace
         ax.plot(tr.t, tr.pc, color=COLORS[key], lw=1.2, label=f"{label}: $\\Delta P_c^*$")
@@ -67,7 +67,7 @@ def _finish(axes, title: str) -> None:
     axes[0].set_title(wrap_title(title))
 
 
-def _rocof(ax, runs: dict[str, SimResult], labels: dict[str, str], relays: RelaySettings,
+def _rocof(ax, runs: dict[str, Result], labels: dict[str, str], relays: RelaySettings,
            f_nominal: float, dashed: tuple[str, ...] = (), mark_trips: bool = False) -> None:
     for key, label in labels.items():
         tr = runs[key].trace
@@ -87,7 +87,7 @@ def _rocof(ax, runs: dict[str, SimResult], labels: dict[str, str], relays: Relay
     ax.set_ylabel("Measured ROCOF $\\hat{\\dot\\omega}$ (pu/s)")
 
 
-def rocof_figure(runs: dict[str, SimResult], labels: dict[str, str], relays: RelaySettings,
+def rocof_figure(runs: dict[str, Result], labels: dict[str, str], relays: RelaySettings,
                  title: str, mark_trips: bool = False, f_nominal: float = 60.0) -> Figure:
     """Command (top) and measured ROCOF (bottom, pu/s) with the ROCOF setting dashed
     (in pu/s and in Hz/s at ``f_nominal``, Hz);
@@ -100,7 +100,7 @@ def rocof_figure(runs: dict[str, SimResult], labels: dict[str, str], relays: Rel
     return fig
 
 
-def rocof_panels_figure(runs: dict[str, SimResult], labels: dict[str, str],
+def rocof_panels_figure(runs: dict[str, Result], labels: dict[str, str],
                         relays: RelaySettings, title: str, attacks: dict[str, str],
                         f_nominal: float = 60.0) -> Figure:
     """One panel per run, as the paper's Fig. 4 (a)–(d): the command (applied and,
@@ -133,7 +133,7 @@ def rocof_panels_figure(runs: dict[str, SimResult], labels: dict[str, str],
     return fig
 
 
-def frequency_figure(runs: dict[str, SimResult], labels: dict[str, str],
+def frequency_figure(runs: dict[str, Result], labels: dict[str, str],
                      relays: RelaySettings, title: str, top: str = "command",
                      f_nominal: float = 60.0) -> Figure:
     """Command or mechanical power (top) and measured frequency (bottom, pu) with OF2/UF2."""
@@ -151,7 +151,7 @@ def frequency_figure(runs: dict[str, SimResult], labels: dict[str, str],
     return fig
 
 
-def _frequency(ax, runs: dict[str, SimResult], labels: dict[str, str], relays: RelaySettings,
+def _frequency(ax, runs: dict[str, Result], labels: dict[str, str], relays: RelaySettings,
                f_nominal: float, dashed: tuple[str, ...]) -> None:
     """Measured frequency (pu) with the OF2/UF2 settings on the side(s) it moves to."""
     for key, label in labels.items():
@@ -171,7 +171,7 @@ def _frequency_limits(ax, dw: list, relays: RelaySettings) -> None:
     _limits(ax, [v for _, v in shown], " / ".join(f"{n} {v:g} pu" for n, v in shown))
 
 
-def fault_figure(runs: dict[str, SimResult], currents: dict[str, tuple[np.ndarray, np.ndarray]],
+def fault_figure(runs: dict[str, Result], currents: dict[str, tuple[np.ndarray, np.ndarray]],
                  labels: dict[str, str], relays: RelaySettings, title: str, *,
                  f_nominal: float, line_label: str) -> Figure:
     """Fig. 7: phase-A current of the protected line (A; ``currents`` maps each run
@@ -460,7 +460,7 @@ AREA_STYLES = ("-", "--", ":")
 def areas_figure(runs: dict, labels: dict[str, str], relays: RelaySettings, title: str,
                  panels: tuple[str, ...] = ("command", "frequency", "rocof"),
                  f_nominal: float = 60.0) -> Figure:
-    """An interconnected grid: each run (a :class:`~lfc.simulate_multiarea.MultiAreaResult`,
+    """An interconnected grid: each run (a :class:`~lfc.Result`,
     its colour) and each area (its line style), one panel per quantity in
     ``panels`` — ``"command"`` (applied ΔP_c, pu), ``"frequency"`` (pu, OF2/UF2
     dashed on the side it moves to), ``"rocof"`` (pu/s, the setting dashed),

@@ -4,9 +4,9 @@ two interconnected grids (Kundur's two-area system, the IEEE 39-bus system).
 The SCC keeps its linear design model (as in the paper); only the plant
 changes.  A case is a plant of :func:`lfc.simulate` and :func:`lfc.simulate_many`:
 ``lfc.simulate(MicrogridCase(), ...)`` takes the keywords of an area (plus a
-fault) and returns a :class:`~lfc.simulate.SimResult`;
+fault) and returns a :class:`~lfc.Result`;
 ``lfc.simulate(GridCase.kundur(), ...)`` those of a grid, returning a
-:class:`~lfc.MultiAreaResult`.  ``design=`` is the generator sides' model
+:class:`~lfc.Result`.  ``design=`` is the generator sides' model
 (default: the one fitted to the case).  Each case is an
 :class:`~lfc.testbed.loop.AndesPlant` run by the one ANDES adapter,
 :class:`~lfc.testbed.loop.AndesLoop`; :mod:`lfc.testbed.runners` tells :func:`lfc.simulate`

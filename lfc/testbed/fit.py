@@ -443,7 +443,7 @@ class GridFit:
 
 def record_grid_experiments(case: GridCase, initial: MultiAreaParams) -> list:
     """The two experiments (module docstring), run with the design model
-    ``initial``'s AGC: their :class:`MultiAreaResult`."""
+    ``initial``'s AGC: their :class:`Result`."""
     from lfc.testbed.grids import simulate_andes_grid
 
     return [simulate_andes_grid(initial, duration=GRID_FIT_DURATION, case=case,

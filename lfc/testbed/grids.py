@@ -106,7 +106,8 @@ from lfc.generator import GeneratorSide
 from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams
 from lfc.relays import RelaySettings, relays_or_default
-from lfc.simulate_multiarea import MultiAreaResult, area_filter, estimate_noise, multiarea_result
+from lfc.simulate_multiarea import area_filter, estimate_noise
+from lfc.result import Result, grid_result
 from lfc.testbed.loop import AndesLoop, AndesPlant, GeneratorSides, RecordedSides, TestbedError
 
 GOVERNORS = ("TGOV1", "TGOV1N")
@@ -322,7 +323,7 @@ def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
                         stop_on_trip: bool = False, feedforward: bool = True,
                         anti_windup: bool = False, case: GridCase | None = None,
                         plant: AndesPlant | None = None, network=None
-                        ) -> MultiAreaResult:
+                        ) -> Result:
     """Simulate an interconnected grid on ANDES with AGC and filters; the
     arguments and result of :func:`lfc.simulate` (a grid), plus the ones below.
 
@@ -349,7 +350,7 @@ def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
 
     Returns
     -------
-    MultiAreaResult
+    Result
         One trace row per accepted ANDES step.  Read back without ANDES from a
         run stored by an earlier call with the same arguments but ``filters``
         whose generator sides returned the same commands at every control
@@ -458,7 +459,7 @@ def _setup(params: MultiAreaParams, *, duration: float, attacks, loads, filters,
 
 
 def _run_stored(make: Callable[[], _Setup], share: bytes | None, key: str | None
-                ) -> tuple[MultiAreaResult, _Shared | None, bool]:
+                ) -> tuple[Result, _Shared | None, bool]:
     """The result of the setup ``make()`` builds, its run if it is shareable
     (else None), and whether ANDES ran: a run stored under ``key``
     (:mod:`lfc.testbed.stored_runs`; ``share``: the call's pickle) that its
@@ -495,16 +496,16 @@ def _run(setup: _Setup) -> _Shared:
                    np.array([u for _, u in loop.samples]).reshape(-1, n_a))
 
 
-def _result(setup: _Setup, run: _Shared) -> MultiAreaResult:
+def _result(setup: _Setup, run: _Shared) -> Result:
     """The result of ``setup``'s generator sides on the run ``run``."""
     per_area = run.per_area
-    return multiarea_result(setup.params, run.t, per_area[:, :, :5], per_area[:, :, 5],
+    return grid_result(setup.params, run.t, per_area[:, :, :5], per_area[:, :, 5],
                             per_area[:, :, 6], run.trips, setup.tc,
                             [g.ctrl for g in setup.gens], setup.built, setup.settings,
                             p_net=per_area[:, :, 7])
 
 
-def _replay(setup: _Setup, run: _Shared) -> MultiAreaResult | None:
+def _replay(setup: _Setup, run: _Shared) -> Result | None:
     """``setup``'s result without running ANDES, if it is ``run``: its generator
     sides read ``run``'s control samples and return the same commands, bit for
     bit, at every one (then ANDES would integrate the same run: the plant, its
@@ -630,7 +631,7 @@ class GridPlant:
 
 def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
                               jobs: int = 2, progress: bool = True,
-                              **common) -> list[MultiAreaResult]:
+                              **common) -> list[Result]:
     """Many :func:`simulate_andes_grid` runs in ``jobs`` processes (ANDES holds the
     GIL), each scenario a dict of its keyword arguments, ``common`` the ones
     they share; the results in the scenarios' order.
@@ -665,7 +666,7 @@ def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
     for i in sorted(range(len(calls)), key=lambda i: (bool(calls[i].get("filters")), i)):
         if keys[i] is not None:
             leader.setdefault(keys[i], i)
-    out: list[MultiAreaResult | None] = [None] * len(calls)
+    out: list[Result | None] = [None] * len(calls)
     shared: dict[bytes, _Shared] = {}    # a finished leader's run
     speculated: set[bytes] = set()       # groups one of whose others started early
     todo = list(range(len(calls)))
@@ -704,7 +705,7 @@ def simulate_andes_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
         todo.remove(i)
         return i
 
-    def finished(i: int, result: MultiAreaResult, run: _Shared | None, andes: bool) -> None:
+    def finished(i: int, result: Result, run: _Shared | None, andes: bool) -> None:
         out[i] = result
         if keys[i] is not None and run is not None:
             shared[keys[i]] = run
@@ -756,7 +757,7 @@ def _bound(params: MultiAreaParams, call: dict) -> dict:
 
 
 def _run_call(params: MultiAreaParams, call: dict, share: bytes | None, key: str | None,
-              keep: bool) -> tuple[MultiAreaResult, _Shared | None, bool]:
+              keep: bool) -> tuple[Result, _Shared | None, bool]:
     """Run a table's scenario (in a worker process), reading back a run stored
     under ``key`` (``share``: its call's pickle); what it leaves to share if
     ``keep`` and it is shareable; whether ANDES ran."""

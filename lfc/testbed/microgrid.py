@@ -55,7 +55,7 @@ from lfc.generator import GeneratorSide
 from lfc.model import STATES, LFCParams
 from lfc.relays import RelaySettings, relays_or_default
 from lfc.signals import SignalLike
-from lfc.simulate import SimResult, result
+from lfc.result import Result, area_result
 from lfc.testbed.loop import (AndesLoop, BreakerOpens, GeneratorSides, RecordedSides,
                               TestbedError)
 
@@ -440,9 +440,9 @@ def simulate_microgrid(params: LFCParams, *, duration: float,
                        stop_on_trip: bool = False, load_feedforward: bool = False,
                        anti_windup: bool = False, case: MicrogridCase | None = None,
                        overcurrent: OvercurrentSettings | None = None,
-                       network=None) -> SimResult:
+                       network=None) -> Result:
     """Simulate the closed loop on the ANDES microgrid; the same arguments and
-    :class:`~lfc.simulate.SimResult` as :func:`lfc.simulate`, plus the ones below.
+    :class:`~lfc.Result` as :func:`lfc.simulate`, plus the ones below.
 
     Parameters
     ----------
@@ -468,7 +468,7 @@ def simulate_microgrid(params: LFCParams, *, duration: float,
 
     Returns
     -------
-    SimResult
+    Result
         ``trace`` has one row per accepted ANDES step, with the extra columns
         ``v_gen`` (B6 voltage, pu) and ``i_line_re``/``i_line_im`` (protected
         line's current phasor at B6, pu); ``line_trips`` holds the over-current
@@ -598,7 +598,7 @@ def rerun(rec) -> MicrogridRun:
 
 
 def _result(run: MicrogridRun, gen: GeneratorSide, case: MicrogridCase,
-            settings: dict) -> SimResult:
+            settings: dict) -> Result:
     cols = ("t", *STATES, "p_load", *TESTBED_COLUMNS)
     trace = pd.DataFrame(run.rows[:, [0, 1, 2, 3, 4, 5, 6, 9, 10, 11]], columns=list(cols))
     trace["t"] = trace["t"].round(9)  # ANDES accumulates its time in floating point
@@ -608,7 +608,7 @@ def _result(run: MicrogridRun, gen: GeneratorSide, case: MicrogridCase,
         [(case.protected_line, round(trip_t, 9), round(open_t, 9))]
         if trip_t is not None and trip_t <= t_end else [],
         columns=["line", "trip_t", "open_t"])
-    return result(trace, gen.tc, gen.ctrl, run.trips, gen.scc, settings, line_trips)
+    return area_result(trace, gen.tc, gen.ctrl, run.trips, gen.scc, settings, line_trips)
 
 
 def _check_scenario(case: MicrogridCase, duration: float, step: float, control_period: float,

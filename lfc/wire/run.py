@@ -52,9 +52,10 @@ from lfc.lockstep import LinearGrid
 from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams, as_grid
 from lfc.relays import relays_or_default
+from lfc.result import Result
 from lfc.run import runner_of
-from lfc.simulate import SimResult, check_timing
-from lfc.simulate_multiarea import MultiAreaResult, area_filter
+from lfc.simulate import check_timing
+from lfc.simulate_multiarea import area_filter
 from lfc.wire.attacks import WireAttack
 from lfc.wire.link import Link
 from lfc.wire.relay import Impairment
@@ -81,7 +82,7 @@ class WireResult:
 
     Attributes
     ----------
-    sim : SimResult or MultiAreaResult
+    sim : Result
         The generator side(s) as :func:`lfc.simulate` reports them (trace,
         controls, trips, the filter's alarms).
     exchanges : DataFrame
@@ -107,7 +108,7 @@ class WireResult:
     settings : dict
     """
 
-    sim: SimResult | MultiAreaResult
+    sim: Result
     exchanges: pd.DataFrame
     alarm_log: pd.DataFrame
     frames: list
@@ -116,8 +117,7 @@ class WireResult:
 
     @property
     def tripped(self) -> bool:
-        return self.sim.tripped if isinstance(self.sim, MultiAreaResult) else \
-            not self.sim.trips.empty
+        return self.sim.tripped
 
     def forensics(self, area: int = 0) -> dict:
         """The operator's estimate of the attack on ``area`` from the alarm log
@@ -132,8 +132,7 @@ class WireResult:
         areas), the exchanges' median and 99th-percentile round trips and the
         generator's 99th-percentile lateness (ms, real time)."""
         ex = self.exchanges
-        areas = self.sim.areas if isinstance(self.sim, MultiAreaResult) else (self.sim,)
-        trips = pd.concat([a.trips for a in areas]).sort_values("t")
+        areas, trips = self.sim.areas, self.sim.trips.sort_values("t")
         return pd.DataFrame([{
             "protocol": self.settings["protocol"], "agc": self.settings["agc"],
             "attack": self.settings["attack_name"],
