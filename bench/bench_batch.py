@@ -40,7 +40,7 @@ import pandas as pd
 from lfc import LFCParams, SafetyFilter, Sinusoid, simulate, simulate_many
 
 ROOT = Path(__file__).resolve().parents[1]
-REFERENCE = "a73c376"  # numpy engine (lfc/batch.py's _Batch), before lfc/engine.py
+REFERENCE = "a73c376"  # numpy engine (lfc/tables.py's _Batch), before lfc/engine.py
 REFERENCE_N = 2000
 DURATION, DT = 30.0, 1e-3
 REFERENCE_RUN = """
@@ -169,7 +169,7 @@ def _cpu_ghz() -> float:
 def fill() -> None:
     """Lanes against one at a time (one core) as the scenarios per plant grow."""
     from lfc import scenarios as scenario_tables
-    from lfc.batch import run_chunk
+    from lfc.tables import run_chunk
     from lfc.relays import RelaySettings
     n, rng = 960, np.random.default_rng(0)
     print(f"{'filter':<12}{'per plant':>10}{'one (s)':>9}{'lanes (s)':>10}{'one/lanes':>10}")

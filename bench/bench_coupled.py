@@ -48,7 +48,7 @@ from lfc.filters.bounds import pair
 from lfc.filters.contract import contract_design
 from lfc.filters.coupled import CoupledFilter
 from lfc.filters.coupled_kernel import row_intervals
-from lfc.simulate_multiarea import area_filter
+from lfc.linear_grid import area_filter
 
 DURATION, REPEAT = 20.0, 3
 THREE = MultiAreaParams.three_area()

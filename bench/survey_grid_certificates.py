@@ -368,7 +368,7 @@ def strict_level() -> None:
 
 def restoration() -> None:
     from lfc.filters.coupled import CoupledFilter
-    from lfc.simulate_multiarea import simulate_grid_linear
+    from lfc.linear_grid import simulate_grid_linear
     print("| grid | filters | held after a 0.05 pu step (held_after_step) | restored after a "
           "step of -0.05, +0.05 pu in area 0, then in area 1 |")
     print("|---|---|---|---|")

@@ -17,7 +17,6 @@ imports nothing else: the command line and a notebook's first cell start at once
 from __future__ import annotations
 
 import importlib
-import types
 
 __version__ = "0.3.0"   # also in pyproject.toml (tests/test_engine.py checks they match)
 
@@ -51,20 +50,3 @@ def __getattr__(name: str):
 
 def __dir__() -> list[str]:
     return sorted(set(globals()) | set(_WHERE))
-
-
-class _Package(types.ModuleType):
-    """The package's module type: the submodule ``lfc.simulate`` (results) never
-    replaces the function ``lfc.simulate`` (importing a submodule binds its name in
-    the package, which would)."""
-
-    def __setattr__(self, name: str, value: object) -> None:
-        if name in _WHERE and isinstance(value, types.ModuleType):
-            return
-        super().__setattr__(name, value)
-
-
-import sys  # noqa: E402
-
-sys.modules[__name__].__class__ = _Package
-del sys

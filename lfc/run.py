@@ -7,7 +7,7 @@ Both take the plant first, and the plant decides what a scenario is:
 plant                      ``simulate`` keywords                       ``simulate_many`` scenarios
 =========================  ==========================================  ===========================
 ``LFCParams``              ``pc_attack``, ``wref_attack``, ``load``,   a DataFrame, one row each
-                           ``scc``, ...                                (``lfc.batch``)
+                           ``scc``, ...                                (``lfc.tables``)
 ``MultiAreaParams``        ``attacks``, ``loads``, ``filters``, ...    a list of dicts of those
                                                                        keywords
 ``MicrogridCase`` (ANDES)  as ``LFCParams``, plus ``design``, ``fault``  —
@@ -22,7 +22,7 @@ only area). On ANDES the filters and the AGC keep a linear design model, as in t
 A plant brings its own way to run: a :class:`Runner` registered for its type
 (:func:`register`) or for a protocol it follows (:func:`register_protocol`: an
 ``AndesPlant`` of your own is recognized by its methods).  The linear plants register
-theirs in :mod:`lfc.simulate` and :mod:`lfc.simulate_multiarea`, the ANDES cases in
+theirs in :mod:`lfc.tables` (an area) and :mod:`lfc.linear_grid`, the ANDES cases in
 :mod:`lfc.testbed.runners`; :data:`PLUGINS` are imported the first time a plant
 matches no runner, so this module names no plant type and imports no testbed.
 """
@@ -40,7 +40,7 @@ __all__ = ["simulate", "simulate_many"]
 
 #: the modules that register runners, imported when a plant matches no runner (a module
 #: whose optional dependency is missing, the testbed without ANDES, is skipped)
-PLUGINS = ("lfc.simulate", "lfc.simulate_multiarea", "lfc.testbed")
+PLUGINS = ("lfc.tables", "lfc.linear_grid", "lfc.testbed")
 #: what :func:`simulate_many` returns: the metrics table, or one result per scenario
 KEEP = ("metrics", "results")
 
@@ -156,8 +156,8 @@ def simulate(plant, scenario=None, *, duration: float, design=None, **kwargs):
         ANDES cases only: the design model of the generator side (default the
         model fitted to the case; required for an ``AndesPlant`` of your own).
     **kwargs
-        The scenario: for an area, :func:`lfc.simulate.simulate_area`'s
-        keywords; for a grid, :func:`lfc.simulate_multiarea.simulate_grid_linear`'s;
+        The scenario: for an area, :func:`lfc.linear_area.simulate_area`'s
+        keywords; for a grid, :func:`lfc.linear_grid.simulate_grid_linear`'s;
         on ANDES also :func:`lfc.testbed.microgrid.simulate_microgrid`'s (``fault``,
         ``overcurrent``, ``step``) or
         :func:`lfc.testbed.grids.simulate_andes_grid`'s (``step``).
@@ -184,7 +184,7 @@ def simulate_many(plant, scenarios, *, duration: float, design=None, keep: str =
         The plant (module docstring).
     scenarios : DataFrame, list of Scenario or list of dict
         A list of :class:`lfc.scenarios.Scenario` for every plant; for an area also a
-        table (:func:`lfc.batch.simulate_table`: one row per scenario), for a grid a
+        table (:func:`lfc.tables.simulate_table`: one row per scenario), for a grid a
         list of dicts of :func:`simulate`'s keywords.
     duration : float
         Simulated time (s), > 0.

@@ -306,8 +306,8 @@ class Scenario:
     measures, checked once when made.
 
     A single area is area 0 of a grid of one area: :meth:`for_area` takes
-    :func:`lfc.simulate`'s keywords of an area, :func:`lfc.batch.table_scenarios` a
-    scenario table's rows (:func:`lfc.batch.scenario_row` writes one back), and
+    :func:`lfc.simulate`'s keywords of an area, :func:`lfc.tables.table_scenarios` a
+    scenario table's rows (:func:`lfc.tables.scenario_row` writes one back), and
     ``lfc.simulate(plant, scenario)`` and ``lfc.simulate_many(plant, scenarios)`` run
     it on any plant (:meth:`keywords` gives the plant's form).
 

@@ -11,7 +11,7 @@ import pytest
 
 import lfc
 from lfc import LFCParams, MultiAreaParams
-from lfc.simulate_multiarea import simulate_grid_linear
+from lfc.linear_grid import simulate_grid_linear
 
 TWO = MultiAreaParams.two_area()
 PULSE = lfc.Step(3.0, start=1.0, stop=11.0)    # pu on area 0's ACE, 10 s

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 import lfc
 from lfc import simulate_many
-from lfc.batch import scenario_signal
+from lfc.tables import scenario_signal
 from lfc.result import METRIC_KEYS
 from same_metrics import same_metrics
 from lfc.experiments.redteam import piecewise_attack_table
@@ -121,7 +121,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 def slowly(*args):   # a chunk takes milliseconds: give the test time to kill the run
     time.sleep(0.5)
-    return lfc.batch.run_chunk(*args)
+    return lfc.tables.run_chunk(*args)
 
 class Slow(ThreadPoolExecutor):
     def submit(self, fn, *args):

@@ -25,7 +25,7 @@ from lfc.filters.base import MAX_ABS_INPUT
 from lfc.filters.contract import ContractOptions, contract_design
 from lfc.filters.coupled_set import output_rows, reduced_model
 from lfc.model import zoh
-from lfc.simulate_multiarea import simulate_grid_linear
+from lfc.linear_grid import simulate_grid_linear
 from test_coupled import LIGHT, THREE, battery, ieee39, kundur, ring
 from test_coupled_baseline import STEP
 

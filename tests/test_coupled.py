@@ -23,7 +23,7 @@ from lfc.filters.base import INVALID, OUTSIDE
 from lfc.filters.coupled import CoupledFilter, CoupledOptions
 from lfc.filters.coupled_kernel import row_intervals
 from lfc.filters.coupled_set import reduced_model
-from lfc.simulate_multiarea import simulate_grid_linear
+from lfc.linear_grid import simulate_grid_linear
 import tiers
 from test_coupled_baseline import STEP, step_battery
 
@@ -731,7 +731,7 @@ def test_on_andes_ieee39_the_red_teams_winner_leaves_the_certificate_only_beyond
       Rigor issue, whose gains are about 1 % smaller, the same attack drove those
       commands to -1 and +0.65 pu and tripped ROCOF after the flags: without the
       range the outcome on ANDES sits at the edge.  The per-area certified
-      filters, kept within the same range (``simulate_multiarea.area_filter``),
+      filters, kept within the same range (``linear_grid.area_filter``),
       trip nothing on that winner; without the range they trip on it; nor do the
       contracts (boxes of ±0.15 pu)."""
     from lfc.experiments.redteam import coordinated_attacks, coordinated_search

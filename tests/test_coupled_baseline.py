@@ -17,7 +17,7 @@ import tiers
 import lfc
 from lfc import MultiAreaParams
 from lfc.filters.bounds import tie_step_bound
-from lfc.simulate_multiarea import simulate_grid_linear, simulate_grid_table
+from lfc.linear_grid import simulate_grid_linear, simulate_grid_table
 
 RELAYS = lfc.RelaySettings()
 INSTANTS = (2.0, 3.37, 5.0, 7.71)   # s, while the attacks run (they start at 1 s)

@@ -24,7 +24,7 @@ from lfc.filters.coupled import CoupledFilter, CoupledOptions
 from lfc.filters.coupled_kernel import RHO_NEW
 from lfc.filters.coupled_set import load_error_steps
 from lfc.experiments.redteam import severity as sev
-from lfc.simulate_multiarea import simulate_grid_linear
+from lfc.linear_grid import simulate_grid_linear
 from test_coupled import RELAYS, THREE, battery, ieee39, kundur
 import tiers
 from test_coupled_baseline import attacks, tally

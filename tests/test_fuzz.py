@@ -292,7 +292,7 @@ def test_fuzz_a_runs_size_is_checked_by_its_states_before_anything_is_allocated(
     """``check_timing`` scales the longest run by the grid's size: a run it accepts
     traces at most ``MAX_TRACE_VALUES`` values; one it refuses says how many GB."""
     from lfc.engine import N_CTRL
-    from lfc.simulate import MAX_TRACE_VALUES, check_timing
+    from lfc.linear_area import MAX_TRACE_VALUES, check_timing
     n_states = 5 * n_areas + max(n_areas - 1, 0)
     duration = round(duration / dt) * dt
     try:

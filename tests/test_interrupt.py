@@ -22,7 +22,7 @@ import pandas as pd
 import probe
 import pytest
 
-from lfc import batch
+from lfc import tables
 from lfc._pool import completed
 from lfc.repro import book
 
@@ -115,7 +115,7 @@ def test_ctrl_c_on_batch_stops_its_workers_and_leaves_only_complete_chunks(tmp_p
     assert 1 <= len(kept) < n // size and not (out / "results.csv").exists()
     for path in kept:                       # every file left is whole, none partial
         k = int(path.name.split("_")[1])     # chunk_<number>_<key>.csv
-        assert batch._read_chunk(path, pd.RangeIndex(k * size, (k + 1) * size)) is not None
+        assert tables._read_chunk(path, pd.RangeIndex(k * size, (k + 1) * size)) is not None
     done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
     assert len(pd.read_csv(out / "results.csv")) == n

@@ -13,7 +13,7 @@ import pytest
 import lfc
 from lfc.filters import base, certified, contract, coupled, coupled_kernel, paper
 from lfc.filters.base import Layout
-from lfc.simulate_multiarea import area_filter
+from lfc.linear_grid import area_filter
 
 P, RELAYS = lfc.LFCParams(), lfc.RelaySettings()
 FILTERS = Path(lfc.__file__).parent / "filters"

@@ -13,7 +13,7 @@ import lfc
 from lfc.experiments.redteam import coordinated_search, severity
 from lfc.multiarea import MultiAreaParams, discretize_grid, multiarea_matrices
 from lfc.filters.bounds import tie_step_bound
-from lfc.simulate_multiarea import area_filter
+from lfc.linear_grid import area_filter
 
 RELAYS = lfc.RelaySettings()
 TWO = MultiAreaParams.two_area()
@@ -315,7 +315,7 @@ def test_finding_the_hold_recheck_fails_under_tie_drift_so_the_guarantee_can_end
     although assumption (c) holds at every period: the held command was
     certified for the net disturbance of an earlier sample, and the tie-line
     flow has drifted by more than ``load_bound`` since.  The guarantee (module
-    docstring of :mod:`lfc.simulate_multiarea`) ends there; this run still
+    docstring of :mod:`lfc.linear_grid`) ends there; this run still
     does not trip.  Without the net disturbance (``feedforward=False``) the
     same attack trips ROCOF."""
     attacks = {2: {"pc": lfc.Sinusoid(1.0, 0.5, start=1.0)}}

@@ -17,9 +17,9 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 import lfc
-from lfc import batch
+from lfc import tables
 from lfc import simulate_many
-from lfc.batch import ChunkWarning
+from lfc.tables import ChunkWarning
 from lfc.repro.cli import main
 
 P = lfc.LFCParams()
@@ -93,7 +93,7 @@ def test_a_damaged_chunk_is_recomputed_with_a_warning_naming_it(tmp_path, damage
 def test_chunks_of_other_code_are_not_reused(tmp_path, monkeypatch):
     simulate_many(P, table(), duration=5.0, chunk_size=2, out=tmp_path, progress=False)
     old = chunk_files(tmp_path)
-    monkeypatch.setattr(batch, "code_digest", lambda: "another version of the engine")
+    monkeypatch.setattr(tables, "code_digest", lambda: "another version of the engine")
     simulate_many(P, table(), duration=5.0, chunk_size=2, out=tmp_path, progress=False)
     assert len(chunk_files(tmp_path)) == 2 * len(old)       # computed again, under new names
 
@@ -145,11 +145,11 @@ def test_a_chunk_with_a_valid_checksum_but_impossible_metrics_is_recomputed(tmp_
     metrics = SANE_METRICS.astype({"alarms": float}).copy()
     metrics.loc[0, col] = value
     path = tmp_path / "chunk.csv"
-    batch._write_chunk(path, metrics)
+    tables._write_chunk(path, metrics)
     with pytest.warns(ChunkWarning, match=why):
-        assert batch._read_chunk(path, SANE_METRICS.index) is None
-    batch._write_chunk(path, SANE_METRICS)
-    pd.testing.assert_frame_equal(batch._read_chunk(path, SANE_METRICS.index).reset_index(drop=True),
+        assert tables._read_chunk(path, SANE_METRICS.index) is None
+    tables._write_chunk(path, SANE_METRICS)
+    pd.testing.assert_frame_equal(tables._read_chunk(path, SANE_METRICS.index).reset_index(drop=True),
                                   SANE_METRICS, check_dtype=False)
 
 
@@ -162,7 +162,7 @@ def test_property_damaged_chunk_files_never_give_a_wrong_result(tmp_path_factory
     folder = tmp_path_factory.mktemp("chunk")
     metrics = SANE_METRICS.copy()
     path = folder / "chunk.csv"
-    batch._write_chunk(path, metrics)
+    tables._write_chunk(path, metrics)
     raw = bytearray(path.read_bytes())
     if data.draw(st.booleans(), "truncate"):
         raw = raw[:data.draw(st.integers(0, len(raw) - 1), "length")]
@@ -173,7 +173,7 @@ def test_property_damaged_chunk_files_never_give_a_wrong_result(tmp_path_factory
     path.write_bytes(bytes(raw))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        read = batch._read_chunk(path, SANE_METRICS.index)
+        read = tables._read_chunk(path, SANE_METRICS.index)
     if read is None:
         assert any(issubclass(w.category, ChunkWarning) and path.name in str(w.message)
                    for w in caught)
@@ -222,7 +222,7 @@ def test_property_a_scenario_table_is_refused_or_simulated_correctly(rows, bad, 
     res = simulate_many(P, scenarios, duration=2.0, progress=False)
     event("simulated")
     for i, row in scenarios.iterrows():
-        signal = batch.scenario_signal(row, 2.0)
+        signal = tables.scenario_signal(row, 2.0)
         channel = {"pc": "pc_attack", "wref": "wref_attack", "load": "load"}[row.channel]
         scc = None if np.isnan(row.alpha) else (
             lfc.SafetyFilter(P, method="certified") if row.method == "certified"

@@ -222,7 +222,7 @@ def test_off_the_box_every_trip_is_flagged_outside_first(attacks):
     noise declared) on the low-inertia corners of a ±40 % box, Kalman estimate on
     the design model.  Off its assumptions it trips — but every trip comes after
     the filter flagged ``outside`` (measured here: no silent trip)."""
-    from lfc.batch import scenario_signal
+    from lfc.tables import scenario_signal
     from lfc.estimation import KalmanFilter
     wide = [replace(P, **{n: getattr(P, n) * f for n, f in zip(BOX, combo)})
             for combo in itertools.product((0.6, 1.4), repeat=len(BOX))]

@@ -96,7 +96,7 @@ def test_design_is_for_andes_cases_only():
 @pytest.mark.parametrize("old", ["simulate_batch", "simulate_multiarea",
                                  "simulate_multiarea_batch"])
 def test_the_names_of_0_3_are_gone(old):
-    """Removed in 0.4 (CHANGELOG.md names what replaces each); ``lfc.simulate_multiarea``
+    """Removed in 0.4 (CHANGELOG.md names what replaces each); ``lfc.linear_grid``
     is the module once imported, not a function."""
     assert old not in lfc.__all__ and not callable(getattr(lfc, old, None))
     assert old in (Path(lfc.__file__).parents[1] / "CHANGELOG.md").read_text()
@@ -134,7 +134,7 @@ def test_a_plant_brings_its_runner_and_an_andes_plant_is_known_by_its_methods():
     named = {n.id for n in ast.walk(source) if isinstance(n, ast.Name)}
     imported = {n.module for n in ast.walk(source) if isinstance(n, ast.ImportFrom)}
     assert not named & {"LFCParams", "MultiAreaParams", "MicrogridCase", "GridCase"}
-    assert not [m for m in imported if m.startswith(("lfc.testbed", "lfc.simulate", "lfc.batch"))]
+    assert not [m for m in imported if m.startswith(("lfc.testbed", "lfc.simulate", "lfc.tables"))]
     assert [runner_of(p).name for p in (P, TWO, MicrogridCase(), GridCase.kundur())] == \
         ["area", "grid", "microgrid", "grid case"]
     methods = {name: (lambda *args: None) for name in ANDES_PLANT}

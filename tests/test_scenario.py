@@ -1,7 +1,7 @@
 """Issue "One": one ``Scenario`` for every plant — checked once when made, run by
 ``lfc.simulate(plant, scenario)`` and ``lfc.simulate_many(plant, [scenario, ...])`` on
 an area, a grid and ANDES, read from a scenario table and written back to one
-(``lfc.batch.table_scenarios``, ``scenario_row``)."""
+(``lfc.tables.table_scenarios``, ``scenario_row``)."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from same_metrics import same_metrics
 from test_lanes import mixed
 
 import lfc
-from lfc.batch import scenario_row, table_scenarios
+from lfc.tables import scenario_row, table_scenarios
 from lfc.scenarios import Scenario
 from lfc.result import METRIC_KEYS
 

@@ -18,9 +18,9 @@ import pytest
 
 import lfc
 import probe
-from lfc import batch
+from lfc import tables
 from lfc._files import kept, read_stored, write_stored
-from lfc.batch import ChunkWarning
+from lfc.tables import ChunkWarning
 from lfc.repro import runner
 
 P = lfc.LFCParams()
@@ -77,12 +77,12 @@ def test_an_emptied_or_truncated_chunk_is_recomputed(tmp_path, damage):
 
 
 def test_a_chunk_stored_for_other_row_labels_is_not_read_for_these(tmp_path):
-    metrics = lfc.simulate_many(P, _table(), duration=0.5)[list(lfc.batch.METRIC_KEYS)]
+    metrics = lfc.simulate_many(P, _table(), duration=0.5)[list(lfc.tables.METRIC_KEYS)]
     path = tmp_path / "chunk.csv"
-    batch._write_chunk(path, metrics)
-    assert batch._read_chunk(path, metrics.index) is not None
+    tables._write_chunk(path, metrics)
+    assert tables._read_chunk(path, metrics.index) is not None
     with pytest.warns(ChunkWarning, match="stored for other rows"):
-        assert batch._read_chunk(path, pd.Index([5, 6])) is None
+        assert tables._read_chunk(path, pd.Index([5, 6])) is None
 
 
 @pytest.mark.parametrize("damage", ["swapped", "copied", "truncated", "emptied", "deep",
@@ -403,7 +403,7 @@ def test_a_numba_cache_file_naming_a_class_since_renamed_is_stale_not_damaged(tm
 def test_the_longest_run_is_scaled_by_the_grids_size_and_checked_before_allocating():
     """A six-area chain at the single area's longest run ended in ``MemoryError``:
     the limit is on the trace's values, with the estimate in the message."""
-    from lfc.simulate import MAX_STEPS, check_timing
+    from lfc.linear_area import MAX_STEPS, check_timing
     check_timing(MAX_STEPS * 1e-3, 1e-3, 0.01)                      # one area: as before
     with pytest.raises(ValueError, match=r"\(6 area\(s\), 35 states\) would take about "
                                          r"[0-9.]+ GB; lower duration \(at most 1[0-9.]+ s"):

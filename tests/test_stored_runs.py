@@ -219,7 +219,7 @@ def test_the_key_covers_the_plant_side_and_nothing_else(tmp_path, kind):
                                    '    """Evaluate an attack or a load signal at times'))
     assert digest() == before                                     # a docstring: not code
     engine.write_text(text + "\nEDITED = 1\n")                    # elsewhere in the engine
-    for name in ("filters/certified.py", "filters/coupled.py", "simulate_multiarea.py",
+    for name in ("filters/certified.py", "filters/coupled.py", "linear_grid.py",
                  "testbed/grids.py", "testbed/microgrid.py"):    # (their other code)
         path = package / name
         path.write_text(path.read_text() + "\nEDITED = 1\n")

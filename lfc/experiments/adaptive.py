@@ -36,13 +36,13 @@ from lfc.engine import CTRL_COLUMNS, check_area_keys
 from lfc.filters import SafetyFilter
 from lfc.filters.coupled import check_coupled
 from lfc.generator import GeneratorSide
+from lfc.linear_area import check_timing
+from lfc.linear_grid import area_filter, estimate_noise
 from lfc.lockstep import LinearGrid
 from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams, as_grid
 from lfc.relays import RelaySettings, relays_or_default
-from lfc.simulate import check_timing
 from lfc.result import Result
-from lfc.simulate_multiarea import area_filter, estimate_noise
 
 PROBE = 1e3      # pu: a command beyond every interval, which each filter clips to its edge
 U_REF = CTRL_COLUMNS.index("u_ref")
@@ -153,7 +153,7 @@ def run_adaptive(params: LFCParams | MultiAreaParams, filters, attack: AdaptiveA
     filters : SafetyFilter, str or dict
         One area: a :class:`~lfc.filters.SafetyFilter` or a method name (built
         on ``design``); a grid: ``{area: kind or filter}`` as in
-        :func:`lfc.simulate` (:func:`lfc.simulate_multiarea.area_filter`:
+        :func:`lfc.simulate` (:func:`lfc.linear_grid.area_filter`:
         ``"certified"``, ``"coupled"``, ``"contract"``).  Not the paper's SCC:
         its output is not a clip to an interval (it predicts with the incoming
         command, so a larger one may pass less), so it has no edge to read

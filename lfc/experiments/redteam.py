@@ -39,17 +39,17 @@ from scipy.optimize import differential_evolution
 from lfc._format import number
 from lfc._validate import (ParameterTypeError, check_array, check_count, check_flag,
                            check_multiple, check_number, check_positive, check_seed)
-from lfc.batch import scenario_signal
 from lfc.engine import check_area_keys
 from lfc.estimation import check_noise_std
 from lfc.experiments.scenarios import ATTACK_START
 from lfc.filters.base import check_choice
 from lfc.filters.certified import BOX
+from lfc.linear_grid import area_filter
 from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams
 from lfc.relays import RelaySettings, relays_or_default
 from lfc.run import simulate_many
-from lfc.simulate_multiarea import area_filter
+from lfc.tables import scenario_signal
 
 # family -> (channel, waveform, bounds of (amplitude, freq_hz)); one bound: freq unused
 FAMILIES = {

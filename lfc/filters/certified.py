@@ -76,7 +76,7 @@ breach seen directly; not on an estimate, ``noise_std``, nor with
 ``recheck_bound``).  With ``load_kind="band"`` the held check is a
 re-certification at the load given now, with the whole band around it: passing it
 proves the hold from now on (the grids' per-area guarantee rests on it,
-:mod:`lfc.simulate_multiarea`), and ``outside`` means only that it could not be
+:mod:`lfc.linear_grid`), and ``outside`` means only that it could not be
 re-proven from this state — raised while the band assumption (around the load
 given at the certification) still holds when the load has moved within the band
 since (its effect is then in the state and the band is allowed again):
@@ -487,7 +487,7 @@ class _PlantBlock:
             est = np.zeros(2)
         # the held command's re-check.  "band": a re-certification at the load given
         # now, the whole band around it (a hold passing it is proven from now on: the
-        # grids' per-area guarantee, lfc.simulate_multiarea).  "steps" (theorem C): the
+        # grids' per-area guarantee, lfc.linear_grid).  "steps" (theorem C): the
         # trajectory from here with the load given now differs from the one certified
         # by what the load did since (the state holds that effect), at most its total
         # variation times sup |S| (the load given now the true one) or sup S - inf S

@@ -127,7 +127,7 @@ def _parser() -> argparse.ArgumentParser:
                     help="figure path without extension (.png and .pdf written; default "
                          "beside the table: sweep_<y>_vs_<x>)")
     bt = sub.add_parser("batch", help="simulate a scenario table (CSV) with simulate_many")
-    bt.add_argument("scenarios", type=Path, help="CSV, one row per scenario (see lfc.batch)")
+    bt.add_argument("scenarios", type=Path, help="CSV, one row per scenario (see lfc.tables)")
     bt.add_argument("--duration", type=float, required=True, help="simulated time (s)")
     bt.add_argument("--out", type=_folder, required=True,
                     help="folder: per-chunk files (resume) and results.csv")

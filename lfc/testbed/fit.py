@@ -498,7 +498,7 @@ def validated_range(case: GridCase, params: MultiAreaParams) -> tuple[float, tup
     first rung fails), and every rung run (:attr:`GridFit.validation`).  Stops
     at the first rung that fails; ANDES' runs stop at a trip, and one that does
     not converge counts as tripped."""
-    from lfc.simulate_multiarea import simulate_grid_linear
+    from lfc.linear_grid import simulate_grid_linear
     from lfc.testbed.grids import simulate_andes_grid
     from lfc.testbed.loop import TestbedError
 

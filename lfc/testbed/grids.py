@@ -103,10 +103,10 @@ from lfc._validate import check_count, check_flag, check_multiple, check_positiv
 from lfc.engine import check_area_keys, check_attacks, sample_signal
 from lfc.filters.coupled import check_coupled
 from lfc.generator import GeneratorSide
+from lfc.linear_grid import area_filter, estimate_noise
 from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams
 from lfc.relays import RelaySettings, relays_or_default
-from lfc.simulate_multiarea import area_filter, estimate_noise
 from lfc.result import Result, grid_result
 from lfc.testbed.loop import AndesLoop, AndesPlant, GeneratorSides, RecordedSides, TestbedError
 

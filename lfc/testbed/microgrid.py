@@ -54,8 +54,8 @@ from lfc.filters import SafetyFilter
 from lfc.generator import GeneratorSide
 from lfc.model import STATES, LFCParams
 from lfc.relays import RelaySettings, relays_or_default
-from lfc.signals import SignalLike
 from lfc.result import Result, area_result
+from lfc.signals import SignalLike
 from lfc.testbed.loop import (AndesLoop, BreakerOpens, GeneratorSides, RecordedSides,
                               TestbedError)
 

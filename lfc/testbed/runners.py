@@ -10,12 +10,12 @@ to the case, cached on disk; required for a plant of your own).  Importing
 from __future__ import annotations
 
 from lfc.engine import check_load_measured
+from lfc.linear_grid import results_table
 from lfc.run import Runner, register, register_protocol
 from lfc.scenarios import grid_scenarios
-from lfc.simulate_multiarea import results_table
-from lfc.testbed.microgrid import MicrogridCase
 from lfc.testbed.grids import GridCase
 from lfc.testbed.loop import AndesPlant
+from lfc.testbed.microgrid import MicrogridCase
 
 #: the methods of an ANDES plant (:class:`~lfc.testbed.loop.AndesPlant`)
 ANDES_PLANT = tuple(n for n, v in vars(AndesPlant).items()

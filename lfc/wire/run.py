@@ -48,14 +48,14 @@ from lfc.engine import check_area_keys
 from lfc.filters import SafetyFilter
 from lfc.filters.coupled import CoupledFilter
 from lfc.generator import GeneratorSide
+from lfc.linear_area import check_timing
+from lfc.linear_grid import area_filter
 from lfc.lockstep import LinearGrid
 from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams, as_grid
 from lfc.relays import relays_or_default
 from lfc.result import Result
 from lfc.run import runner_of
-from lfc.simulate import check_timing
-from lfc.simulate_multiarea import area_filter
 from lfc.wire.attacks import WireAttack
 from lfc.wire.link import Link
 from lfc.wire.relay import Impairment
@@ -170,7 +170,7 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
         ``{area: operations}`` (a list or a name alone attacks area 0).
     scc : SafetyFilter, None or dict
         The generator's filter; for a grid ``{area: "paper" | "certified" |
-        filter}`` (:func:`lfc.simulate_multiarea.area_filter`; the coupled
+        filter}`` (:func:`lfc.linear_grid.area_filter`; the coupled
         certificate reads the whole grid and does not travel over one area's link).
     protocol : str
         ``"modbus"`` (Modbus/TCP) or ``"dnp3"``.

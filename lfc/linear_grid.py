@@ -65,17 +65,17 @@ import numpy as np
 import pandas as pd
 
 from lfc._validate import ParameterTypeError, check_count
-from lfc.batch import metrics_frame
-from lfc.estimation import check_noise_std
 from lfc.engine import METRICS, check_area_keys, sample_signal
+from lfc.estimation import check_noise_std
 from lfc.filters import SafetyFilter, build
 from lfc.filters.coupled import CoupledFilter
+from lfc.linear_area import check_timing
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams
 from lfc.relays import RELAY_NAMES, RelaySettings, relays_or_default
+from lfc.result import METRIC_KEYS, Result, grid_result
 from lfc.run import Runner, register
 from lfc.scenarios import Scenarios, grid_scenarios
-from lfc.simulate import check_timing
-from lfc.result import METRIC_KEYS, Result, grid_result
+from lfc.tables import metrics_frame
 
 __all__ = ["area_filter", "grid_results", "results_table", "simulate_grid_linear",
            "simulate_grid_table"]

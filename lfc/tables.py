@@ -47,13 +47,13 @@ from lfc.filters import (CONFLICT_RULES, METHODS, OUTSIDE_RULES, PREDICTIONS, Sa
                          options_of)
 from lfc.filters.base import built_once
 from lfc.filters.base import given as holds_value
+from lfc.linear_area import check_timing, simulate_area
 from lfc.model import LFCParams
 from lfc.relays import RELAY_NAMES, RelaySettings, relays_or_default
+from lfc.result import METRIC_KEYS
 from lfc.run import Runner, only_for_metrics, register
 from lfc.scenarios import Scenario, Scenarios
 from lfc.signals import Chirp, Ramp, Samples, Signal, Sinusoid, Square, Step
-from lfc.simulate import check_timing, simulate_area
-from lfc.result import METRIC_KEYS
 
 WAVEFORMS = ("sinusoid", "square", "chirp", "step", "ramp", "samples", "none")
 CHANNELS = ("pc", "wref", "load")
@@ -766,7 +766,7 @@ def _waveform(signal) -> dict:
 
 def _filter_columns(scc, params: LFCParams, row: dict) -> dict:
     """A table row's filter columns for ``scc`` (None: ``alpha`` NaN), checked by
-    reading them back as :func:`lfc.batch.simulate_table` does (``row`` holds the
+    reading them back as :func:`lfc.tables.simulate_table` does (``row`` holds the
     row's noise columns, which the certified filter's declared noise reads)."""
     if scc is None:
         return {"method": "paper", "alpha": math.nan, "Ts": math.nan}
