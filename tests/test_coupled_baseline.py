@@ -17,6 +17,7 @@ import tiers
 import lfc
 from lfc import MultiAreaParams
 from lfc.filters.bounds import tie_step_bound
+from lfc.experiments.restoration import grid_battery
 from lfc.linear_grid import simulate_grid_linear, simulate_grid_table
 
 RELAYS = lfc.RelaySettings()
@@ -26,14 +27,7 @@ STEP = 0.05                          # pu, the legitimate load step
 
 def attacks(n: int) -> dict:
     """The battery's attacks on a grid of ``n`` areas (name: ``attacks`` argument)."""
-    every = range(n)
-    return {"sinusoid on area 0's P_c": {0: {"pc": lfc.Sinusoid(1.0, 0.5, start=1.0)}},
-            "square on area 0's ω_ref": {0: {"wref": lfc.Square(0.5, 0.3, start=1.0)}},
-            "bias on every ACE": {a: {"ace": lfc.Step(-2.5, start=1.0)} for a in every},
-            "coordinated sinusoid": {a: {"pc": lfc.Sinusoid(1.0, 0.5, start=1.0)}
-                                     for a in every},
-            "opposite sinusoids": {a: {"pc": lfc.Sinusoid((-1.0) ** a, 0.5, start=1.0)}
-                                   for a in every}}
+    return grid_battery(n)
 
 
 def runs_of(grid: MultiAreaParams, scenarios: list[dict]) -> pd.DataFrame:

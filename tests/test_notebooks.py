@@ -706,7 +706,7 @@ def test_coupled_certificate_notebook_shows_its_figure_and_its_claims_hold(tmp_p
     also behind Kundur's stiff tie)."""
     run_chapter("coupled", tmp_path, check_claims=True)
     claims = json.loads((tmp_path / "res" / "claims.json").read_text())
-    assert len(claims) == 7 and all(claims.values())
+    assert len(claims) == 10 and all(claims.values())
 
 
 @pytest.mark.exhaustive

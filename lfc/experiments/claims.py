@@ -159,14 +159,20 @@ def multiarea_claims(load_step: dict, attacks: dict[str, dict], tol: float = 1e-
     return _bools(claims)
 
 
-def coupled_claims(runs: dict, kundur: dict[str, tuple[int, int, int]]) -> dict[str, bool]:
+def coupled_claims(runs: dict, kundur: dict[str, tuple[int, int, int]],
+                   restored: pd.DataFrame) -> dict[str, bool]:
     """The grid-certificates chapter (notebook 10).  ``runs`` maps a filter
     setting (``"none"``, ``"per-area"``: the default per-area certified filters,
     ``"per-area steps"``, ``"coupled"``, ``"contract"``) to the multi-area run of a
     legitimate load step during an attack; ``kundur`` maps ``"per-area steps"``,
     ``"coupled"`` and ``"contract"`` to ``(runs, runs with a trip, runs with an
     outside flag)`` of load steps during an ACE attack on Kundur's areas as fitted
-    to ANDES."""
+    to ANDES; ``restored`` has a row per grid, attack of the grids' battery and
+    ``filters`` (``"coupled"``, ``"contract"``), with ``tripped`` and ``at AGC's pace``
+    (:func:`lfc.experiments.restoration.restoration`)."""
+    light = restored.grid == "two lightly damped areas"
+    coupled, contract = restored.filters == "coupled", restored.filters == "contract"
+    pace = restored["at AGC's pace"]
     def outside(r) -> int:
         return sum(int(area.alarms.outside.sum()) for area in r.areas)
 
@@ -184,6 +190,11 @@ def coupled_claims(runs: dict, kundur: dict[str, tuple[int, int, int]]) -> dict[
             kundur["coupled"][1:] == (0, 0),
         "Kundur: the contracts trip nothing and never flag outside":
             kundur["contract"][1:] == (0, 0),
+        "after every attack of the grids' battery nothing trips": not restored.tripped.any(),
+        "after every attack the contracts are back at schedule at the grid's AGC's pace":
+            bool(pace[contract].all()),
+        "after every attack the coupled filters are back at schedule at the grid's AGC's "
+        "pace, but on two lightly damped areas": bool(pace[coupled & ~light].all()),
     })
 
 

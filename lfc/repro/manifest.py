@@ -99,7 +99,7 @@ CHAPTERS = (
             "Beyond the paper: certificates for a whole grid", ("linear",),
             ("coupled_certificate", "coupled_scaling"),
             {"duration": 10.0, "kundur_instants": [3.37], "scaling_areas": [2, 3],
-             "scaling_ties": [2.0, 30.0]}),
+             "scaling_ties": [2.0, 30.0], "restoration_grids": ["two-area"]}),
     Chapter("wire", "11_wire.ipynb",
             "Beyond the paper: the attack on a real industrial protocol (Modbus/TCP)",
             ("linear",), ("wire",),
