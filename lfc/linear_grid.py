@@ -11,7 +11,8 @@ only.  With one area and no tie-line both are :func:`lfc.simulate` exactly.
 disturbance ``w_i = dP_L,i + dP_tie,i`` at each control sample
 (``feedforward=True``; the tie-line export is metered at the area's
 boundary) and declared a ``load_bound`` that covers how far ``w_i`` may move
-within one control period.  Proven (per area, no communication between the
+within one control period (``load_kind="period"``: the held command is
+re-certified at every call).  Proven (per area, no communication between the
 filters): while (a) the plant of area ``i`` is its design model, (b) its filter
 knows the area's state and ``w_i`` at each control sample, and (c) ``w_i``
 moves by at most ``load_bound`` within any control period, area ``i``'s OF2,

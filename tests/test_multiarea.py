@@ -377,6 +377,7 @@ def test_finding_with_the_kalman_estimate_the_certified_filters_leave_their_cert
     square, 1 and 3 pu, 0.1 to 2 Hz, on area 0 or on both in opposition): no trip,
     worst severity below 0.95."""
     declared = {a: lfc.SafetyFilter(TWO.areas[a], RELAYS, method="certified", noise_std=NOISE,
+                                    load_kind="period",
                                     load_bound=tie_step_bound(TWO, a, RELAYS, 0.01))
                 for a in range(2)}
     attack = {0: {"pc": lfc.Sinusoid(1.0, 0.5, start=1.0)}}

@@ -5,15 +5,18 @@ from :func:`curvature_gains`), the sparsest sample times that keep that within a
 tightening (:func:`merge_intervals`), the matrix exponential at many times
 (:func:`expm_at`), and how far a tie-line export can move in one control period while
 every frequency stays in its relay band (:func:`tie_step_bound`: the per-area filters'
-load budget in a grid).  The gains of the plant's responses to bounded inputs are
+load budget in a grid), and how far a load within a certified filter's assumption moves
+the state at the horizon in its terminal set's norm (:func:`load_moves_terminal`,
+:func:`band_moves_terminal`).  The gains of the plant's responses to bounded inputs are
 :mod:`lfc.filters.responses`.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg import expm
+from scipy.linalg import eigh, expm
 
+from lfc.filters.responses import L1_HORIZON
 from lfc.multiarea import MultiAreaParams
 from lfc.relays import RelaySettings
 
@@ -92,3 +95,35 @@ def tie_step_bound(params: MultiAreaParams, area: int, relays: RelaySettings,
     ``F``: ``control_period * sum_j T_ij * 2 F``."""
     rate = sum(coef for i, j, coef in params.tie if area in (i, j)) * 2 * relays.F
     return float(control_period * rate)
+
+
+def load_moves_terminal(A: np.ndarray, bl: np.ndarray, E: np.ndarray, P: np.ndarray, *,
+                        load_given: bool = False) -> float:
+    """How far, in ``P``'s norm, a load of total variation 1 pu moves ``e_T = E (x -
+    x_eq)`` between a command's certification and a re-check (a proven bound), the
+    re-check given the true load (``load_given``) or the load given at the
+    certification.
+
+    A step ``d`` at ``s`` before the re-check leaves ``-e^{As} q_p d`` of the new
+    equilibrium's deviation (the load given), or ``(I - e^{As}) q_p d`` of the old
+    one's; ``||E e^{As} z||_P`` does not grow with ``s`` (``P`` is a Lyapunov matrix
+    of ``A``): at most ``||E q_p||_P``, or twice that."""
+    z = E @ np.linalg.solve(A, bl)
+    moved = float(np.sqrt(max(z @ P @ z, 0.0)))
+    return moved if load_given else 2.0 * moved
+
+
+def band_moves_terminal(A: np.ndarray, bl: np.ndarray, E: np.ndarray, P: np.ndarray) -> float:
+    """How far, in ``P``'s norm, a load within ±1 pu of the one given at a
+    command's certification moves ``e_T = E (x - x_eq)`` between the certification
+    and a re-check at that load (a proven bound): ``int_0^inf f(s) ds`` with ``f(s) =
+    ||e^{As} E b_l||_P`` (``E = e^{AT}``).  ``f`` does not increase (``P`` is a
+    Lyapunov matrix of ``A``), so the left sum on 1 ms to ``L1_HORIZON`` bounds it
+    there, and after, ``f(s) <= f(H) e^{-lam (s - H) / 2}`` with ``lam`` the least
+    ``z' Q z / z' P z``, ``Q = -(A' P + P A)``: ``2 f(H) / lam``."""
+    dt = 1e-3
+    s = np.arange(0.0, L1_HORIZON + dt / 2, dt)
+    z = expm_at(A, s) @ (E @ bl)
+    f = np.sqrt(np.maximum(np.einsum("ti,ij,tj->t", z, P, z), 0.0))
+    lam = float(np.min(eigh(-(A.T @ P + P @ A), P, eigvals_only=True)))
+    return float(dt * np.sum(f[:-1]) + 2.0 * f[-1] / lam)

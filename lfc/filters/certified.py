@@ -36,11 +36,13 @@ corners of the box), with the state known within the estimation bound
 state without it), a command held between calls, a load that moves by at most
 ``load_bound`` from the load ``p_load`` given to the filter when the command was
 certified (``load_kind``: ``"band"``, ``|dP_L(t) - p_load| <= load_bound`` at
-every instant, any signal; ``"steps"``, the total variation of ``dP_L - p_load``
+every instant after it, any signal; ``"steps"``, the total variation of ``dP_L - p_load``
 from the certification on, its initial offset included, at most ``load_bound``:
 one step, a ramp or any monotone change of at most ``load_bound``, at any
-instant) and a start from a state where some command is certified (e.g.
-equilibrium): the measured frequency and ROCOF stay
+instant; ``"period"``, ``|dP_L(t) - p_k| <= load_bound`` within each control
+period from the load ``p_k`` given at its start, the command applied then
+certified, new or held, for that period) and a start from a state where some
+command is certified (e.g. equilibrium): the measured frequency and ROCOF stay
 inside ``|dw_meas| <= F`` and ``|rocof_meas| <= rocof_limit`` at every instant,
 whatever the incoming commands are — OF2, UF2 and ROCOF never trip, for any
 relay sampling.  No bound on ``|p_load|`` is needed: a constant load only
@@ -61,30 +63,31 @@ leaves the steady-state ellipsoid until the load estimate has caught up).  With
 outputs through white Gaussian noise ``noise_std`` at ``relay_rate`` trip at most
 that often (a union bound over an hour of samples).
 
-**What ``outside`` means.**  With ``load_kind="steps"`` (proven): the held level
-adds back what a load within the assumptions can have done since the command's
-certification (theorem C of ``docs/coupled-certificate.md`` for one area: the rows
-by ``load_bound`` times ``sup |S|`` for the load given, ``sup S - inf S`` for a load
-not given, the equilibrium by the load's shift of it, the terminal set by
-:func:`load_moves_terminal`).  So on the design model (no ``uncertainty``), with
-the exact state, the load given (``load_feedforward``) or not, and the load's
-total variation since each certification within ``load_bound`` (``load_bound -
-recheck_bound`` with ``recheck_bound``), ``outside`` is never raised: a flag means
-an assumption is broken.  The held command is also flagged when the total
-variation of the load given, sampled at the calls, exceeds ``load_bound`` (a
-breach seen directly; not on an estimate, ``noise_std``, nor with
-``recheck_bound``).  With ``load_kind="band"`` the held check is a
-re-certification at the load given now, with the whole band around it: passing it
-proves the hold from now on (the grids' per-area guarantee rests on it,
-:mod:`lfc.linear_grid`), and ``outside`` means only that it could not be
-re-proven from this state — raised while the band assumption (around the load
-given at the certification) still holds when the load has moved within the band
-since (its effect is then in the state and the band is allowed again):
-``tests/test_proven_load.py`` pins it.  With a box or an estimate neither is
-proven (the held check at a plant other than the true one, or at an estimate, can
-fail with every assumption holding).  No sampled filter flags a trip within one
-control period of an assumption breaking (a step just after a sample):
-``outside`` comes at the next sample at the earliest.
+**What ``outside`` means.**  On the design model (no ``uncertainty``) with the
+exact state and ``load_kind`` ``"band"`` or ``"steps"`` (proven): never raised
+while the load stays within its assumption since each certification, the load
+given (``load_feedforward``) or not (taken for 0) — a flag means an assumption is
+broken.  The held level adds back what such a load can have done since the
+certification (the state holds its effect).  ``"band"``: the held command is
+checked at the load given at its certification, ``s`` s ahead with room for
+``load_bound int_s^inf |h|`` (:func:`~lfc.filters.responses.load_tails`), the
+current outputs for ``load_bound int_0^inf |h|``, the terminal state for
+:func:`~lfc.filters.bounds.band_moves_terminal`.  ``"steps"`` (theorem C of
+``docs/coupled-certificate.md`` for one area): the rows for ``load_bound`` times
+``sup |S|`` (the load given) or ``sup S - inf S`` (not given), the equilibrium for
+the load's shift of it, the terminal set for
+:func:`~lfc.filters.bounds.load_moves_terminal`; with ``recheck_bound``,
+``load_bound - recheck_bound``.  A held command is also flagged when the load
+given leaves the assumption, sampled at the calls (not on an estimate, nor with
+``recheck_bound``).  ``"period"`` (a grid's areas, :mod:`lfc.linear_grid`), and
+``"band"`` on an estimate: the held check is a re-certification at the load given
+now with the whole band around it — passing it proves the hold for the coming
+period (the grids' per-area guarantee rests on it); ``outside`` means only that it
+could not be re-proven from this state, and is raised when the load has moved
+within the band since the certification.  With a box or an estimate none is
+proven.  No sampled filter flags a trip within one control period of an
+assumption breaking; a load beyond a band that is not given shows only through
+the state, possibly after a trip.  ``tests/test_proven_load.py`` pins each.
 
 **A hold proven period by period** (``recheck_bound`` > 0, ``load_kind="steps"``).
 Without it a held command is proven only while the load's total variation since
@@ -93,10 +96,9 @@ moving (an interconnected area's tie-line flow) can exceed it while a command is
 held.  With it, the held command's re-check also leaves room for a total variation
 of ``recheck_bound`` within the coming control period (each limit tightened by
 ``recheck_bound`` times the step response's peak over one period,
-:func:`period_step_gain`; at most what ``load_bound`` takes, so a command
-certified now passes its own re-check; and at most ``load_bound``, which covers a new
-command's first period), so the guarantee above also holds under
-this assumption instead: at every control sample the applied command is new (and
+:func:`period_step_gain`; at most what ``load_bound`` takes, so a command certified
+now passes its own re-check; and at most ``load_bound``, which covers a new command's
+first period), so the guarantee above also holds under this assumption instead: at every control sample the applied command is new (and
 the load's variation from then on is within ``load_bound``) or held and re-checked
 without an ``outside`` flag, and within each control period the load varies by at
 most ``recheck_bound`` — whatever it did before.  Proven up to the first
@@ -107,13 +109,12 @@ either is refused (:func:`lfc.engine.check_load_measured`).
 
 **Measured, not proven.**  Plants inside the box but not at its corners (the
 held response is not monotone in the parameters): tested on random interior
-plants by ``tests/test_robust.py``.  That the estimation error stays within
-its bound: the bound is the Kalman filter's steady-state error covariance at
-the design model and the filter's ``control_period``; it is not shown to hold
-at the box's corners (the model mismatch drives an error that grows with the
-state: an audit measured it leaving the 99.99 % ellipsoid at the weak corners,
-where only the held command's re-check prevented a trip) nor in the estimate's
-transient after a load step.  No trip has been measured on the Kalman estimate
+plants by ``tests/test_robust.py``.  That the estimation error stays within its
+bound (the Kalman filter's steady-state error covariance at the design model and
+``control_period``): not at the box's corners (the model mismatch drives an error
+that grows with the state: an audit measured it leaving the 99.99 % ellipsoid at
+the weak corners, where only the held command's re-check prevented a trip) nor in
+the estimate's transient after a load step.  No trip has been measured on the Kalman estimate
 over the box (``tests/test_robust.py``: 16 seeds x 23 attacks, design model
 and weakest corner; one seed x 23 attacks at all 32 corners, where some runs
 flag ``outside``: the error left its bound and the filter said so).  Off the
@@ -144,23 +145,26 @@ from lfc.estimation import KalmanFilter, check_noise_std, measurement_std
 from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, OUTSIDE, Backend, Layout, METHOD_IDS,
                               Options, applied_flags, built_once, check_limits, given,
                               hold_invalid, option, valid_input)
-from lfc.filters.bounds import (curvature_gains, expm_at, intersample, merge_intervals, pair,
-                                tie_step_bound)
-from lfc.filters.responses import L1_HORIZON, load_gains, peak_norm, period_step_gain
+from lfc.filters.bounds import (band_moves_terminal, curvature_gains, expm_at, intersample,
+                                load_moves_terminal, merge_intervals, pair, tie_step_bound)
+from lfc.filters.responses import (L1_HORIZON, load_gains, load_tails, peak_norm,
+                                   period_step_gain)
 from lfc.model import LFCParams, lfc_matrices, output_matrix
 from lfc.relays import RelaySettings
 
 GRID = ((0.05, 1e-3), (0.1, 2e-3), (0.2, 5e-3), (2.0, 1e-2), (60.0, 2e-2))  # (until, step) s
 MIN_STEP, MAX_STEP = 1e-3, 0.1  # s: the sample spacing of adaptive_grid
 BOX = ("M", "D", "tau_g", "tau_t", "droop")  # the parameters an uncertainty box may cover
-LOAD_KINDS = ("band", "steps")   # what load_bound bounds (module docstring)
+LOAD_KINDS = ("band", "steps", "period")   # what load_bound bounds (module docstring)
 LP_LOAD = 1.0          # pu: load range of _derivative_bound's programs (V does not depend on it)
 NUMERIC_MARGIN = 1e-6  # relative tightening that absorbs floating-point differences
 #: the data array decide() reads: a header, then one block per plant (the design model
 #: and the box's corners), each a head, then per output (frequency, ROCOF) ``m`` rows in
 #: each of its columns, then the terminal ellipsoid
-LAYOUT = Layout("u_min", "u_max", "n_plants", "n_rows", "f_lim", "r_lim", "load_room")
-U_MIN, U_MAX, N_PLANTS, N_ROWS, F_LIM, R_LIM, LOAD_ROOM = LAYOUT.offsets()
+LAYOUT = Layout("u_min", "u_max", "n_plants", "n_rows", "f_lim", "r_lim", "load_room",
+                "held_at_certified_load")
+U_MIN, U_MAX, N_PLANTS, N_ROWS, F_LIM, R_LIM, LOAD_ROOM, HELD_AT_CERTIFIED_LOAD = \
+    LAYOUT.offsets()
 HEAD = LAYOUT.size
 BLOCK = Layout("eq_per_p", "eq_half", "eq_half_held", "rho", "rho_held", "a_quad", "y0_f",
                "y0_r", "y0_f_held", "y0_r_held")
@@ -237,9 +241,11 @@ class CertifiedOptions(Options):
                                "how far the load may move from the p_load given; 0 covers "
                                "none (nominal, like uncertainty=0); a bound costs room "
                                "and alarms (load_during_attack.bound_price)")
-    load_kind: str = option("band", "", "'band' or 'steps'",
-                            "'band': |dP_L - p_load| <= load_bound at every instant; 'steps': "
-                            "its total variation since certification (a step, a ramp)")
+    load_kind: str = option("band", "", "'band', 'steps' or 'period'",
+                            "'band': |dP_L - p_load| <= load_bound at every instant after "
+                            "the certification; 'steps': its total variation since "
+                            "certification (a step, a ramp); 'period': a band around the "
+                            "load given at each call, within that control period (a grid)")
     recheck_bound: float = option(0.0, "pu", ">= 0, with load_kind 'steps'",
                                   "the load's total variation within one control period that "
                                   "the held command's re-check covers (a hold then stays "
@@ -276,7 +282,8 @@ class CertifiedOptions(Options):
         check_nonnegative("recheck_bound", self.recheck_bound)
         if self.recheck_bound > 0 and self.load_kind != "steps":
             raise ValueError(f"recheck_bound={self.recheck_bound!r} needs load_kind='steps' "
-                             f"(with 'band' the re-check already covers load_bound)")
+                             f"(with 'period' the re-check already covers load_bound for "
+                             f"the coming period; 'band' covers the whole hold)")
         if self.recheck_bound > self.load_bound:
             raise ValueError(f"recheck_bound={self.recheck_bound!r} must be <= load_bound="
                              f"{self.load_bound!r}: a new command's first period is covered "
@@ -347,14 +354,15 @@ class CertifiedSet:
     horizon : float
         Look-ahead before the terminal ellipsoid (s), in [0.2, 20] (longer adds
         samples where the held command no longer moves ROCOF, whose steady state
-        is 0: the ellipsoid covers them). Default 8 s:
-        long enough for the weakly damped corners of a ±20 % box (damping 0.09)
-        to settle toward the terminal set.
+        is 0: the ellipsoid covers them).  Default 8 s: long enough for the weakly
+        damped corners of a ±20 % box (damping 0.09) to settle toward it.
     load_bound : float
         How far the load may move from the ``p_load`` given (pu), >= 0.
-    load_kind : {"band", "steps"}
-        What ``load_bound`` bounds (module docstring): the deviation at every
-        instant (default) or its total variation since the certification.
+    load_kind : {"band", "steps", "period"}
+        What ``load_bound`` bounds (module docstring): the deviation from the load
+        given at the certification (default), its total variation since then, or
+        the deviation from the load given at each call within that control period
+        (a grid's tie-line flow: the held command re-certified every period).
     margin : float
         Extra fractional tightening of both limits, in [0, 1).
     uncertainty : float or dict
@@ -408,7 +416,7 @@ class CertifiedSet:
         # the held command's load monitor: how far the load given may move from the one
         # given at its certification within the assumptions (none on an estimate, nor
         # with recheck_bound, whose hold is proven period by period however far it moved)
-        monitored = cov is None and o.recheck_bound == 0 and o.load_kind == "steps"
+        monitored = cov is None and o.recheck_bound == 0 and o.load_kind != "period"
         self.load_room = o.load_bound * (1 + NUMERIC_MARGIN) + 1e-12 if monitored else math.inf
         self.tau = max(b.tau for b in self.blocks)   # largest inter-sample tightening (pu, pu/s)
 
@@ -416,7 +424,8 @@ class CertifiedSet:
         """The data array :func:`decide` reads (layout in the module's constants)."""
         head = np.zeros(HEAD)
         head[:] = (self.u_min, self.u_max, len(self.blocks), self.n_rows,
-                   self.relays.F, self.relays.rocof_limit, self.load_room)
+                   self.relays.F, self.relays.rocof_limit, self.load_room,
+                   float(self.options.load_kind == "band" and self.noise_std is None))
         return np.concatenate([head] + [b.pack() for b in self.blocks])
 
 
@@ -455,14 +464,15 @@ class _PlantBlock:
         C = output_matrix()
         q = -np.linalg.solve(A, B)                       # x_eq = q[:, 0] u + q[:, 1] p
         gains_of_kind = load_gains(A, B[:, 1], C)
-        self.load_gain = gain = gains_of_kind[load_kind]   # per pu of load_bound
+        gain = gains_of_kind["band" if load_kind == "period" else load_kind]
+        self.load_gain = gain                             # per pu of load_bound
         lim = limits - load * gain                        # the load covered
         if np.any(lim <= 0):
             most = float(np.min(limits / gain))
             steps = gains_of_kind["steps"]
             hint = (f"; load_kind='steps' (one step, a ramp or any monotone change) takes "
                     f"{pair(steps)} per pu and allows < {float(np.min(limits / steps)):.4g} pu"
-                    if load_kind == "band" else "")
+                    if load_kind != "steps" else "")
             raise ValueError(f"load_bound={load:g} pu is too large: with load_kind="
                              f"{load_kind!r} it takes {load:g} x {pair(gain)} of the limits "
                              f"{pair(limits)} (frequency pu, ROCOF pu/s) of plant {plant!r}; "
@@ -485,18 +495,19 @@ class _PlantBlock:
             lim = lim - est
         else:
             est = np.zeros(2)
-        # the held command's re-check.  "band": a re-certification at the load given
-        # now, the whole band around it (a hold passing it is proven from now on: the
-        # grids' per-area guarantee, lfc.linear_grid).  "steps" (theorem C): the
-        # trajectory from here with the load given now differs from the one certified
-        # by what the load did since (the state holds that effect), at most its total
-        # variation times sup |S| (the load given now the true one) or sup S - inf S
-        # (the swing: a load not given, taken for the one given at the certification),
-        # so the re-check adds that back and never fails while the assumptions hold;
-        # recheck_bound (the load given: lfc.engine.check_load_measured) takes the
-        # coming period's room from it
-        if load_kind == "band":
+        # the held command's re-check (module docstring, "What outside means"): "period"
+        # re-certifies at the load given now; "band" checks at the load given at the
+        # certification with room for what the band did since, s ahead at most
+        # load_bound int_s^inf |h|; "steps" (theorem C) with room for the load's total
+        # variation times sup |S| (the load given) or sup S - inf S (not given), less
+        # recheck_bound's room for the coming period (the load given)
+        # (on an estimate nothing is proven: "band" re-certifies as "period" does, at
+        # the latest estimate of the load)
+        since = load_kind == "band" and cov is None
+        if load_kind != "steps" and not since:
             held = lim
+        elif since:
+            held = lim + load * load_tails(A, B[:, 1], C, times)   # (n, 2)
         else:
             held = lim + load * (gain if recheck[0] > 0 else gains_of_kind["swing"])
         # recheck_bound: the held command's trajectory must leave room for the load's
@@ -518,34 +529,35 @@ class _PlantBlock:
         self.rows = {level: _rows(hu, b) for level, b in self.bounds.items()}
         self.G = (G / hu[..., None]).reshape(-1, 5)       # rows normalized by hu
         self.l = (hl / hu).ravel()
-        # the current outputs: for [0, t_1] to stay tau_max (new) or 0 (held) inside
-        self.y0 = {"new": lim - t_max - tau0, "held": held - tau0}
+        # the current outputs: for [0, t_1] to stay tau_max (new) or 0 (held) inside;
+        # "band": they hold what the load did since, at most load_bound int_0^inf |h|
+        self.y0 = {"new": lim - t_max - tau0,
+                   "held": (lim + load * gain if since else held) - tau0}
         if np.any(self.y0["new"] <= 0):
             raise ValueError(f"the tightenings leave nothing of the relay limits: "
                              f"{self._budget()}; lower load_bound, noise_std, "
                              f"trips_per_hour or margin")
         spent = load - recheck[0] if load_kind == "steps" else 0.0
-        self._terminal(A, B[:, 1], C, q, times[-1], {"new": lim, "held": held}, t_max, cov,
-                       kappa, spent, recheck[0] > 0)
+        self._terminal(A, B[:, 1], C, q, times[-1],
+                       {"new": lim, "held": np.min(np.atleast_2d(held), axis=0)}, t_max, cov,
+                       kappa, spent, recheck[0] > 0, load if since else 0.0)
 
     def _terminal(self, A, bl, C, q, horizon, lims, t_max, cov, kappa, spent,
-                  load_given) -> None:
+                  load_given, band) -> None:
         """Continuous-time Lyapunov ellipsoid around the held command's equilibrium,
         the room that leaves the equilibrium, and ``e_T = E x + eu u + el p``.
 
         The new level's ellipsoid takes at most half of the frequency's room and its
         equilibrium the rest.  The held level absorbs what a load within the
-        assumptions did since the command's certification (``spent`` pu:
-        ``load_bound`` less ``recheck_bound`` for ``"steps"``): it moves the
-        equilibrium frequency by at most ``spent |dw_p|`` and ``e_T`` by at most
-        ``spent`` times :func:`load_moves_terminal` in ``P``'s norm (``load_given``:
-        with ``recheck_bound``, which needs it), so a command
+        assumptions did since the certification: ``"steps"`` (``spent`` pu,
+        ``load_bound`` less ``recheck_bound``) moves the equilibrium frequency by at
+        most ``spent |dw_p|`` and ``e_T`` by ``spent`` times :func:`load_moves_terminal`
+        in ``P``'s norm (``load_given``: with ``recheck_bound``), ``"band"`` (``band``
+        pu) ``e_T`` by ``band`` times :func:`band_moves_terminal`; so a command
         certified at the new level passes the held one (exact state, this plant).
-        Where the held rows' room fits a wider pair (the ellipsoid at most half of
-        the frequency's room) the held level takes it.  The held level's terminal set
-        need not fit the limits: a held command is proven by its certification (and,
-        with ``recheck_bound``, period by period by its rows, within one period of the
-        horizon's start), not by this check."""
+        Where the held rows' room fits a wider pair the held level takes it.  It need
+        not fit the limits: a held command is proven by its certification (with
+        ``recheck_bound``, period by period by its rows), not by this check."""
         lim_new = lims["new"] - 2 * t_max
         scale = np.array([1.0, 1.0, lim_new[0], lim_new[0], lim_new[1]])
         self.P = solve_continuous_lyapunov(A.T, -np.diag(scale ** -2.0))
@@ -568,7 +580,8 @@ class _PlantBlock:
                              f"{self._budget()}; lower load_bound, noise_std, "
                              f"trips_per_hour or margin")
         h = room[0] - r * sigma[0]
-        moved = spent * load_moves_terminal(A, bl, self.E, self.P, load_given=load_given)
+        moved = (spent * load_moves_terminal(A, bl, self.E, self.P, load_given=load_given)
+                 + band * band_moves_terminal(A, bl, self.E, self.P))
         drift = spent * abs(dw_p)
         # the held level: theorem C's, NUMERIC_MARGIN wider (a command certified on the
         # new level's boundary, with a load of exactly the bound since, lands on it), or
@@ -606,22 +619,6 @@ class _PlantBlock:
         if len(out) != BLOCK_HEAD + N_COLS * len(self.l) + ELL_SIZE:   # the layout above
             raise RuntimeError("the certified filter's data layout is inconsistent")
         return out
-
-
-def load_moves_terminal(A: np.ndarray, bl: np.ndarray, E: np.ndarray, P: np.ndarray, *,
-                        load_given: bool = False) -> float:
-    """How far, in ``P``'s norm, a load of total variation 1 pu moves ``e_T = E (x -
-    x_eq)`` between a command's certification and a re-check (a proven bound), the
-    re-check given the true load (``load_given``) or the load given at the
-    certification.
-
-    A step ``d`` at ``s`` before the re-check leaves ``-e^{As} q_p d`` of the new
-    equilibrium's deviation (the load given), or ``(I - e^{As}) q_p d`` of the old
-    one's; ``||E e^{As} z||_P`` does not grow with ``s`` (``P`` is a Lyapunov matrix
-    of ``A``): at most ``||E q_p||_P``, or twice that."""
-    z = E @ np.linalg.solve(A, bl)
-    moved = float(np.sqrt(max(z @ P @ z, 0.0)))
-    return moved if load_given else 2.0 * moved
 
 
 def _rows(hu: np.ndarray, lim: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -753,11 +750,12 @@ class CertifiedFilter(Backend):
     def grid_options(cls, grid, area: int, relays: RelaySettings,
                      control_period: float) -> dict:
         """In a grid: ``load_bound`` the tie-line's move in one period
-        (:func:`~lfc.filters.bounds.tie_step_bound`) and the grid's ``command_range``
-        as the actuator limits (where a fitted model describes its plant)."""
+        (:func:`~lfc.filters.bounds.tie_step_bound`) with ``load_kind="period"``
+        (re-certified every period) and the grid's ``command_range`` as the actuator
+        limits (where a fitted model describes its plant)."""
         span = grid.command_range
         return {"load_bound": tie_step_bound(grid, area, relays, control_period),
-                "u_min": -span, "u_max": span}
+                "load_kind": "period", "u_min": -span, "u_max": span}
 
     def __init__(self, params: LFCParams, relays: RelaySettings,
                  options: CertifiedOptions) -> None:
@@ -885,9 +883,13 @@ def decide(fd: np.ndarray, x: np.ndarray, u_ref: float, p: float, mem: np.ndarra
         mem[1], mem[2] = p, 0.0             # the load given now, its move since
     else:                                   # hold; check the held command at its own level
         u = mem[0]
-        lo_f, hi_f, lo_r, hi_r = _interval(fd, x, p, True)
-        moved = mem[2] + abs(p - mem[1])    # the load given's total variation, sampled
-        mem[1], mem[2] = p, moved
+        if fd[HELD_AT_CERTIFIED_LOAD] > 0:  # "band": at the load given at the certification
+            lo_f, hi_f, lo_r, hi_r = _interval(fd, x, mem[1], True)
+            moved = abs(p - mem[1])         # how far the load given left it
+        else:
+            lo_f, hi_f, lo_r, hi_r = _interval(fd, x, p, True)
+            moved = mem[2] + abs(p - mem[1])    # the load given's total variation, sampled
+            mem[1], mem[2] = p, moved
         if not (max(lo_f, lo_r) <= u <= min(hi_f, hi_r)) or moved > fd[LOAD_ROOM]:
             flags |= OUTSIDE
     mem[0] = u

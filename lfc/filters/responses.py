@@ -7,6 +7,8 @@ response ``h(t) = C e^{At} b`` and step response ``S(t) = C A^-1 (e^{At} - I) b`
 * :func:`load_gains` — ``"band"``: ``int |h|``, the most any input within ±1 pu
   moves ``y`` (the L1 norm); ``"steps"``: ``sup |S|``, the most an input of total
   variation 1 pu moves it; ``"swing"``: ``sup S - inf S``;
+* :func:`load_tails` — ``int_s^inf |h|``, what a load within ±1 pu from ``s`` on
+  can still do;
 * :func:`period_step_gain` — ``sup |S|`` within one control period;
 * :func:`rate_gains` — the most a held input moving by at most 1 pu/s moves ``y``
   away from where its final value puts it.
@@ -166,17 +168,24 @@ def _until_negligible(gains: Callable[[float], tuple[tuple[np.ndarray, ...],
         horizon *= 2
 
 
-def _l1(resp: np.ndarray, modes: _Modes, t: np.ndarray) -> np.ndarray:
-    """Per output, at least ``int |h|`` between ``t[0]`` and ``t[-1]`` given ``h`` at
-    ``t`` (``resp``): per step ``d``, ``|h| <= |l| + |h - l|`` with ``l`` the linear
-    interpolation, ``int |l|`` exact (``d (a^2 + b^2) / (2 (a + b))`` where it
-    changes sign, ``a, b`` its ends' moduli) and ``int |h - l| <= d^3 / 12 sup
-    |h''|``, the sup bounded by the envelope at the step's start."""
+def _l1_steps(resp: np.ndarray, modes: _Modes, t: np.ndarray) -> np.ndarray:
+    """Per output and step of ``t`` (len(C), len(t) - 1), at least ``int |h|`` over
+    the step given ``h`` at ``t`` (``resp``): per step ``d``, ``|h| <= |l| + |h -
+    l|`` with ``l`` the linear interpolation, ``int |l|`` exact (``d (a^2 + b^2) /
+    (2 (a + b))`` where it changes sign, ``a, b`` its ends' moduli) and ``int |h -
+    l| <= d^3 / 12 sup |h''|``, the sup bounded by the envelope at the step's
+    start."""
     d = np.diff(t)
     a, b = np.abs(resp[:, :-1]), np.abs(resp[:, 1:])
     crossing = resp[:, :-1] * resp[:, 1:] < 0
     line = np.where(crossing, (a ** 2 + b ** 2) / np.where(crossing, a + b, 1.0), a + b)
-    return np.sum(0.5 * d * line + d ** 3 / 12 * modes.envelope(t[:-1], 2), axis=1)
+    return 0.5 * d * line + d ** 3 / 12 * modes.envelope(t[:-1], 2)
+
+
+def _l1(resp: np.ndarray, modes: _Modes, t: np.ndarray) -> np.ndarray:
+    """Per output, at least ``int |h|`` between ``t[0]`` and ``t[-1]`` (:func:`_l1_steps`
+    summed)."""
+    return np.sum(_l1_steps(resp, modes, t), axis=1)
 
 
 def _extremes(step: np.ndarray, modes: _Modes, t: np.ndarray
@@ -235,6 +244,38 @@ def load_gains(A: np.ndarray, bl: np.ndarray, C: np.ndarray) -> dict[str, np.nda
 
     band, steps, swing = _until_negligible(gains, float(-modes.w.real.max()), "a load gain")
     return {"band": band, "steps": steps, "swing": swing}
+
+
+def load_tails(A: np.ndarray, bl: np.ndarray, C: np.ndarray,
+               times: np.ndarray) -> np.ndarray:
+    """Per time ``s`` of ``times`` (s, >= 0) and output, an enclosure of ``int_s^inf
+    |h(t)| dt`` (shape (len(times), len(C))): how far a load within ±1 pu that
+    acts only from ``s`` on can still move the output.  The terms of
+    :func:`load_gains`' ``"band"`` (the same 1 ms grid, horizon, tail and error)
+    summed from the grid point at or before ``s`` on (at ``s = 0`` that gain, to
+    the summation order's rounding)."""
+    times = np.asarray(times, float)
+    if times.ndim != 1 or not np.all(np.isfinite(times)) or np.any(times < 0):
+        raise ValueError("times must be a 1-D array of finite times >= 0 s")
+    modes = _modes(A, bl, C)
+
+    def gains(horizon: float) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
+        t = np.arange(0.0, horizon, DT)
+        end = (len(t) - 1) * DT
+        steps = np.concatenate([_l1_steps(responses(A, bl, C, t[i:i + size + 1])[0], modes,
+                                          t[i:i + size + 1])
+                                for i in range(0, len(t) - 1, size)], axis=1)
+        after = np.cumsum(steps[:, ::-1], axis=1)[:, ::-1]   # from each grid point on
+        after = np.hstack([after, np.zeros((len(C), 1))])
+        tail, err = modes.beyond(end), modes.error()
+        first = np.floor(times / DT + 1e-9).astype(int)     # the grid point at or before s
+        inside = first < len(t)
+        rest = np.where(inside[:, None], after[:, np.minimum(first, len(t) - 1)].T + tail,
+                        np.array([modes.beyond(s) for s in np.where(inside, 0.0, times)]))
+        return (after[:, 0] + tail + err, rest + err), (tail, np.zeros_like(rest))
+
+    size = int(round(L1_HORIZON / DT))
+    return _until_negligible(gains, float(-modes.w.real.max()), "a load gain")[1]
 
 
 def period_step_gain(A: np.ndarray, bl: np.ndarray, C: np.ndarray,
