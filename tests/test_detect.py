@@ -349,6 +349,29 @@ def test_tshark_decodes_the_capture_with_no_malformed_frame(protocol, dissector,
     assert lines("_ws.malformed || _ws.expert.severity >= error") == []
 
 
+@pytest.mark.skipif(__import__("shutil").which("tshark") is None,
+                    reason="tshark (Debian's tshark package) is not installed")
+def test_wireshark_reads_that_a_synthesized_capture_is_synthesized(tmp_path):
+    """A capture written from the relay's log (``write_pcap``) says so to Wireshark's
+    tools: capinfos prints it as the capture's comment, tshark as the first packet's
+    (``frame.comment``), and the frames still decode with nothing malformed."""
+    import subprocess
+
+    from lfc.wire.capture import SYNTHESIZED, write_pcap
+    run = wire("fig4", "modbus", duration=0.5)
+    path = write_pcap(run.frames, tmp_path / "run.pcap")
+
+    def out(*command: str) -> str:
+        return subprocess.run(command, capture_output=True, text=True, check=True).stdout
+
+    assert f"Capture comment:     {SYNTHESIZED}" in out("capinfos", str(path))
+    assert out("tshark", "-r", str(path), "-Y", "frame.comment", "-T", "fields", "-e",
+               "frame.number", "-e", "frame.comment").splitlines() == [f"1\t{SYNTHESIZED}"]
+    assert out("tshark", "-r", str(path), "-Y", "_ws.malformed || _ws.expert.severity >= "
+               "error") == ""
+    assert len(out("tshark", "-r", str(path), "-Y", "mbtcp").splitlines()) == len(run.frames)
+
+
 def test_a_capture_without_the_right_to_sniff_says_what_to_do_instead(monkeypatch, tmp_path):
     import socket as socket_module
 

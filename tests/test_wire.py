@@ -18,7 +18,7 @@ import lfc
 from lfc.repro.cli import main
 from lfc.wire import WireAttack, run_wire
 from lfc.wire.attacks import ATTACKS, from_simulate
-from lfc.wire.capture import read_commands, write_pcap
+from lfc.wire.capture import SYNTHESIZED, read_commands, write_pcap
 from lfc.wire.registers import decode, encode
 
 PARAMS, RELAYS = lfc.LFCParams(), lfc.RelaySettings()
@@ -160,12 +160,15 @@ def test_a_float_crosses_the_registers_bit_for_bit(values):
 
 @pytest.mark.parametrize("protocol", ["modbus", "dnp3"])
 def test_the_capture_decodes_to_the_logged_commands(tmp_path, protocol):
-    """``write_pcap``: read back from the capture (Modbus/TCP with scapy's own
-    dissector, DNP3 with dnp3py's frame parser, CRCs checked), the commands the
-    generator received are the ones the relay forwarded, Fig. 4's sinusoid in
-    them."""
+    """``write_pcap``: a pcapng file that says it is synthesized; read back from it
+    (Modbus/TCP with scapy's own dissector, DNP3 with dnp3py's frame parser, CRCs
+    checked), the commands the generator received are the ones the relay forwarded,
+    Fig. 4's sinusoid in them."""
     run = run_wire(PARAMS, duration=2.0, attack="fig4", protocol=protocol)
     path = write_pcap(run.frames, tmp_path / "run.pcap", protocol)
+    data = path.read_bytes()
+    assert data[:4] == b"\x0a\x0d\x0d\x0a"                  # pcapng, whatever the name
+    assert data.count(SYNTHESIZED.encode()) == 2             # section header, first packet
     got = read_commands(path, protocol)
     assert len(got) == 200 and [seq for _, seq in got] == list(range(200))
     received = [values["pc"] for values, _ in got]

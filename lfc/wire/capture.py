@@ -18,18 +18,27 @@ leg).
 
 Every frame is one TCP segment (sequence and acknowledgement numbers follow the
 bytes sent), stamped with the wall-clock time it crossed the relay.  Written
-with ``scapy`` (imported here only).  This capture is made from the relay's log;
+with ``scapy`` (imported here only) as pcapng, whose section header and first
+packet carry :data:`SYNTHESIZED` (Wireshark shows it under the capture file's
+properties and as the packet's comment: ``tshark -Y frame.comment``), so the
+file says what it is.  This capture is made from the relay's log;
 ``run_wire(capture=...)`` takes one from the loopback interface instead
 (:mod:`lfc.wire.sniff`), and :func:`read_frames` reads either back.
 """
 
 from __future__ import annotations
 
+import struct
 from pathlib import Path
 
 from lfc.wire.relay import CENTRE as LOOPBACK_CENTRE
 
 CENTRE, RELAY = "10.0.0.1", "10.0.0.2"
+#: what a synthesized capture says of itself (pcapng comments)
+SYNTHESIZED = ("lfc: synthesized from the relay's log of a run, not captured: addresses, "
+               "ports, TCP sequence numbers and the clock's epoch are made up and there are "
+               "no handshakes; the payload bytes and their times at the relay are the run's. "
+               "A capture from the sockets: run_wire(capture=...).")
 BACK = {"centre>relay": "relay>centre", "relay>centre": "centre>relay",
         "relay>generator": "generator>relay", "generator>relay": "relay>generator"}
 
@@ -52,11 +61,11 @@ def _protocol(protocol: str):
 def write_pcap(frames: list[tuple[float, str, bytes, int]], path: str | Path,
                protocol: str = "modbus", epoch: float = 0.0) -> Path:
     """Write ``frames`` (time s, leg, bytes, area: :attr:`lfc.wire.run.WireResult.frames`)
-    of a run over ``protocol`` to ``path`` (pcap); times are offset so the first
-    frame is at ``epoch`` s.  Returns the path."""
+    of a run over ``protocol`` to ``path`` (pcapng, commented :data:`SYNTHESIZED`
+    whatever the file's name); times are offset so the first frame is at ``epoch``
+    s.  Returns the path."""
     from scapy.layers.inet import IP, TCP
     from scapy.layers.l2 import Ether
-    from scapy.utils import wrpcap
 
     if not frames:
         raise ValueError("no frames to capture")
@@ -72,9 +81,30 @@ def write_pcap(frames: list[tuple[float, str, bytes, int]], path: str | Path,
         pkt.time = epoch + (t - t0)
         seq[leg, area] = mine + len(data)
         packets.append(pkt)
+    packets[0].comments = [SYNTHESIZED.encode()]
     path = Path(path)
-    wrpcap(str(path), packets)
+    writer = _commented_writer(path, SYNTHESIZED)
+    try:
+        writer.write(packets)
+    finally:
+        writer.close()
     return path
+
+
+def _commented_writer(path: Path, comment: str):
+    """A scapy pcapng writer whose section header block carries ``comment``
+    (option 1, ``opt_comment``; scapy writes none)."""
+    from scapy.utils import PcapNgWriter
+
+    class Writer(PcapNgWriter):
+        def _write_block_shb(self) -> None:
+            text = comment.encode()
+            body = self.endian_magic + struct.pack(self.endian + "HHq", 1, 0, -1)
+            options = (struct.pack(self.endian + "HH", 1, len(text)) + self._add_padding(text)
+                       + struct.pack(self.endian + "HH", 0, 0))
+            self.f.write(self.build_block(b"\x0A\x0D\x0D\x0A", body, options))
+
+    return Writer(str(path))
 
 
 def read_frames(path: str | Path, protocol: str = "modbus") -> list[tuple[float, str, bytes, int]]:
