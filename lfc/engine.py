@@ -40,8 +40,10 @@ from lfc.multiarea import N_AREA_STATES
 from lfc.relays import relay_sample
 from lfc.signals import GRID, N_PARAMS, NONE, SAMPLES, STEP, Signal, value_at
 
-PC, WREF, LOAD, ACE = range(4)      # signal channels (ACE: an attack on the area control error)
-N_CHANNELS = 4
+#: signal channels: ACE an attack on the area control error, DW_MEAS and ROCOF_MEAS on the
+#: readings of the generator side's sensors
+PC, WREF, LOAD, ACE, DW_MEAS, ROCOF_MEAS = range(6)
+N_CHANNELS = 6
 N_KF = 6                            # largest Kalman state (5 states + the load)
 N_CTRL = 15                         # trace columns per control period (see CTRL_COLUMNS)
 CTRL_COLUMNS = ("u_ref", "u", "flags", "h_freq", "h_rocof", "margin_freq", "margin_rocof",
@@ -275,7 +277,10 @@ def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise: tupl
 
     ``x`` is the plant's state in design-model coordinates and ``p_true`` the true
     load (pu); ``noise`` the measurement noise of this sample on ``(dw_meas,
-    rocof_meas)`` (pu, pu/s).
+    rocof_meas)`` (pu, pu/s).  A sensor attack (channels ``DW_MEAS``, ``ROCOF_MEAS``)
+    is added to both readings wherever the generator side reads them: the AGC's
+    integrator, the Kalman filter and, with the exact state, the filter's state (the
+    relays read the plant).
     In an interconnected grid (:mod:`lfc.multiarea`) ``p_true`` is the area's net
     disturbance (load plus tie-line export) and the integrator is the area's AGC:
     ``gstate[0] += k_freq (wref - dw_meas) - k_tie tie`` with ``tie`` the measured
@@ -294,7 +299,9 @@ def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise: tupl
     k_i_period, k_tie_period, feedforward, anti_windup, method, fd = controller
     mem, gstate, x_hat, ctrl = memory
     noise0, noise1 = noise
-    y0, y1 = x[3] + noise0, x[4] + noise1
+    lie0 = signal_value(DW_MEAS, kinds, params, offsets, st, sv, t, j)
+    lie1 = signal_value(ROCOF_MEAS, kinds, params, offsets, st, sv, t, j)
+    y0, y1 = x[3] + noise0 + lie0, x[4] + noise1 + lie1
     if est >= 0 and not grid_wide(method):
         n = ka.shape[0]
         kf_correct(kg, kc, kstate, (y0, y1), x_hat)     # x_hat: scratch until below
@@ -304,6 +311,8 @@ def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise: tupl
     else:
         for r in range(5):
             x_hat[r] = x[r]
+        x_hat[3] += lie0
+        x_hat[4] += lie1
         p_hat = p_true if feedforward else 0.0
     u_ref = gstate[0] + signal_value(PC, kinds, params, offsets, st, sv, t, j)
     wref = signal_value(WREF, kinds, params, offsets, st, sv, t, j)
@@ -450,8 +459,12 @@ def run_kernel(timing: Timing, plants: Plants, rows: Rows, samples: SignalSample
             if grid_wide(method0) and index[i, 0, 0] >= 0:   # what its estimator measures
                 for a in range(n_a):
                     q_a = index[i, a, 1]
-                    ym[2 * a] = x[m * a + 3] + (noise[q_a, j, 0] if q_a >= 0 else 0.0)
-                    ym[2 * a + 1] = x[m * a + 4] + (noise[q_a, j, 1] if q_a >= 0 else 0.0)
+                    ym[2 * a] = x[m * a + 3] + (noise[q_a, j, 0] if q_a >= 0 else 0.0) \
+                        + signal_value(DW_MEAS, kinds[i, a], params[i, a], offsets[i, a], st,
+                                       sv, t, j)
+                    ym[2 * a + 1] = x[m * a + 4] + (noise[q_a, j, 1] if q_a >= 0 else 0.0) \
+                        + signal_value(ROCOF_MEAS, kinds[i, a], params[i, a], offsets[i, a],
+                                       st, sv, t, j)
                     s = 0.0
                     for line in range(n_l):
                         s += inc[a, line] * x[m * n_a + line]
@@ -625,10 +638,10 @@ _NO_SAMPLES = np.zeros(0)   # a scenario without sampled signals (empty: nothing
 
 
 def scenario_signals(pc_attack, wref_attack, load, tc: np.ndarray, t: np.ndarray,
-                     ace_attack=None) -> tuple:
-    """One scenario's (or area's) signals as the engine reads them: ``(kinds (4,),
-    params (4, 6), offsets (4, 2), sample times, sample values)``, channels
-    ``PC, WREF, LOAD, ACE``.  A :class:`~lfc.signals.Signal` is passed as its
+                     ace_attack=None, dw_meas_attack=None, rocof_meas_attack=None) -> tuple:
+    """One scenario's (or area's) signals as the engine reads them: ``(kinds (6,),
+    params (6, 6), offsets (6, 2), sample times, sample values)``, channels
+    ``PC, WREF, LOAD, ACE, DW_MEAS, ROCOF_MEAS``.  A :class:`~lfc.signals.Signal` is passed as its
     spec; any other callable is sampled on its grid (control samples ``tc`` for
     the attacks, plant samples ``t`` for the load)."""
     kinds, params = np.zeros(N_CHANNELS, np.int64), np.zeros((N_CHANNELS, N_PARAMS))
@@ -636,7 +649,9 @@ def scenario_signals(pc_attack, wref_attack, load, tc: np.ndarray, t: np.ndarray
     for c, (signal, name, grid) in enumerate(((pc_attack, "pc_attack", tc),
                                              (wref_attack, "wref_attack", tc),
                                              (load, "load", t),
-                                             (ace_attack, "ace_attack", tc))):
+                                             (ace_attack, "ace_attack", tc),
+                                             (dw_meas_attack, "dw_meas_attack", tc),
+                                             (rocof_meas_attack, "rocof_meas_attack", tc))):
         if signal is None:                                    # kind NONE: zero, no samples
             offsets[c, 0] = n
             continue
@@ -662,7 +677,9 @@ def scenario_signals(pc_attack, wref_attack, load, tc: np.ndarray, t: np.ndarray
     return kinds, params, offsets, np.concatenate(st), np.concatenate(sv)
 
 
-CHANNELS = ("pc", "wref", "ace")   # what an attacker may corrupt in an area
+#: what an attacker may corrupt in an area: the command, the frequency reference, the ACE,
+#: and what the generator side's frequency and ROCOF sensors read
+CHANNELS = ("pc", "wref", "ace", "dw_meas", "rocof_meas")
 
 
 def check_area_keys(mapping: dict | None, n_areas: int, name: str) -> dict:

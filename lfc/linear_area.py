@@ -66,7 +66,8 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
              estimator=None, noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0,
              dt: float = 1e-3, control_period: float = 0.01, stop_on_trip: bool = False,
              load_feedforward: bool = False, relay_noise: bool = False,
-             anti_windup: bool = False) -> Result:
+             anti_windup: bool = False, dw_meas_attack: Signal | None = None,
+             rocof_meas_attack: Signal | None = None) -> Result:
     """Simulate the closed loop from equilibrium.
 
     Parameters
@@ -115,6 +116,11 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
         integrator does not integrate in the direction that widens the
         difference (conditional integration), so it cannot wind up behind a
         held command.  Default False: the paper's loop, where it winds up.
+    dw_meas_attack, rocof_meas_attack : callable, optional
+        Added to what the generator side's frequency (pu) and ROCOF (pu/s) sensors
+        read: the local integrator, the Kalman filter (``estimator``) and, with the
+        exact state, the filter's ``dw_meas`` and ``rocof_meas`` states all read the
+        spoofed value; the relays, the trace and the metrics the plant's.
 
     Returns
     -------
@@ -131,7 +137,8 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
                          "effect here)")
     sc = Scenarios(params, duration=duration, dt=dt, control_period=control_period,
                    relays=relays)
-    sc.add(attacks={0: {"pc": pc_attack, "wref": wref_attack}}, loads={0: load},
+    sc.add(attacks={0: {"pc": pc_attack, "wref": wref_attack, "dw_meas": dw_meas_attack,
+                        "rocof_meas": rocof_meas_attack}}, loads={0: load},
            filters={0: scc}, estimator=estimator, noise_std=noise_std, seed=seed,
            feedforward=load_feedforward, relay_noise=relay_noise, anti_windup=anti_windup)
     run = sc.run(trace=True, stop_on_trip=stop_on_trip)
@@ -149,5 +156,8 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
                 "noise_std": list(noise_std), "scc": repr(scc), "estimator": repr(estimator),
                 "pc_attack": repr(pc_attack), "wref_attack": repr(wref_attack),
                 "load": repr(load), "stop_on_trip": stop_on_trip,
-                "load_feedforward": load_feedforward, "anti_windup": anti_windup}
+                "load_feedforward": load_feedforward, "anti_windup": anti_windup,
+                **{name: repr(v) for name, v in (("dw_meas_attack", dw_meas_attack),
+                                                 ("rocof_meas_attack", rocof_meas_attack))
+                   if v is not None}}
     return area_result(trace, sc.tc, run.ctrl[:, 0], trips, scc, settings)

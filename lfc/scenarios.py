@@ -130,6 +130,7 @@ class Scenarios:
             raise ValueError(f"plant must have the design's {n} area(s) and {len(grid.tie)} "
                              f"tie-line(s), got {plant!r}")
         check_coupled(filters, grid, estimator, noise_std)
+        check_sensed(attacks, filters, estimator)
         check_load_measured(filters, estimator, feedforward)
         p_i = self._plants.index(plant, lambda: discretize_grid(plant, self.dt))
         f_is = [-1 if filters.get(a) is None else self._filters.index(
@@ -151,7 +152,7 @@ class Scenarios:
                 noise.append(make_noise(noise_std, self.n_ctrl, seed if a == 0 else (seed, a)))
             kinds, params, offsets, st, sv = scenario_signals(
                 channels.get("pc"), channels.get("wref"), loads.get(a), self.tc, self.t,
-                channels.get("ace"))
+                channels.get("ace"), channels.get("dw_meas"), channels.get("rocof_meas"))
             offsets[:, 0] += n_samples                # into this run's sample arrays
             sig.append(((kinds, params, offsets), st, sv))
             n_samples += len(st)
@@ -290,10 +291,25 @@ def kalman_tables(filters: list) -> Estimators:
     return Estimators(ka, kb, kc, kg, kdim)
 
 
+def check_sensed(attacks: dict, filters: dict, estimator) -> None:
+    """``ValueError`` for an attack on an area's sensors (``dw_meas``, ``rocof_meas``)
+    with a coupled filter on the exact grid state: it reads every area's state from the
+    plant, not from the sensors, so the attack would not reach it (give it its grid
+    Kalman filter, ``estimator="kalman"``, which reads the sensors)."""
+    sensed = sorted(a for a, channels in attacks.items()
+                    if any(channels.get(c) is not None for c in ("dw_meas", "rocof_meas")))
+    coupled = any(isinstance(f, CoupledFilter) or f == "coupled" for f in filters.values())
+    if sensed and coupled and estimator is None:
+        raise ValueError(f"attacks on the sensors of area(s) {sensed} with a coupled filter "
+                         f"on the exact grid state: it reads the plant, not the sensors; "
+                         f"give estimator='kalman' (its grid Kalman filter reads them)")
+
+
 # -- one scenario --------------------------------------------------------------------------
 #: the keywords of a scenario in an area's form (lfc.simulate of an LFCParams or a microgrid)
 AREA_KEYS = ("pc_attack", "wref_attack", "load", "scc", "estimator", "noise_std", "seed",
-             "load_feedforward", "relay_noise", "anti_windup")
+             "load_feedforward", "relay_noise", "anti_windup", "dw_meas_attack",
+             "rocof_meas_attack")
 #: the keywords of a scenario in a grid's form (lfc.simulate of a MultiAreaParams or a grid)
 GRID_KEYS = ("attacks", "loads", "filters", "estimator", "noise_std", "seed", "feedforward",
              "relay_noise", "anti_windup")
@@ -314,10 +330,13 @@ class Scenario:
     Parameters
     ----------
     attacks : dict, optional
-        ``{area: {"pc" | "wref" | "ace": signal}}``: the attacker's additions to the
-        command that reaches the area (pu), to its frequency reference (pu) and to the
-        tie-line term of its area control error (pu); a
-        :class:`~lfc.signals.Signal` or any callable of time (s).
+        ``{area: {"pc" | "wref" | "ace" | "dw_meas" | "rocof_meas": signal}}``: the
+        attacker's additions to the command that reaches the area (pu), to its
+        frequency reference (pu), to the tie-line term of its area control error (pu),
+        and to what its generator side's frequency (pu) and ROCOF (pu/s) sensors read
+        (the AGC, the Kalman filter and, with the exact state, the filter read them;
+        the relays read the plant); a :class:`~lfc.signals.Signal` or any callable of
+        time (s).
     loads : dict, optional
         ``{area: signal}``: each area's load change (pu).
     filters : dict, optional
@@ -389,9 +408,12 @@ class Scenario:
     def for_area(cls, *, pc_attack=None, wref_attack=None, load=None, scc=None,
                  estimator=None, noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0,
                  load_feedforward: bool = False, relay_noise: bool = False,
-                 anti_windup: bool = False) -> Scenario:
+                 anti_windup: bool = False, dw_meas_attack=None,
+                 rocof_meas_attack=None) -> Scenario:
         """The scenario of one area from :func:`lfc.simulate`'s keywords of an area."""
-        channels = {k: v for k, v in (("pc", pc_attack), ("wref", wref_attack)) if v is not None}
+        channels = {k: v for k, v in (("pc", pc_attack), ("wref", wref_attack),
+                                      ("dw_meas", dw_meas_attack),
+                                      ("rocof_meas", rocof_meas_attack)) if v is not None}
         return cls(attacks={0: channels} if channels else {},
                    loads={} if load is None else {0: load},
                    filters={} if scc is None else {0: scc}, estimator=estimator,
@@ -427,6 +449,8 @@ class Scenario:
               "load": self.loads.get(0), "scc": scc, "estimator": self.estimator,
               "noise_std": self.noise_std, "seed": self.seed,
               "load_feedforward": bool(self.feedforward), "anti_windup": self.anti_windup}
+        kw.update({f"{c}_attack": channels[c] for c in ("dw_meas", "rocof_meas")
+                   if c in channels})
         return {**kw, "relay_noise": True} if self.relay_noise else kw
 
 

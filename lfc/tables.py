@@ -56,7 +56,7 @@ from lfc.scenarios import Scenario, Scenarios
 from lfc.signals import Chirp, Ramp, Samples, Signal, Sinusoid, Square, Step
 
 WAVEFORMS = ("sinusoid", "square", "chirp", "step", "ramp", "samples", "none")
-CHANNELS = ("pc", "wref", "load")
+CHANNELS = ("pc", "wref", "load", "dw_meas", "rocof_meas")
 REQUIRED = ("waveform", "channel", "amplitude", "freq_hz", "start", "alpha", "Ts")
 READINGS = {"outside_rule": OUTSIDE_RULES, "conflict": CONFLICT_RULES,
             "prediction": PREDICTIONS}  # optional columns: the paper filter's readings
@@ -455,7 +455,8 @@ def simulate_table(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
     scenarios : DataFrame
         One row per scenario with the columns ``REQUIRED``: ``waveform`` (one of
         ``WAVEFORMS``), ``channel`` (``"pc"`` command, ``"wref"`` frequency
-        reference, ``"load"``), ``amplitude`` (pu; pu/s for a ramp), ``freq_hz``
+        reference, ``"load"``, or what the sensors read: ``"dw_meas"``,
+        ``"rocof_meas"``), ``amplitude`` (pu; pu/s for a ramp), ``freq_hz``
         (Hz; a chirp's end frequency, from ``CHIRP_F0``), ``start`` (s),
         ``alpha`` (1/s; NaN runs without SCC) and ``Ts`` (s); optionally
         ``stop`` (s), ``values`` and ``sample_period`` (``"samples"`` rows),
@@ -704,13 +705,16 @@ def table_scenarios(table: pd.DataFrame, params: LFCParams, *, duration: float,
 def scenario_row(scenario: Scenario, params: LFCParams) -> dict:
     """``scenario`` as one row of a scenario table for the area ``params``
     (:func:`table_scenarios` reads it back to the same scenario): one signal of a
-    ``SIGNAL_WAVEFORMS`` class on ``pc``, ``wref`` or the load, or none; a filter built
+    ``SIGNAL_WAVEFORMS`` class on ``pc``, ``wref``, the load or a sensor, or none; a filter built
     on ``params`` or none; the Kalman estimate exactly where there is noise; the
     plant's ``M``, ``D``, ... where it is not ``params``.  ``ValueError`` naming what
     a table cannot hold."""
     kw = scenario.keywords("area")
     given = [(c, s) for c, s in (("pc", kw["pc_attack"]), ("wref", kw["wref_attack"]),
-                                 ("load", kw["load"])) if s is not None]
+                                 ("load", kw["load"]),
+                                 ("dw_meas", kw.get("dw_meas_attack")),
+                                 ("rocof_meas", kw.get("rocof_meas_attack")))
+             if s is not None]
     if len(given) > 1:
         raise ValueError(f"a table row holds one signal, got {[c for c, _ in given]}")
     channel, signal = given[0] if given else ("pc", None)

@@ -62,6 +62,13 @@ FAMILIES = {
 }
 # families of the coordinated search: the above, and a bias on the ACE an AGC integrates
 MULTI_FAMILIES = {**FAMILIES, "bias on ACE": ("ace", "step", [(-3.0, 3.0)])}
+# families on what the sensors read (outside every filter's threat model: searched apart)
+SENSOR_FAMILIES = {
+    "bias on dw_meas": ("dw_meas", "step", [(-0.1, 0.1)]),
+    "sinusoid on dw_meas": ("dw_meas", "sinusoid", [(0.0, 0.1), (0.05, 3.0)]),
+    "bias on rocof_meas": ("rocof_meas", "step", [(-1.0, 1.0)]),
+}
+_SINGLE = {**FAMILIES, **SENSOR_FAMILIES}   # what family_search and replay take
 
 
 READ_BY = {"none": (), "paper": ("alpha", "Ts"), "certified": ("uncertainty", "declare_noise")}
@@ -191,7 +198,7 @@ def trip_verdict(tripped: dict, severities: dict, band: float = EDGE) -> str:
 
 
 def _family_table(family: str, theta: np.ndarray, defender: Defender) -> pd.DataFrame:
-    channel, waveform, bounds = FAMILIES[family]
+    channel, waveform, bounds = _SINGLE[family]
     amp = theta[0]
     freq = theta[1] if len(bounds) > 1 else np.zeros_like(amp)
     return pd.DataFrame({"waveform": waveform, "channel": channel, "amplitude": amp,
@@ -253,13 +260,14 @@ def family_search(params: LFCParams, defender: Defender, family: str, *,
                   relays: RelaySettings | None = None, duration: float = 10.0,
                   seed: int = 0, maxiter: int = 15, popsize: int = 10,
                   search: Search = Search()) -> dict:
-    """Worst attack of one family against ``defender`` (see module docstring),
-    over the plants and noise seeds ``search`` allows."""
+    """Worst attack of one family (``FAMILIES``, or ``SENSOR_FAMILIES``: what a sensor
+    reads) against ``defender`` (see module docstring), over the plants and noise
+    seeds ``search`` allows."""
     if not isinstance(defender, Defender):
         raise ParameterTypeError(f"defender must be a Defender, got {defender!r:.80}")
-    check_choice("family", family, tuple(FAMILIES))
+    check_choice("family", family, tuple(_SINGLE))
     relays = relays_or_default(relays)
-    bounds = FAMILIES[family][2]
+    bounds = _SINGLE[family][2]
     theta, sev, row = _search(lambda th: _family_table(family, th, defender), len(bounds),
                               bounds, params, relays, duration, seed, maxiter, popsize, search)
     return {"defender": defender.name, "search": family, "severity": sev,
@@ -274,7 +282,8 @@ def replay(found, duration: float) -> dict:
     dict, or a row of a table of them) of
     :func:`family_search` (its ``search`` family and ``theta``) or of
     :func:`freeform_search` (its ``values`` and ``sample_period``), as a
-    ``pc_attack`` or ``wref_attack`` signal starting at ``ATTACK_START``;
+    ``pc_attack``, ``wref_attack``, ``dw_meas_attack`` or ``rocof_meas_attack``
+    signal starting at ``ATTACK_START``;
     ``duration`` (s) ends a chirp, as in the search's runs."""
     def entry(key: str):
         if not isinstance(found, (dict, pd.Series)) or key not in found.keys():
@@ -286,9 +295,9 @@ def replay(found, duration: float) -> dict:
         raise ValueError(f"duration must be > ATTACK_START ({ATTACK_START} s, when the attack "
                          f"starts), got {duration!r}")
     kind = entry("search")
-    if isinstance(kind, str) and kind in FAMILIES:
+    if isinstance(kind, str) and kind in _SINGLE:
         theta = check_array("found['theta']", entry("theta"),
-                            shape=(len(FAMILIES[kind][2]),))
+                            shape=(len(_SINGLE[kind][2]),))
         row = _family_table(kind, theta[:, None], Defender("replay")).iloc[0]
         channel = row["channel"]
     elif isinstance(kind, str) and kind.startswith("free-form"):
@@ -298,7 +307,7 @@ def replay(found, duration: float) -> dict:
                              Defender("replay")).iloc[0]
         channel = "pc"
     else:
-        raise ValueError(f"found['search'] must be one of {list(FAMILIES)} or a free-form "
+        raise ValueError(f"found['search'] must be one of {list(_SINGLE)} or a free-form "
                          f"search, got {kind!r}")
     return {f"{channel}_attack": scenario_signal(row, duration)}
 

@@ -22,9 +22,24 @@ ANDES_PLANT = tuple(n for n, v in vars(AndesPlant).items()
                     if callable(v) and not n.startswith("_"))
 
 
+SENSORS = ("dw_meas", "rocof_meas")   # the sensor channels the linear plants model
+
+
+def _no_sensor_attack(scenario: dict) -> None:
+    """``ValueError`` for an attack on the generator side's sensors: on ANDES they
+    read the simulator's own measurements, which these runners do not corrupt."""
+    named = [f"{c}_attack" for c in SENSORS if scenario.get(f"{c}_attack") is not None]
+    named += [f"attacks[{a}][{c!r}]" for a, channels in (scenario.get("attacks") or {}).items()
+              if isinstance(channels, dict) for c in SENSORS if channels.get(c) is not None]
+    if named:
+        raise ValueError(f"{', '.join(named)}: attacks on the sensors run on the linear plants "
+                         f"(LFCParams, MultiAreaParams), not on ANDES yet")
+
+
 def _microgrid(case: MicrogridCase, *, duration: float, design=None, **scenario):
     from lfc.testbed.fit import design_model
     from lfc.testbed.microgrid import simulate_microgrid
+    _no_sensor_attack(scenario)
     check_load_measured({None: scenario.get("scc")}, scenario.get("estimator"),
                         scenario.get("load_feedforward", False))
     return simulate_microgrid(design if design is not None else design_model(case),
@@ -34,6 +49,7 @@ def _microgrid(case: MicrogridCase, *, duration: float, design=None, **scenario)
 def _grid_case(case: GridCase, *, duration: float, design=None, **scenario):
     from lfc.testbed.fit import grid_design
     from lfc.testbed.grids import simulate_andes_grid
+    _no_sensor_attack(scenario)
     check_load_measured(scenario.get("filters") or {}, scenario.get("estimator"),
                         scenario.get("feedforward", True))
     return simulate_andes_grid(design if design is not None else grid_design(case),
@@ -44,6 +60,8 @@ def _grid_case_many(case: GridCase, scenarios: list[dict], *, duration: float, d
                     keep: str = "metrics", **kwargs):
     from lfc.testbed.fit import grid_design
     from lfc.testbed.grids import simulate_andes_grid_table
+    for scenario in scenarios:
+        _no_sensor_attack(scenario if isinstance(scenario, dict) else vars(scenario))
     results = simulate_andes_grid_table(design if design is not None else grid_design(case),
                                         grid_scenarios(scenarios), duration=duration,
                                         case=case, **kwargs)
@@ -55,6 +73,7 @@ def _own_plant(plant, *, duration: float, design=None, **scenario):
     if design is None:
         raise ValueError("design is required for an AndesPlant of your own: a "
                          "MultiAreaParams of its n_areas areas")
+    _no_sensor_attack(scenario)
     check_load_measured(scenario.get("filters") or {}, scenario.get("estimator"),
                         scenario.get("feedforward", True))
     return simulate_andes_grid(design, duration=duration, plant=plant, **scenario)
