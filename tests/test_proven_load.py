@@ -5,6 +5,7 @@ by the peak of the step response instead of the L1 norm."""
 from __future__ import annotations
 
 import itertools
+import math
 
 import numpy as np
 import pandas as pd
@@ -202,6 +203,21 @@ def test_with_a_band_outside_is_never_raised_while_the_load_stays_in_it():
         assert m["outside"] == 0 and not m["tripped"]
     quiet = lfc.simulate(P, duration=20.0, load=lfc.Step(BAND, start=1.0), scc=scc).metrics()
     assert quiet["outside"] == 0 and not quiet["tripped"]
+
+
+def test_with_a_band_at_the_largest_bound_the_edges_flag_nothing():
+    """The range's other corner: ``load_bound`` just below ``largest_load_bound``
+    (0.0589 pu on the default plant), the load not given, steps to either edge and a
+    5 Hz square across the whole band, during each attack at two instants: 24 runs, no
+    ``outside``, no trip."""
+    from lfc.experiments.load_during_attack import ATTACKS
+    bound = math.floor(1e4 * largest_load_bound(P, RELAYS)) / 1e4 * 0.999
+    scc = SafetyFilter(P, method="certified", load_bound=bound)
+    for attack, t in itertools.product(ATTACKS, AUDITED[[1, 2]]):
+        for load in (lfc.Step(bound, start=t), lfc.Step(-bound, start=t),
+                     lfc.Square(bound, 5.0, start=t)):
+            m = lfc.simulate(P, duration=12.0, scc=scc, load=load, **ATTACKS[attack]).metrics()
+            assert m["outside"] == 0 and not m["tripped"], (attack, t, load)
 
 
 def test_with_a_band_a_load_beyond_it_is_flagged_given_or_not():
