@@ -103,11 +103,11 @@ def test_on_a_grid_the_lie_reaches_the_attacked_areas_reading_only():
 
 
 def test_andes_plants_refuse_a_sensor_attack_naming_it():
+    from lfc.testbed import GridCase, MicrogridCase
     with pytest.raises(ValueError, match="dw_meas_attack.*not on ANDES"):
-        lfc.simulate(lfc.testbed.MicrogridCase(), duration=1.0,
-                     dw_meas_attack=lfc.Step(0.01))
+        lfc.simulate(MicrogridCase(), duration=1.0, dw_meas_attack=lfc.Step(0.01))
     with pytest.raises(ValueError, match=r"attacks\[1\]\['rocof_meas'\].*not on ANDES"):
-        lfc.simulate(lfc.testbed.GridCase.kundur(), duration=1.0,
+        lfc.simulate(GridCase.kundur(), duration=1.0,
                      attacks={1: {"rocof_meas": lfc.Step(0.01)}})
 
 
