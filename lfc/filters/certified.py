@@ -98,10 +98,11 @@ of ``recheck_bound`` within the coming control period (each limit tightened by
 ``recheck_bound`` times the step response's peak over one period,
 :func:`period_step_gain`; at most what ``load_bound`` takes, so a command certified
 now passes its own re-check; and at most ``load_bound``, which covers a new command's
-first period), so the guarantee above also holds under this assumption instead: at every control sample the applied command is new (and
-the load's variation from then on is within ``load_bound``) or held and re-checked
-without an ``outside`` flag, and within each control period the load varies by at
-most ``recheck_bound`` — whatever it did before.  Proven up to the first
+first period), so the guarantee above also holds under this assumption instead: at
+every control sample the applied command is new (and the load's variation from then
+on is within ``load_bound``) or held and re-checked without an ``outside`` flag, and
+within each control period the load varies by at most ``recheck_bound`` — whatever
+it did before.  Proven up to the first
 ``outside`` flag; ``tests/test_proven_load.py`` checks it at steps of exactly
 ``recheck_bound`` landing at every instant of every attack.  The filter must be
 given the load (``load_feedforward=True``) or an estimate of it: a run without
@@ -425,7 +426,7 @@ class CertifiedSet:
         head = np.zeros(HEAD)
         head[:] = (self.u_min, self.u_max, len(self.blocks), self.n_rows,
                    self.relays.F, self.relays.rocof_limit, self.load_room,
-                   float(self.options.load_kind == "band" and self.noise_std is None))
+                   float(self.blocks[0].held_at_certified_load))
         return np.concatenate([head] + [b.pack() for b in self.blocks])
 
 
@@ -500,16 +501,15 @@ class _PlantBlock:
         # certification with room for what the band did since, s ahead at most
         # load_bound int_s^inf |h|; "steps" (theorem C) with room for the load's total
         # variation times sup |S| (the load given) or sup S - inf S (not given), less
-        # recheck_bound's room for the coming period (the load given)
-        # (on an estimate nothing is proven: "band" re-certifies as "period" does, at
-        # the latest estimate of the load)
-        since = load_kind == "band" and cov is None
-        if load_kind != "steps" and not since:
-            held = lim
-        elif since:
+        # recheck_bound's room for the coming period; on an estimate (nothing proven)
+        # "band" re-certifies as "period" does, at the latest estimate of the load
+        self.held_at_certified_load = since = load_kind == "band" and cov is None
+        if since:
             held = lim + load * load_tails(A, B[:, 1], C, times)   # (n, 2)
-        else:
+        elif load_kind == "steps":
             held = lim + load * (gain if recheck[0] > 0 else gains_of_kind["swing"])
+        else:
+            held = lim
         # recheck_bound: the held command's trajectory must leave room for the load's
         # variation within the coming period, whose effect until the next sample is at
         # most its total variation times the step response's peak over one period

@@ -270,8 +270,10 @@ def load_tails(A: np.ndarray, bl: np.ndarray, C: np.ndarray,
         tail, err = modes.beyond(end), modes.error()
         first = np.floor(times / DT + 1e-9).astype(int)     # the grid point at or before s
         inside = first < len(t)
-        rest = np.where(inside[:, None], after[:, np.minimum(first, len(t) - 1)].T + tail,
-                        np.array([modes.beyond(s) for s in np.where(inside, 0.0, times)]))
+        rest = np.empty((len(times), len(C)))
+        rest[inside] = after[:, first[inside]].T + tail
+        for k in np.flatnonzero(~inside):                   # beyond the grid: the modal tail
+            rest[k] = modes.beyond(times[k])
         return (after[:, 0] + tail + err, rest + err), (tail, np.zeros_like(rest))
 
     size = int(round(L1_HORIZON / DT))
