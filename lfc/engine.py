@@ -677,9 +677,11 @@ def scenario_signals(pc_attack, wref_attack, load, tc: np.ndarray, t: np.ndarray
     return kinds, params, offsets, np.concatenate(st), np.concatenate(sv)
 
 
+#: what the generator side's frequency and ROCOF sensors read (an attack adds to it)
+SENSOR_CHANNELS = ("dw_meas", "rocof_meas")
 #: what an attacker may corrupt in an area: the command, the frequency reference, the ACE,
-#: and what the generator side's frequency and ROCOF sensors read
-CHANNELS = ("pc", "wref", "ace", "dw_meas", "rocof_meas")
+#: and what the sensors read
+CHANNELS = ("pc", "wref", "ace", *SENSOR_CHANNELS)
 
 
 def check_area_keys(mapping: dict | None, n_areas: int, name: str) -> dict:

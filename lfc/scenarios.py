@@ -15,10 +15,11 @@ from numbers import Integral
 import numpy as np
 
 from lfc._validate import ParameterTypeError, check_flag, check_seed
-from lfc.engine import (CHANNELS, LOAD, METRICS, N_CHANNELS, N_CTRL, N_KF, Estimators,
-                        FilterTables, Outputs, Plants, RelayTables, Rows, SignalSamples, Timing,
-                        Work, check_area_keys, check_load_measured, check_noise,
-                        make_estimator, make_noise, run_kernel, scenario_signals)
+from lfc.engine import (CHANNELS, LOAD, METRICS, N_CHANNELS, N_CTRL, N_KF, SENSOR_CHANNELS,
+                        Estimators, FilterTables, Outputs, Plants, RelayTables, Rows,
+                        SignalSamples, Timing, Work, check_area_keys, check_load_measured,
+                        check_noise, make_estimator, make_noise, run_kernel,
+                        scenario_signals)
 from lfc.filters import SafetyFilter
 from lfc.filters.coupled import CoupledFilter, check_coupled
 from lfc.filters.dispatch import GRID_WIDE, scratch_size
@@ -297,7 +298,7 @@ def check_sensed(attacks: dict, filters: dict, estimator) -> None:
     plant, not from the sensors, so the attack would not reach it (give it its grid
     Kalman filter, ``estimator="kalman"``, which reads the sensors)."""
     sensed = sorted(a for a, channels in attacks.items()
-                    if any(channels.get(c) is not None for c in ("dw_meas", "rocof_meas")))
+                    if any(channels.get(c) is not None for c in SENSOR_CHANNELS))
     coupled = any(isinstance(f, CoupledFilter) or f == "coupled" for f in filters.values())
     if sensed and coupled and estimator is None:
         raise ValueError(f"attacks on the sensors of area(s) {sensed} with a coupled filter "
@@ -411,9 +412,9 @@ class Scenario:
                  anti_windup: bool = False, dw_meas_attack=None,
                  rocof_meas_attack=None) -> Scenario:
         """The scenario of one area from :func:`lfc.simulate`'s keywords of an area."""
-        channels = {k: v for k, v in (("pc", pc_attack), ("wref", wref_attack),
-                                      ("dw_meas", dw_meas_attack),
-                                      ("rocof_meas", rocof_meas_attack)) if v is not None}
+        channels = {k: v for k, v in zip(("pc", "wref", *SENSOR_CHANNELS),
+                                         (pc_attack, wref_attack, dw_meas_attack,
+                                          rocof_meas_attack)) if v is not None}
         return cls(attacks={0: channels} if channels else {},
                    loads={} if load is None else {0: load},
                    filters={} if scc is None else {0: scc}, estimator=estimator,
@@ -449,8 +450,7 @@ class Scenario:
               "load": self.loads.get(0), "scc": scc, "estimator": self.estimator,
               "noise_std": self.noise_std, "seed": self.seed,
               "load_feedforward": bool(self.feedforward), "anti_windup": self.anti_windup}
-        kw.update({f"{c}_attack": channels[c] for c in ("dw_meas", "rocof_meas")
-                   if c in channels})
+        kw.update({f"{c}_attack": channels[c] for c in SENSOR_CHANNELS if c in channels})
         return {**kw, "relay_noise": True} if self.relay_noise else kw
 
 

@@ -9,7 +9,7 @@ to the case, cached on disk; required for a plant of your own).  Importing
 
 from __future__ import annotations
 
-from lfc.engine import check_load_measured
+from lfc.engine import SENSOR_CHANNELS, check_load_measured
 from lfc.linear_grid import results_table
 from lfc.run import Runner, register, register_protocol
 from lfc.scenarios import grid_scenarios
@@ -22,15 +22,13 @@ ANDES_PLANT = tuple(n for n, v in vars(AndesPlant).items()
                     if callable(v) and not n.startswith("_"))
 
 
-SENSORS = ("dw_meas", "rocof_meas")   # the sensor channels the linear plants model
-
-
 def _no_sensor_attack(scenario: dict) -> None:
     """``ValueError`` for an attack on the generator side's sensors: on ANDES they
     read the simulator's own measurements, which these runners do not corrupt."""
-    named = [f"{c}_attack" for c in SENSORS if scenario.get(f"{c}_attack") is not None]
+    named = [f"{c}_attack" for c in SENSOR_CHANNELS if scenario.get(f"{c}_attack") is not None]
     named += [f"attacks[{a}][{c!r}]" for a, channels in (scenario.get("attacks") or {}).items()
-              if isinstance(channels, dict) for c in SENSORS if channels.get(c) is not None]
+              if isinstance(channels, dict) for c in SENSOR_CHANNELS
+              if channels.get(c) is not None]
     if named:
         raise ValueError(f"{', '.join(named)}: attacks on the sensors run on the linear plants "
                          f"(LFCParams, MultiAreaParams), not on ANDES yet")
