@@ -220,6 +220,25 @@ def test_with_a_band_at_the_largest_bound_the_edges_flag_nothing():
             assert m["outside"] == 0 and not m["tripped"], (attack, t, load)
 
 
+def test_with_a_band_the_largest_inputs_and_a_wide_margin_flag_nothing():
+    """Attacking the band's exact ``outside`` where inputs are largest: a 100 pu
+    sinusoid and a 1,000 pu square on P_c, a 50 pu square on ω_ref and a 10⁵ pu pulse on
+    P_c that ends at 6 s (the filter recovers after it), each with steps to either edge
+    of the band and a 3 Hz square across it, the load not given: no ``outside``, no
+    trip; the same with ``margin=0.3`` and the band at 0.04 pu."""
+    attacks = [{"pc_attack": lfc.Sinusoid(100.0, 1.0, start=1.0)},
+               {"pc_attack": lfc.Square(1000.0, 0.3, start=1.0)},
+               {"wref_attack": lfc.Square(50.0, 2.0, start=1.0)},
+               {"pc_attack": lfc.Step(1e5, start=1.0, stop=6.0)}]
+    for bound, margin in ((BAND, 0.0), (0.04, 0.3)):
+        scc = SafetyFilter(P, method="certified", load_bound=bound, margin=margin)
+        for attack in attacks:
+            for load in (lfc.Step(bound, start=1.5), lfc.Step(-bound, start=3.001),
+                         lfc.Square(bound, 3.0, start=1.2)):
+                m = lfc.simulate(P, duration=15.0, scc=scc, load=load, **attack).metrics()
+                assert m["outside"] == 0 and not m["tripped"], (bound, attack, load)
+
+
 def test_with_a_band_a_load_beyond_it_is_flagged_given_or_not():
     """The other side: a step of four times the band (0.2 pu against 0.05), given or
     not, during every attack at four instants, both signs, is flagged in every run,
