@@ -68,6 +68,14 @@ class MultiAreaParams:
         are far from linear).  The coupled certificate keeps every area's command
         within ``±command_range`` (its ``u_min``, ``u_max``,
         :class:`lfc.filters.coupled.CoupledOptions`).
+    load_mismatch : float, optional
+        How far this model is from the plant it stands for, as load (pu, summed
+        over the areas), >= 0 and finite.  Default 0: the model is the plant.  A
+        model fitted to ANDES carries its fit's (:func:`lfc.testbed.fit.mismatch`:
+        the largest swing of the load that makes the model reproduce ANDES' rotor
+        speeds, over the records of the fit and of its command range).  The grid-wide
+        certificates add it to their ``load_bound`` (``mismatch_budget``,
+        :class:`lfc.filters.coupled.CoupledOptions`).
     """
 
     areas: tuple[LFCParams, ...]
@@ -75,6 +83,7 @@ class MultiAreaParams:
     bias: tuple[float, ...] | None = None
     k_agc: tuple[float, ...] | None = None
     command_range: float = math.inf
+    load_mismatch: float = 0.0
 
     def __post_init__(self) -> None:
         areas = tuple(self.areas) if isinstance(self.areas, (list, tuple)) else ()
@@ -117,6 +126,11 @@ class MultiAreaParams:
             raise ValueError(f"command_range must be > 0 pu (math.inf: no range), got "
                              f"{self.command_range!r}")
         object.__setattr__(self, "command_range", float(self.command_range))
+        check_number("load_mismatch", self.load_mismatch)
+        if not (math.isfinite(self.load_mismatch) and self.load_mismatch >= 0):
+            raise ValueError(f"load_mismatch must be a finite number >= 0 pu, got "
+                             f"{self.load_mismatch!r}")
+        object.__setattr__(self, "load_mismatch", float(self.load_mismatch))
         for name, low, strict in (("bias", 0.0, True), ("k_agc", 0.0, False)):
             value = getattr(self, name)
             if value is None:

@@ -38,4 +38,4 @@ def test_the_multi_area_chapters_claims_hold_on_its_scenario(plant, tmp_path):
     from lfc.repro.notebook import record_claims
     claims, metrics = chapters.multiarea(plant)
     record_claims(tmp_path, claims, True, plant, metrics)
-    assert len(claims) == 13
+    assert len(claims) == 20

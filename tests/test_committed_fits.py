@@ -88,8 +88,8 @@ def test_the_committed_fit_is_what_the_fit_computes_here(name):
         assert new[key] == pytest.approx(old[key], rel=SPREAD, abs=1e-6), key
     if hasattr(committed, "validation"):
         assert computed.command_range == committed.command_range
-        assert [(s, g, t) for s, g, _, t in computed.validation] == \
-            [(s, g, t) for s, g, _, t in committed.validation]
+        assert [(s, g, t) for s, g, _, t, _ in computed.validation] == \
+            [(s, g, t) for s, g, _, t, _ in committed.validation]
 
 
 def test_every_blas_kernel_reads_the_same_committed_fit_and_computes_nothing(monkeypatch):

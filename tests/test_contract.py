@@ -127,15 +127,18 @@ def test_the_design_keeps_every_output_within_its_limit_and_says_what_it_costs()
     within its limit and the binding one meets it (the linear program's
     optimum), unless the box is the grid's ``command_range``; the boxes and
     rates measured (pu, pu/s) are pinned to a range.  On Kundur's fitted model
-    the range binds: without it the box would be 0.29 pu at 0.51 pu/s; within
+    the range binds: without it (and its mismatch) the box would be 0.29 pu at 0.51 pu/s; within
     ±0.1 pu the box's own bound keeps ROCOF at a third of its limit whatever the
     rate, so the rate is 2 x 0.1 pu per period (no constraint: it crosses the
-    box in one period) and the bounds take 41 % (frequency) and 32 % (ROCOF) of
-    the limits."""
+    box in one period) and the bounds take 50 % (frequency) and 38 % (ROCOF) of
+    the limits (42 % and 32 % without its fit's 0.043 pu mismatch).  The fitted
+    models' designs cover their fits' mismatch as load (``mismatch_budget``): the
+    IEEE 39-bus system's 0.27 pu shrinks its box from 0.155 to 0.095 pu and its
+    rate from 0.26 to 0.137 pu/s."""
     light = MultiAreaParams.two_area(LIGHT)
     expected = {"two-area": (MultiAreaParams.two_area(), 0.15, 0.22),
                 "three-area": (THREE, 0.16, 0.12), "kundur": (kundur(), 0.0999, 19.9),
-                "ieee39": (ieee39(), 0.15, 0.25), "ring of 4": (ring(4), 0.085, 0.11),
+                "ieee39": (ieee39(), 0.095, 0.137), "ring of 4": (ring(4), 0.085, 0.11),
                 "chain of 4": (ring(4, chain=True), 0.084, 0.11),
                 "lightly damped": (light, 0.36, 0.025)}
     for name, (grid, box, rate) in expected.items():
@@ -148,8 +151,11 @@ def test_the_design_keeps_every_output_within_its_limit_and_says_what_it_costs()
         assert np.all(share.rate >= rate) and share.rate.max() < 1.1 * rate, name
     share = contract_design(kundur(), RELAYS)
     assert np.all(share.rate * PERIOD <= 2 * share.command_range)
-    assert np.allclose(share.use().max(axis=0), [0.42, 0.32], atol=0.01)
-    wide = contract_design(dataclasses.replace(kundur(), command_range=np.inf), RELAYS)
+    assert np.allclose(share.use().max(axis=0), [0.50, 0.38], atol=0.01)
+    alone = contract_design(kundur(), RELAYS, mismatch_budget=False)
+    assert np.allclose(alone.use().max(axis=0), [0.42, 0.32], atol=0.01)
+    wide = contract_design(dataclasses.replace(kundur(), command_range=np.inf), RELAYS,
+                           mismatch_budget=False)
     assert np.all(wide.half_width > 0.29) and np.all(wide.rate > 0.51)
     assert wide.use().max() > 1 - 1e-5
 

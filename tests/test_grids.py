@@ -242,9 +242,9 @@ def test_the_fitted_models_command_range_is_where_andes_follows_it(name, expecte
     assert ({(step, sign) for step, sign, *_ in passed if step <= expected}
             == {(step, sign) for step in fitting.VALID_STEPS if step <= expected
                 for sign in (1, -1)})
-    for step, sign, ratio, tripped in passed:
+    for step, sign, ratio, tripped, _ in passed:
         assert not tripped and max(ratio) <= fitting.VALID_RATIO, (step, sign)
-    step, _, ratio, tripped = last
+    step, _, ratio, tripped, _ = last
     assert step == 2 * expected and (tripped or max(ratio) > fitting.VALID_RATIO)
     assert "| 0.05 | + / − |" in report.validation_table()
 

@@ -87,11 +87,11 @@ def test_multi_area_notebook_shows_its_figures_and_its_claims_hold(tmp_path):
     run the full load step and attacks; only the red team is shortened)."""
     run_chapter("multiarea", tmp_path)
     metrics = json.loads((tmp_path / "res" / "metrics.json").read_text())
-    # (load step + 3 attacks) x (none, paper α=3 and α=20, certified) x 2 areas
-    assert len(metrics) == 4 * 4 * 2
+    # (load step + 3 attacks) x (none, paper α=3 and α=20, certified, coupled) x 2 areas
+    assert len(metrics) == 4 * 5 * 2
     claims = json.loads((tmp_path / "res" / "claims.json").read_text())
-    assert len(claims) == 13 and all(claims.values())
-    for table in ("multiarea_attacks", "multiarea_red_team"):
+    assert len(claims) == 21 and all(claims.values())
+    for table in ("multiarea_attacks", "multiarea_red_team", "multiarea_red_team_replayed"):
         assert "|" in (tmp_path / "fig" / f"{table}.md").read_text()
 
 
@@ -112,18 +112,22 @@ ONE_PROCESS = 1
 @pytest.mark.long(220)
 def test_multi_area_notebook_on_the_kundur_testbed(tmp_path):
     """Notebook 09 on ANDES with its claims checked: AGC restores the schedule,
-    every attack trips without filters, the certified filters stop them all;
-    that they flag ``outside`` there (the plant is not their model) is a
-    documented deviation, which fails the run if it stops occurring."""
+    every attack trips without filters, the certified filters and the coupled
+    certificates (the fit's mismatch in their budget) stop them all, the coupled ones
+    flagging nothing, and the red team's winners against them, found on the fitted
+    model and replayed on ANDES, trip nothing and flag nothing; that the certified
+    filters flag ``outside`` there (the plant is not their model) is a documented
+    deviation, which fails the run if it stops occurring."""
     run_chapter("multiarea", tmp_path, "testbed", paper_alphas=ONE_ALPHA,
                 jobs=ONE_PROCESS)
     claims = json.loads((tmp_path / "res" / "claims.json").read_text())
     deviations = json.loads((tmp_path / "res" / "deviations.json").read_text())
-    assert len(claims) == 12
+    assert len(claims) == 20
     assert {c for c, ok in claims.items() if not ok} == set(deviations) == {
         f"{a} attack: no certified filter flags outside" for a in ("single", "coordinated", "ACE")}
     assert "|" in (tmp_path / "fig" / "multiarea_attacks_testbed.md").read_text()
-    assert not (tmp_path / "fig" / "multiarea_red_team.md").exists()   # linear model only
+    assert "coupled certificate" in (tmp_path / "fig" /
+                                     "multiarea_red_team_replayed_testbed.md").read_text()
     # the causes are separated: the same certified runs on the design model itself, and
     # assumption (c) measured on ANDES against each filter's load_bound
     assert "outside on the model" in (tmp_path / "fig" /
@@ -141,8 +145,10 @@ def test_multi_area_notebook_on_the_kundur_testbed(tmp_path):
 @pytest.mark.long(410)
 def test_multi_area_notebook_on_the_ieee39_testbed(tmp_path):
     """Notebook 09 on ANDES' IEEE 39-bus system, claims checked: AGC restores the
-    schedule, every attack trips without filters, the certified filters stop
-    them all and flag nothing — all 13 claims hold, no deviation.  A finding,
+    schedule, every attack trips without filters, the certified filters and the
+    coupled certificates stop them all and flag nothing, and the red team's winners
+    against the coupled certificates trip and flag nothing on ANDES — all 20 claims
+    hold, no deviation.  A finding,
     pinned: with the certified filters' commands kept within the fitted model's
     range (±0.2 pu, their actuator limits) assumption (c) of the guarantee holds
     on ANDES (the machines' output moves by at most 0.61 ``load_bound`` within a
@@ -153,7 +159,7 @@ def test_multi_area_notebook_on_the_ieee39_testbed(tmp_path):
     run_chapter("multiarea", tmp_path, "ieee39", paper_alphas=ONE_ALPHA,
                 jobs=ONE_PROCESS)
     claims = json.loads((tmp_path / "res" / "claims.json").read_text())
-    assert len(claims) == 12 and all(claims.values())
+    assert len(claims) == 20 and all(claims.values())
     assert json.loads((tmp_path / "res" / "deviations.json").read_text()) == {}
     assert "| M (s) |" in (tmp_path / "fig" / "ieee39_fit.md").read_text()
     metrics = json.loads((tmp_path / "res" / "metrics.json").read_text())

@@ -131,15 +131,18 @@ def kalman_claims(runs: Runs, rms: tuple[float, float],
     })
 
 
-def multiarea_claims(load_step: dict, attacks: dict[str, dict], tol: float = 1e-4
-                     ) -> dict[str, bool]:
+def multiarea_claims(load_step: dict, attacks: dict[str, dict], tol: float = 1e-4,
+                     replayed: pd.DataFrame | None = None) -> dict[str, bool]:
     """The multi-area chapter (notebook 09).  ``load_step`` maps a filter name
-    (``"none"``, ``"paper"``, ``"certified"``) to the run of a load step in area 0;
-    ``attacks`` maps each attack (``"single"``, ``"coordinated"``, ``"ace"``) to
-    such a dict.  AGC restores every area's frequency and tie-line schedule
-    (within ``tol`` pu at the end) with every filter; every attack trips some
-    area without filters; with the certified filter at every area no attack
-    trips any area and no filter flags ``outside``."""
+    (``"none"``, ``"paper"``, ``"certified"``, ``"coupled"``) to the run of a load
+    step in area 0; ``attacks`` maps each attack (``"single"``, ``"coordinated"``,
+    ``"ace"``) to such a dict.  AGC restores every area's frequency and tie-line
+    schedule (within ``tol`` pu at the end) with every filter; every attack trips
+    some area without filters; with the certified filter at every area, and with the
+    coupled certificate where it ran, no attack trips any area and no filter flags
+    ``outside``.  ``replayed``, if given: the red team's winners replayed on the
+    plant, a row per search with ``kind`` (the setting's name), ``tripped`` and
+    ``outside``; against the coupled certificate none trips or flags ``outside``."""
     def restored(r) -> bool:
         end = r.trace.iloc[-1]
         return all(abs(end[f"dw_meas_{a}"]) < tol and abs(end[f"p_tie_{a}"]) < tol
@@ -156,6 +159,16 @@ def multiarea_claims(load_step: dict, attacks: dict[str, dict], tol: float = 1e-
             not runs["certified"].tripped
         claims[f"{name} attack: no certified filter flags outside"] = \
             outside(runs["certified"]) == 0
+        if "coupled" in runs:
+            claims[f"{name} attack: coupled certificate, no trip in any area"] = \
+                not runs["coupled"].tripped
+            claims[f"{name} attack: no coupled filter flags outside"] = \
+                outside(runs["coupled"]) == 0
+    if replayed is not None:
+        coupled = replayed[replayed.kind == "coupled"]
+        claims["the red team's winners against the coupled certificate, on the plant: no "
+               "trip, no outside"] = bool(len(coupled)) and not coupled.tripped.any() \
+            and int(coupled.outside.sum()) == 0
     return _bools(claims)
 
 

@@ -74,7 +74,8 @@ from typing import ClassVar
 import numpy as np
 
 from lfc._jit import inline
-from lfc._validate import ParameterTypeError, check_nonnegative, check_number, check_positive
+from lfc._validate import (ParameterTypeError, check_flag, check_nonnegative, check_number,
+                           check_positive)
 from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, MAX_ABS_INPUT, Backend, Layout,
                               METHOD_IDS, Options, built_once, given, hold_invalid, option,
                               valid_input)
@@ -220,12 +221,14 @@ def _largest_of_smaller(first: np.ndarray, first_offset: np.ndarray, second: np.
 
 def contract_design(params: MultiAreaParams | LFCParams, relays: RelaySettings, *,
                     control_period: float = 0.01, load_bound: float = 0.06,
-                    margin: float = 0.0) -> Contract:
+                    margin: float = 0.0, mismatch_budget: bool = True) -> Contract:
     """Every area's contract on ``params`` (module docstring): the largest rates
     that keep every measured ROCOF within ``rocof_limit``, then the largest boxes
     that keep every measured frequency within ``F`` at those rates, each with room
-    for loads of total variation ``load_bound``, every box within the grid's
-    ``command_range`` (pu; where a fitted model describes its plant).
+    for loads of total variation ``load_bound`` (and, with ``mismatch_budget``, the
+    grid's ``load_mismatch``: a fitted model's distance from its plant as load),
+    every box within the grid's ``command_range`` (pu; where a fitted model
+    describes its plant).
 
     Parameters
     ----------
@@ -239,6 +242,10 @@ def contract_design(params: MultiAreaParams | LFCParams, relays: RelaySettings, 
         >= 0; default 0.06, the coupled certificate's).
     margin : float
         Extra fractional tightening of both limits, in [0, 1).
+    mismatch_budget : bool
+        Add ``params.load_mismatch`` (a :class:`MultiAreaParams`'; 0 for a model
+        that is its plant) to ``load_bound`` (default True).  The contract's
+        ``load_bound`` is the sum.
 
     Raises
     ------
@@ -247,6 +254,10 @@ def contract_design(params: MultiAreaParams | LFCParams, relays: RelaySettings, 
         command within any box can drive it away), or the loads alone take a
         whole limit.
     """
+    check_flag("mismatch_budget", mismatch_budget)
+    check_nonnegative("load_bound", load_bound)
+    if mismatch_budget:
+        load_bound = load_bound + getattr(params, "load_mismatch", 0.0)
     return built_once(lambda: _design(params, relays, control_period, load_bound, margin),
                       "contract_design", params, relays, control_period, load_bound,
                       margin)
@@ -318,6 +329,8 @@ class ContractOptions(Options):
         "half_width None, contract_design's")
     load_bound: float = option(0.06, "pu", ">= 0",
                                "total variation of the loads over a run the design covers")
+    mismatch_budget: bool = option(True, "", "True or False",
+                                   "add a fitted design model's load_mismatch to load_bound")
     margin: float = option(0.0, "", "[0, 1)", "extra fractional tightening of both limits")
     control_period: float = option(0.01, "s", "(0, 1]", "period of the calls")
 
@@ -334,6 +347,7 @@ class ContractOptions(Options):
                 check_positive(name, getattr(self, name))
                 object.__setattr__(self, name, float(getattr(self, name)))
         check_nonnegative("load_bound", self.load_bound)
+        check_flag("mismatch_budget", self.mismatch_budget)
         if not 0.0 <= self.margin < 1.0:
             raise ValueError(f"margin must be in [0, 1), got {self.margin!r}")
         check_positive("control_period", self.control_period)
@@ -369,7 +383,8 @@ class ContractFilter(Backend):
         half, rate = options.half_width, options.rate
         if half is None:
             own = contract_design(params, relays, control_period=options.control_period,
-                                  load_bound=options.load_bound, margin=options.margin)
+                                  load_bound=options.load_bound, margin=options.margin,
+                                  mismatch_budget=options.mismatch_budget)
             half, rate = float(own.half_width[0]), float(own.rate[0])
         self.box, self.step = half, rate * options.control_period
         self.data = np.array([half, self.step, relays.F, relays.rocof_limit])

@@ -18,7 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import expm, solve_continuous_lyapunov
 
-from lfc._validate import check_nonnegative, check_number, check_positive, check_range
+from lfc._validate import (check_flag, check_nonnegative, check_number, check_positive,
+                           check_range)
 from lfc.estimation import LOAD_STD, check_noise_std, measurement_std, steady_state_kalman
 from lfc.filters.base import check_limits
 from lfc.filters.bounds import curvature_gains, expm_at, intersample, merge_intervals, pair
@@ -62,7 +63,8 @@ class CoupledOptions:
         ``docs/coupled-certificate.md``, "With estimates", Cost).  :class:`~lfc.filters.coupled.CoupledFilter` also
         takes ``"auto"``: the shortest of :data:`lfc.filters.coupled.AUTO_HORIZONS`
         whose certificate builds and holds a legitimate step at most
-        :data:`lfc.filters.coupled.AUTO_HELD_MAX` (1 s).
+        :data:`lfc.filters.coupled.AUTO_HELD_MAX` (1 s); its default on a model with
+        a ``load_mismatch`` (and ``mismatch_budget``).
     tightening : float
         How far (fraction of each limit) an output may move between two
         certificate samples, in [1e-4, 0.1]; sets their spacing.  Default 0.005.
@@ -106,6 +108,14 @@ class CoupledOptions:
         load moves the state at the horizon as little as possible in its norm;
         ``"auto"`` (default) takes the Lyapunov one and the shaped one where the
         Lyapunov one leaves no room (a lightly damped area, chains of areas).
+    mismatch_budget : bool
+        Add the design model's ``load_mismatch`` (pu: how far a model fitted to
+        ANDES is from it, as load, :class:`lfc.multiarea.MultiAreaParams`) to
+        ``load_bound`` (default True: a new vector leaves room for the loads and the
+        fit's mismatch; a held one's re-check absorbs ``load_bound -
+        recheck_bound`` and the mismatch).  0 for a model that is its plant.
+        :class:`~lfc.filters.coupled.CoupledFilter` applies it; ``False`` gives the
+        certificate of ``load_bound`` alone.
     """
 
     load_bound: float = 0.06
@@ -120,8 +130,10 @@ class CoupledOptions:
     confidence: float = 0.9999
     held_level: str = "sharp"
     terminal: str = "auto"
+    mismatch_budget: bool = True
 
     def __post_init__(self) -> None:
+        check_flag("mismatch_budget", self.mismatch_budget)
         if self.terminal not in TERMINALS:
             raise ValueError(f"terminal must be one of {TERMINALS}, got {self.terminal!r}")
         check_nonnegative("load_bound", self.load_bound)

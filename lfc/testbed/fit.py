@@ -67,7 +67,7 @@ from scipy.optimize import least_squares
 
 from lfc._files import cache_folder, cached, code_digest, write_atomic
 from lfc._format import number
-from lfc.model import LFCParams, lfc_model
+from lfc.model import LFCParams, lfc_matrices, lfc_model
 from lfc.multiarea import MultiAreaParams
 from lfc.signals import Step
 from lfc.testbed.grids import GridCase, case_design
@@ -79,6 +79,7 @@ FITTED = ("M", "D", "tau_g", "tau_t", "droop", "tau_w", "tau_rocof")
 UNITS = {"M": "s", "D": "pu/pu", "tau_g": "s", "tau_t": "s", "droop": "pu", "tau_w": "s",
          "tau_rocof": "s"}
 OUTPUTS = ("dPm", "dw", "dw_meas", "rocof_meas")
+MISMATCH_WINDOW = 0.05   # s: equivalent_load's mean over it (five control periods)
 
 
 @dataclass(frozen=True)
@@ -95,12 +96,17 @@ class FitReport:
         Output name -> RMS residual / peak of the testbed response, fitted model.
     initial_error : dict
         The same for ``initial``.
+    mismatch : float
+        The fitted model's mismatch over the experiments it was fitted on, as load
+        (pu): the largest swing of :func:`equivalent_load` (its largest value less
+        its smallest) in one experiment.
     """
 
     params: LFCParams
     initial: LFCParams
     error: dict
     initial_error: dict
+    mismatch: float
 
     def table(self) -> str:
         """Markdown table: parameters (initial, fitted; to the stable digits,
@@ -111,6 +117,9 @@ class FitReport:
         lines += ["", "| output | error, case data | error, fitted |", "|---|---|---|"]
         lines += [f"| {n} | {100 * self.initial_error[n]:.2f} % | {100 * self.error[n]:.2f} % |"
                   for n in OUTPUTS]
+        lines += ["", f"Mismatch as load over the fitting runs (the swing of the load that makes "
+                      f"the fitted model reproduce the recorded rotor speed): "
+                      f"{number(self.mismatch)} pu"]
         return "\n".join(lines)
 
 
@@ -156,6 +165,42 @@ def _errors(params: LFCParams, exps: list[dict]) -> np.ndarray:
     return np.hstack(res)
 
 
+def equivalent_load(params: LFCParams, t: np.ndarray, u: np.ndarray, p_load: np.ndarray,
+                    dw: np.ndarray, window: float = MISMATCH_WINDOW) -> np.ndarray:
+    """The design model's mismatch with a recorded run, as load: the load ``d`` (pu)
+    that, added to the recorded ``p_load``, makes the model ``params`` reproduce the
+    recorded rotor speed ``dw`` (pu), given the recorded command ``u`` (pu), on average
+    over each ``window`` s.
+
+    The model's governor and turbine (:func:`lfc.model.lfc_matrices`' first two
+    rows), driven by ``u`` and ``dw``, give its mechanical power ``dPm``; its swing
+    equation ``M dw' = dPm - D dw - (p_load + d)``, integrated over the window ending at
+    each sample (trapezoids), gives ``d``'s mean over it.  The integral form reads a
+    step of the load, which a record samples on either side of its instant, as a
+    step, not as a spike (a derivative's differences would add half the step for one
+    sample).  The samples are at the times ``t`` (s): a uniform grid but perhaps the
+    last (a run's end); the signals are interpolated onto the uniform grid, and ``d``
+    is returned on it from ``window`` on.  Zero, to the trapezoids' error, when the
+    record is the model's own.
+    """
+    t = np.asarray(t, float)
+    dt = t[1] - t[0]
+    grid = t[0] + dt * np.arange(int(math.floor((t[-1] - t[0]) / dt + 1e-9)) + 1)
+    u, p_load, dw = (np.interp(grid, t, np.asarray(v, float)) for v in (u, p_load, dw))
+    A, B = lfc_matrices(params)
+    governor = ct.ss(A[:2, :2], np.column_stack([B[:2, 0], A[:2, 2]]), [[0.0, 1.0]], 0.0)
+    dpm = np.ravel(ct.forced_response(governor, grid, np.vstack([u, dw])).outputs)
+    net = cumulative_trapezoid(dpm - params.D * dw - p_load, grid, initial=0.0)
+    n = max(1, int(round(window / dt)))
+    return (net[n:] - net[:-n] - params.M * (dw[n:] - dw[:-n])) / (n * dt)
+
+
+def swing(values: np.ndarray) -> float:
+    """The largest change of a signal between two of its samples: its maximum less its
+    minimum (the total load variation :func:`equivalent_load` stands for)."""
+    return float(np.max(values) - np.min(values))
+
+
 def fit_design_model(case: MicrogridCase | None = None) -> FitReport:
     """Fit the linear LFC parameters to the testbed (see the module docstring)."""
     case = case or MicrogridCase()
@@ -183,7 +228,9 @@ def fit_params(initial: LFCParams, exps: list[dict[str, np.ndarray]],
         e = _errors(p, exps)
         return {k: float(np.sqrt(np.mean(e[i] ** 2))) for i, k in enumerate(OUTPUTS)}
 
-    return FitReport(fitted, initial, rms(fitted), rms(initial))
+    mismatch = max(swing(equivalent_load(fitted, e["t"], e["u"], e["p_load"], e["dw"]))
+                   for e in exps)
+    return FitReport(fitted, initial, rms(fitted), rms(initial), mismatch)
 
 
 def design_model(case: MicrogridCase | None = None) -> LFCParams:
@@ -216,17 +263,22 @@ def _cache_path(case: object, kind: str = "testbed-fit") -> Path:
 def encode_report(report: FitReport) -> dict:
     """``report`` as JSON data (:func:`decode_report` inverts it exactly)."""
     return {"params": asdict(report.params), "initial": asdict(report.initial),
-            "error": report.error, "initial_error": report.initial_error}
+            "error": report.error, "initial_error": report.initial_error,
+            "mismatch": report.mismatch}
 
 
 def decode_report(data: dict) -> FitReport:
     return FitReport(LFCParams(**data["params"]), LFCParams(**data["initial"]),
-                     data["error"], data["initial_error"])
+                     data["error"], data["initial_error"], float(data["mismatch"]))
 
 
 def check_report(report: FitReport) -> None:
     """Raise ``ValueError`` unless a fit is physically sane: its models valid
-    (:class:`LFCParams` checks every parameter) and its errors finite and >= 0."""
+    (:class:`LFCParams` checks every parameter), its errors and its mismatch finite
+    and >= 0."""
+    if not (math.isfinite(report.mismatch) and report.mismatch >= 0):
+        raise ValueError(f"mismatch must be a finite number >= 0 (pu), got "
+                         f"{report.mismatch!r}")
     for name in ("error", "initial_error"):
         value = getattr(report, name)
         if not (isinstance(value, dict) and all(math.isfinite(v) and v >= 0
@@ -407,38 +459,59 @@ class GridFit:
         Each area's command magnitude (pu) within which the fitted model was
         found to describe ANDES (:func:`validated_range`).
     validation : tuple of tuple
-        The ladder's rungs as run: ``(step, sign, ratio per area, tripped)``,
-        ``step`` in pu (area 0's command ``sign * step``, area 1's the opposite),
-        ``ratio`` ANDES' peak ``|dw_meas|`` over the model's.
+        The ladder's rungs as run: ``(step, sign, ratio per area, tripped,
+        mismatch)``, ``step`` in pu (area 0's command ``sign * step``, area 1's the
+        opposite), ``ratio`` ANDES' peak ``|dw_meas|`` over the model's,
+        ``mismatch`` the run's :func:`grid_mismatch` (pu; ∞ for a run that did not
+        converge).
+    load_mismatch : float
+        The fitted model's mismatch with ANDES as load (pu, summed over the areas):
+        the largest :func:`grid_mismatch` over the two fitting experiments and the
+        ladder's rungs within ``command_range``.  The model's ``load_mismatch``.
     """
 
     areas: tuple[FitReport, ...]
     T: float
     tie_error: float
     command_range: float
-    validation: tuple[tuple[float, int, tuple[float, ...], bool], ...]
+    validation: tuple[tuple[float, int, tuple[float, ...], bool, float], ...]
+    load_mismatch: float
 
     @property
     def params(self) -> MultiAreaParams:
-        """The fitted two-area design model, with its command range."""
+        """The fitted two-area design model, with its command range and its mismatch."""
         return MultiAreaParams(areas=tuple(r.params for r in self.areas),
-                               tie=((0, 1, self.T),), command_range=self.command_range)
+                               tie=((0, 1, self.T),), command_range=self.command_range,
+                               load_mismatch=self.load_mismatch)
 
     def validation_table(self) -> str:
         """Markdown: the ladder of :func:`validated_range`, one row per run."""
         rows = ["| step (pu) | area 0 / area 1 | ANDES' peak Δω over the model's, per area | "
-                "ANDES tripped |",
-                "|---|---|---|---|"]
+                "ANDES tripped | mismatch as load (pu) |",
+                "|---|---|---|---|---|"]
         rows += [f"| {step:g} | {'+' if sign > 0 else '−'} / {'−' if sign > 0 else '+'} | "
-                 f"{', '.join(f'{r:.2f}' for r in ratio)} | {tripped} |"
-                 for step, sign, ratio, tripped in self.validation]
+                 f"{', '.join(f'{r:.2f}' for r in ratio)} | {tripped} | {mismatch:.3f} |"
+                 for step, sign, ratio, tripped, mismatch in self.validation]
         return "\n".join(rows)
 
     def table(self) -> str:
         """Markdown: each area's fit table, then the tie-line's."""
         parts = [f"**Area {i}**\n\n{r.table()}" for i, r in enumerate(self.areas)]
         parts.append(f"**Tie-line**: T = {number(self.T)} pu, error {100 * self.tie_error:.2f} %")
+        parts.append(f"**Command range**: ±{self.command_range:g} pu; **mismatch as load** "
+                     f"within it (summed over the areas): {number(self.load_mismatch)} pu")
         return "\n\n".join(parts)
+
+
+def grid_mismatch(params: MultiAreaParams, run: Any) -> float:
+    """A grid run's mismatch with the design model ``params`` as load (pu): each
+    area's :func:`equivalent_load` from its recorded command, net disturbance (load
+    plus tie-line export) and rotor speed, its :func:`swing`, summed over the areas
+    (the certificates' ``load_bound`` is the loads' variation summed over the areas)."""
+    tr = run.trace
+    return sum(swing(equivalent_load(area, tr["t"].to_numpy(), tr[f"pc_{a}"].to_numpy(),
+                                     tr[f"p_net_{a}"].to_numpy(), tr[f"dw_{a}"].to_numpy()))
+               for a, area in enumerate(params.areas))
 
 
 def record_grid_experiments(case: GridCase, initial: MultiAreaParams) -> list:
@@ -486,7 +559,9 @@ def fit_grid(case: GridCase | None = None) -> GridFit:
     error = float(np.sqrt(np.mean((p - T * i) ** 2)) / np.abs(p).max())
     fitted = MultiAreaParams(areas=tuple(r.params for r in reports), tie=((0, 1, T),))
     command_range, validation = validated_range(case, fitted)
-    return GridFit(tuple(reports), T, error, command_range, validation)
+    within = [rung[4] for rung in validation if rung[0] <= command_range]
+    load_mismatch = max([grid_mismatch(fitted, r) for r in runs] + within)
+    return GridFit(tuple(reports), T, error, command_range, validation, load_mismatch)
 
 
 def validated_range(case: GridCase, params: MultiAreaParams) -> tuple[float, tuple]:
@@ -495,7 +570,8 @@ def validated_range(case: GridCase, params: MultiAreaParams) -> tuple[float, tup
     (pu) at which, at it and below, opposite command steps of either sign trip
     nothing on ANDES and move each area's peak ``|dw_meas|`` at most
     ``VALID_RATIO`` times the model's (``GRID_FIT_STEP``, the fit's own step, if the
-    first rung fails), and every rung run (:attr:`GridFit.validation`).  Stops
+    first rung fails), and every rung run (:attr:`GridFit.validation`, with each
+    run's :func:`grid_mismatch`).  Stops
     at the first rung that fails; ANDES' runs stop at a trip, and one that does
     not converge counts as tripped."""
     from lfc.linear_grid import simulate_grid_linear
@@ -512,11 +588,12 @@ def validated_range(case: GridCase, params: MultiAreaParams) -> tuple[float, tup
                                            attacks=attacks, stop_on_trip=True)
                 peaks, tripped = [a.metrics()["max_abs_dw_meas"] for a in real.areas], \
                     real.tripped
+                mismatch = grid_mismatch(params, real)
             except TestbedError:
-                peaks, tripped = [math.inf] * params.n_areas, True
+                peaks, tripped, mismatch = [math.inf] * params.n_areas, True, math.inf
             ratio = tuple(float(p / m.metrics()["max_abs_dw_meas"])
                           for p, m in zip(peaks, model.areas))
-            rungs.append((step, sign, ratio, bool(tripped)))
+            rungs.append((step, sign, ratio, bool(tripped), mismatch))
             if tripped or max(ratio) > VALID_RATIO:
                 return valid, tuple(rungs)
         valid = step
@@ -537,14 +614,16 @@ def grid_design(case: GridCase | None = None) -> MultiAreaParams:
 def _encode(fit: GridFit) -> dict:
     return {"areas": [encode_report(r) for r in fit.areas], "T": fit.T,
             "tie_error": fit.tie_error, "command_range": fit.command_range,
-            "validation": [[s, g, list(r), t] for s, g, r, t in fit.validation]}
+            "validation": [[s, g, list(r), t, m] for s, g, r, t, m in fit.validation],
+            "load_mismatch": fit.load_mismatch}
 
 
 def _decode(data: dict) -> GridFit:
     return GridFit(tuple(decode_report(r) for r in data["areas"]), float(data["T"]),
                    float(data["tie_error"]), float(data["command_range"]),
-                   tuple((float(s), int(g), tuple(map(float, r)), bool(t))
-                         for s, g, r, t in data["validation"]))
+                   tuple((float(s), int(g), tuple(map(float, r)), bool(t), float(m))
+                         for s, g, r, t, m in data["validation"]),
+                   float(data["load_mismatch"]))
 
 
 def _check(case: GridCase, fit: GridFit) -> None:
@@ -562,6 +641,9 @@ def _check(case: GridCase, fit: GridFit) -> None:
     if fit.command_range not in (GRID_FIT_STEP,) + VALID_STEPS or not fit.validation:
         raise ValueError(f"command_range must be GRID_FIT_STEP or a rung of VALID_STEPS, with the "
                          f"rungs run, got {fit.command_range!r} and {len(fit.validation)} rungs")
+    if not (math.isfinite(fit.load_mismatch) and fit.load_mismatch >= 0):
+        raise ValueError(f"load_mismatch must be a finite number >= 0 (pu), got "
+                         f"{fit.load_mismatch!r}")
 
 
 #: The grids' fit (:func:`fit_grid`).
@@ -588,13 +670,16 @@ def committed_fits() -> tuple[Committed, ...]:
 
 def fit_numbers(fit: FitReport | GridFit) -> dict[str, float]:
     """A fit's numbers by name: each fitted parameter (per area for a grid), the
-    errors, and a grid's tie-line coefficient, its error and its command range."""
+    errors and mismatches, and a grid's tie-line coefficient, its error, its command range
+    and its mismatch as load."""
     if isinstance(fit, FitReport):
         return {**{n: float(getattr(fit.params, n)) for n in FITTED},
-                **{f"error {k}": float(v) for k, v in fit.error.items()}}
+                **{f"error {k}": float(v) for k, v in fit.error.items()},
+                "mismatch": fit.mismatch}
     numbers = {}
     for a, report in enumerate(fit.areas):
         numbers.update({f"area {a} {n}": float(getattr(report.params, n)) for n in GRID_FITTED})
         numbers.update({f"area {a} error {k}": float(v) for k, v in report.error.items()})
+        numbers[f"area {a} mismatch"] = report.mismatch
     return {**numbers, "T": fit.T, "tie_error": fit.tie_error,
-            "command_range": fit.command_range}
+            "command_range": fit.command_range, "load_mismatch": fit.load_mismatch}
