@@ -9,6 +9,7 @@ on Kundur and IEEE 39-bus as fitted to ANDES."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -277,7 +278,8 @@ def test_at_the_strict_level_outside_comes_before_every_trip_at_the_sharp_one_no
     ``recheck_bound`` (:func:`every_period`) under each of the five attacks, with
     noise (seed 0), 10 s.  At the strict held level every run that trips flags
     ``outside`` first, on two and three areas, Kundur (``horizon=16``) and the
-    IEEE 39-bus system (12) as fitted to ANDES (220 runs, 88 trip: ramps of 1 pu/s
+    IEEE 39-bus system (12) as fitted to ANDES, their fits' mismatch in the budget
+    (220 runs, 82 trip; 88 without the mismatch: ramps of 1 pu/s
     and random walks go far beyond what the relays allow; the flag comes at least
     0.02 s before on two and three areas, 0.9 s on the fitted grids, when measured).  Finding, pinned — theorem B does not carry over to the estimate
     at the default sharp level: on two areas 17 of its 27 tripping runs trip before
@@ -288,7 +290,7 @@ def test_at_the_strict_level_outside_comes_before_every_trip_at_the_sharp_one_no
     cases = (("two-area", MultiAreaParams.two_area(), 8.0), ("three-area", THREE, 8.0),
              ("kundur", kundur(), 16.0), ("ieee39", ieee39(), 12.0))
     expected = {"two-area": (50, 27, 0), "three-area": (70, 35, 0), "kundur": (50, 15, 0),
-                "ieee39": (50, 11, 0)}
+                "ieee39": (50, 5, 0)}
     for name, grid, horizon in cases:
         strict = CoupledFilter(grid, RELAYS, noise_std=NOISE, horizon=horizon,
                                held_level="strict")
@@ -514,9 +516,12 @@ def test_finding_on_kundur_a_12_s_horizon_holds_agc_after_a_legitimate_step():
     6.4 s for the exact state's filter at 8 s).  At
     ``horizon=16`` (radius 0.021) it restores in 20.3 and 18.5 s, exactly as
     without filters.  The IEEE 39-bus system's filters at 12 s (radius 0.024)
-    restore as without filters (16.8 and 19.3 s)."""
+    restore as without filters (16.8 and 19.3 s).  The fitted model here leaves its
+    fit's mismatch out (``load_mismatch=0``): the finding is the estimate's cost; with
+    it, the default, 12 s does not build and ``"auto"`` takes 8 s, which holds
+    nothing (:func:`test_the_battery_on_the_estimate_trips_nothing`)."""
     from lfc.experiments.restoration import restored_after
-    grid = kundur()
+    grid = dataclasses.replace(kundur(), load_mismatch=0.0)   # the estimate's cost alone
     radius = {h: CoupledFilter(grid, RELAYS, noise_std=NOISE, horizon=h).data[RHO_NEW]
               for h in (12.0, 16.0)}
     assert radius[12.0] < 0.0012 < 0.02 < radius[16.0]
@@ -590,13 +595,15 @@ def test_a_run_level_confidence_of_099_over_a_minute_costs_agc_little():
     0.8 over the batteries' 20 s at 10 ms.  Built for 0.99 over a minute (6,000
     samples: ``confidence_for_run(0.99, 6000)`` = 1 - 1.7e-6), the filters build
     and a legitimate step holds AGC a little longer: two areas 6.24 -> 7.46 s,
-    Kundur at ``horizon=16`` 0 -> 0.02 s."""
+    Kundur at ``horizon=16`` 0 -> 0.02 s (without its fit's mismatch; with it, at
+    16 s, 3.2 -> 4.9 s, where its default horizon, 8 s, holds nothing)."""
     from lfc.estimation import confidence_for_run, run_confidence
     assert run_confidence(0.9999, 2000) == pytest.approx(0.8)
     run = confidence_for_run(0.99, 6000)
     held = {}
     for name, grid, extra in (("two", MultiAreaParams.two_area(), {}),
-                              ("kundur", kundur(), {"horizon": 16.0})):
+                              ("kundur", kundur(),
+                               {"horizon": 16.0, "mismatch_budget": False})):
         held[name] = [CoupledFilter(grid, RELAYS, noise_std=NOISE, confidence=c,
                                     **extra).held_after_step() for c in (0.9999, run)]
     assert held["two"] == [pytest.approx(6.24, abs=0.01), pytest.approx(7.46, abs=0.01)]
