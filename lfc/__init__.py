@@ -30,7 +30,7 @@ _WHERE = {
     "RelayBank": "lfc.relays", "RelaySettings": "lfc.relays",
     "Chirp": "lfc.signals", "Ramp": "lfc.signals", "Samples": "lfc.signals",
     "Sinusoid": "lfc.signals", "Square": "lfc.signals", "Step": "lfc.signals",
-    "Scenario": "lfc.scenarios",
+    "Scenario": "lfc.scenarios", "FollowingLoad": "lfc.load_attacks",
     "Result": "lfc.result",
     "simulate": "lfc.run", "simulate_many": "lfc.run",
 }

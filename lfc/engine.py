@@ -97,6 +97,9 @@ class Rows(NamedTuple):
     #: rocof_meas)`` (pu, pu/s; drawn at every plant step) and, in ``[i, 0, 2]``, the
     #: scenario's seed for it
     relay_noise: np.ndarray
+    #: (N, n_a, 4): each area's load that follows its frequency meter
+    #: (:class:`lfc.load_attacks.FollowingLoad`: gain, limit, start, stop; gain 0: none)
+    following: np.ndarray
 
 
 class SignalSamples(NamedTuple):
@@ -370,6 +373,15 @@ def _load(kind: int, value: float, on: float, off: float, kinds: np.ndarray,
 
 
 @inline
+def _following(row: np.ndarray, dw_meas: float, t: float) -> float:
+    """The load (pu) a :class:`lfc.load_attacks.FollowingLoad` ``row`` (gain, limit,
+    start, stop) switches at time ``t`` (s) for the meter reading ``dw_meas`` (pu)."""
+    if not row[2] <= t < row[3]:
+        return 0.0
+    return min(max(-row[0] * dw_meas, -row[1]), row[1])
+
+
+@inline
 def _watch(met: np.ndarray, t: float, dw: float, rc: float, noisy: bool, r0: float, r1: float,
            relays: RelayTables, start: np.ndarray, due: np.ndarray, peak_dw: float,
            peak_rc: float) -> tuple:
@@ -409,7 +421,7 @@ def run_kernel(timing: Timing, plants: Plants, rows: Rows, samples: SignalSample
     """
     n_steps, ratio, dt, stop_on_trip = timing
     ad, bu, bl, inc, k_freq, k_tie = plants
-    plant_of, index, kinds, params, offsets, relay_noise = rows
+    plant_of, index, kinds, params, offsets, relay_noise, following = rows
     st, sv, noise = samples
     ka, kb, kc, kg, kdim = estimators
     methods, fdata, foff = filters
@@ -451,11 +463,17 @@ def run_kernel(timing: Timing, plants: Plants, rows: Rows, samples: SignalSample
         met0, start0, due0 = met[0], start[0], due[0]
         kind, value, on, off = kinds0[LOAD], params0[LOAD, 0], params0[LOAD, 2], \
             params0[LOAD, 3]
+        fol, fol0 = following[i], following[i, 0]
+        follows = False
+        for a in range(n_a):
+            follows = follows or fol[a, 0] != 0.0
         for j in range(n_ctrl):
             k0 = j * ratio
             t = k0 * dt
             for a in range(n_a):     # every area's load now (the coupled filter reads all)
                 pl[a] = signal_value(LOAD, kinds[i, a], params[i, a], offsets[i, a], st, sv, t, k0)
+                if follows:
+                    pl[a] += _following(fol[a], x[m * a + 3], t)
             if grid_wide(method0) and index[i, 0, 0] >= 0:   # what its estimator measures
                 for a in range(n_a):
                     q_a = index[i, a, 1]
@@ -508,6 +526,8 @@ def run_kernel(timing: Timing, plants: Plants, rows: Rows, samples: SignalSample
                     Bu[3, 0] * ua, Bu[4, 0] * ua          # the command's terms, held
                 for k in range(k0, min(k0 + ratio, n_steps)):
                     p0 = _load(kind, value, on, off, kinds0, params0, offsets0, st, sv, k * dt, k)
+                    if follows:
+                        p0 += _following(fol0, x3, k * dt)
                     n0 = A[0, 0] * x0 + A[0, 1] * x1 + A[0, 2] * x2 + A[0, 3] * x3 \
                         + A[0, 4] * x4 + u0 + Bl[0, 0] * p0
                     n1 = A[1, 0] * x0 + A[1, 1] * x1 + A[1, 2] * x2 + A[1, 3] * x3 \
@@ -536,6 +556,8 @@ def run_kernel(timing: Timing, plants: Plants, rows: Rows, samples: SignalSample
                         pa = params[i, a]
                         pl[a] = _load(kinds[i, a, LOAD], pa[LOAD, 0], pa[LOAD, 2], pa[LOAD, 3],
                                       kinds[i, a], pa, offsets[i, a], st, sv, k * dt, k)
+                        if follows:
+                            pl[a] += _following(fol[a], x[m * a + 3], k * dt)
                     for r in range(n_s):
                         s = 0.0
                         for c in range(n_s):

@@ -19,6 +19,7 @@ from lfc._validate import (ParameterTypeError, check_flag, check_multiple,
                            check_positive)
 from lfc.engine import N_CTRL, sample_signal
 from lfc.filters import SafetyFilter
+from lfc.load_attacks import FollowingLoad
 from lfc.model import STATES, LFCParams
 from lfc.relays import RELAY_NAMES, RelaySettings, relays_or_default
 from lfc.result import Result, area_result
@@ -67,7 +68,8 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
              dt: float = 1e-3, control_period: float = 0.01, stop_on_trip: bool = False,
              load_feedforward: bool = False, relay_noise: bool = False,
              anti_windup: bool = False, dw_meas_attack: Signal | None = None,
-             rocof_meas_attack: Signal | None = None) -> Result:
+             rocof_meas_attack: Signal | None = None,
+             following_load: FollowingLoad | None = None) -> Result:
     """Simulate the closed loop from equilibrium.
 
     Parameters
@@ -121,6 +123,10 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
         read: the local integrator, the Kalman filter (``estimator``) and, with the
         exact state, the filter's ``dw_meas`` and ``rocof_meas`` states all read the
         spoofed value; the relays, the trace and the metrics the plant's.
+    following_load : FollowingLoad, optional
+        A dynamic load-altering attack (:class:`lfc.load_attacks.FollowingLoad`): a
+        botnet's load that follows the frequency meter, added to ``load`` (the
+        trace's ``p_load`` holds both).
 
     Returns
     -------
@@ -140,7 +146,8 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
     sc.add(attacks={0: {"pc": pc_attack, "wref": wref_attack, "dw_meas": dw_meas_attack,
                         "rocof_meas": rocof_meas_attack}}, loads={0: load},
            filters={0: scc}, estimator=estimator, noise_std=noise_std, seed=seed,
-           feedforward=load_feedforward, relay_noise=relay_noise, anti_windup=anti_windup)
+           feedforward=load_feedforward, relay_noise=relay_noise, anti_windup=anti_windup,
+           following_loads={0: following_load})
     run = sc.run(trace=True, stop_on_trip=stop_on_trip)
     end = int(run.ends[0])
     t = sc.t[:end + 1]
@@ -148,6 +155,8 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
     for i, name in enumerate(STATES):
         trace[name] = run.x[:end + 1, i]
     trace["p_load"] = sample_signal(load, t, "load")
+    if following_load is not None:
+        trace["p_load"] += following_load.load(t, trace["dw_meas"].to_numpy())
     bits = run.trips[:end + 1, 0]
     trips = pd.DataFrame([(RELAY_NAMES[r], float(t[k])) for k in np.flatnonzero(bits)
                           for r in range(3) if bits[k] >> r & 1], columns=["relay", "t"])
@@ -158,6 +167,7 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
                 "load": repr(load), "stop_on_trip": stop_on_trip,
                 "load_feedforward": load_feedforward, "anti_windup": anti_windup,
                 **{name: repr(v) for name, v in (("dw_meas_attack", dw_meas_attack),
-                                                 ("rocof_meas_attack", rocof_meas_attack))
+                                                 ("rocof_meas_attack", rocof_meas_attack),
+                                                 ("following_load", following_load))
                    if v is not None}}
     return area_result(trace, sc.tc, run.ctrl[:, 0], trips, scc, settings)

@@ -71,6 +71,7 @@ from lfc.estimation import check_noise_std
 from lfc.filters import SafetyFilter, build
 from lfc.filters.coupled import CoupledFilter
 from lfc.linear_area import check_timing
+from lfc.load_attacks import DW_MEAS
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams
 from lfc.relays import RELAY_NAMES, RelaySettings, relays_or_default
 from lfc.result import METRIC_KEYS, Result, grid_result
@@ -113,7 +114,8 @@ def simulate_grid_linear(params: MultiAreaParams, *, duration: float,
                        estimator=None, noise_std: tuple[float, float] = (0.0, 0.0),
                        seed: int = 0, dt: float = 1e-3, control_period: float = 0.01,
                        stop_on_trip: bool = False, feedforward: bool = True,
-                       relay_noise: bool = False, anti_windup: bool = False) -> Result:
+                       relay_noise: bool = False, anti_windup: bool = False,
+                       following_loads: dict | None = None) -> Result:
     """Simulate an interconnected grid from equilibrium.
 
     Parameters
@@ -149,6 +151,10 @@ def simulate_grid_linear(params: MultiAreaParams, *, duration: float,
         Each area's AGC integrator does not integrate in the direction that
         widens the gap between its command and what the area's filter applies
         (conditional integration, as in :func:`lfc.simulate`).  Default False.
+    following_loads : dict, optional
+        ``{area: FollowingLoad}``: a dynamic load-altering attack in the area
+        (:class:`lfc.load_attacks.FollowingLoad`), added to its load (the trace's
+        ``p_load`` holds both).
 
     Returns
     -------
@@ -165,9 +171,10 @@ def simulate_grid_linear(params: MultiAreaParams, *, duration: float,
              for a, f in filters.items()}
     sc = Scenarios(params, duration=duration, dt=dt, control_period=control_period,
                    relays=relays)
+    following_loads = check_area_keys(following_loads, params.n_areas, "following_loads")
     sc.add(attacks=attacks, loads=loads, filters=built, estimator=estimator,
            noise_std=noise_std, seed=seed, feedforward=feedforward, relay_noise=relay_noise,
-           anti_windup=anti_windup)
+           anti_windup=anti_windup, following_loads=following_loads)
     run = sc.run(trace=True, stop_on_trip=stop_on_trip)
     end = int(run.ends[0])
     t = sc.t[:end + 1]
@@ -176,6 +183,8 @@ def simulate_grid_linear(params: MultiAreaParams, *, duration: float,
     tie = run.x[:end + 1, m * n_a:] @ params.incidence().T     # (samples, areas)
     loads = loads or {}
     p_load = np.column_stack([sample_signal(loads.get(a), t, f"loads[{a}]") for a in range(n_a)])
+    for a, follower in following_loads.items():
+        p_load[:, a] += follower.load(t, states[:, a, DW_MEAS])
     trips = [pd.DataFrame([(RELAY_NAMES[r], float(t[k])) for k in
                            np.flatnonzero(run.trips[:end + 1, a])
                            for r in range(3) if run.trips[k, a] >> r & 1], columns=["relay", "t"])
@@ -187,14 +196,15 @@ def simulate_grid_linear(params: MultiAreaParams, *, duration: float,
                 "filters": {a: repr(f) for a, f in built.items()},
                 "stop_on_trip": stop_on_trip, "feedforward": feedforward,
                 "anti_windup": anti_windup,
-                "relay_noise": relay_noise}
+                "relay_noise": relay_noise,
+                **({"following_loads": repr(following_loads)} if following_loads else {})}
     return grid_result(params, t, states, p_load, tie, trips, sc.tc,
                        [run.ctrl[:, a] for a in range(n_a)], built, settings)
 
 
 #: the keys of a grid scenario (the keywords of :func:`simulate_grid_linear` it sets)
 SCENARIO_KEYS = ("attacks", "loads", "filters", "estimator", "noise_std", "seed", "feedforward",
-                 "relay_noise", "anti_windup")
+                 "relay_noise", "anti_windup", "following_loads")
 
 
 def check_grid_scenarios(scenarios: object) -> None:
@@ -250,7 +260,7 @@ def simulate_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
     scenarios : list of dict
         Each with any of the keyword arguments ``attacks``, ``loads``,
         ``filters``, ``estimator``, ``noise_std``, ``seed``, ``feedforward``,
-        ``relay_noise``, ``anti_windup`` of
+        ``relay_noise``, ``anti_windup``, ``following_loads`` of
         :func:`simulate_grid_linear` (filters named by kind are built once).
     duration, relays, dt, control_period
         As in :func:`simulate_grid_linear`.

@@ -24,6 +24,7 @@ from lfc.filters import SafetyFilter
 from lfc.filters.coupled import CoupledFilter, check_coupled
 from lfc.filters.dispatch import GRID_WIDE, scratch_size
 from lfc.lanes import LANE_MIN_FILL, LaneWork, lane_blocks, run_lanes
+from lfc.load_attacks import NO_FOLLOWING, FollowingLoad
 from lfc.model import LFCParams
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams, as_grid, discretize_grid
 from lfc.relays import RelaySettings
@@ -97,6 +98,7 @@ class Scenarios:
         self._rows: list[list[tuple]] = []
         self._noise: list[np.ndarray] = []
         self._relay_noise: list[list[tuple]] = []
+        self._following: list[list[tuple]] = []
         self._sig: list[tuple] = []
         self._st: list[np.ndarray] = []
         self._sv: list[np.ndarray] = []
@@ -121,6 +123,7 @@ class Scenarios:
         check_area_keys(fields.get("attacks"), n, "attacks")   # the rest: Scenario's own
         check_area_keys(fields.get("loads"), n, "loads")
         check_area_keys(fields.get("filters"), n, "filters")
+        check_area_keys(fields.get("following_loads"), n, "following_loads")
         scenario = Scenario(**keywords) if scenario is None else scenario
         attacks, loads, filters = scenario.attacks, scenario.loads, scenario.filters
         estimator, noise_std, seed = scenario.estimator, scenario.noise_std, scenario.seed
@@ -168,6 +171,9 @@ class Scenarios:
         self._rows.append(row)
         self._plant_of.append(p_i)
         self._relay_noise.append([(*(noise_std if relay_noise else (0.0, 0.0)), seed)] * n)
+        self._following.append([scenario.following_loads[a].row()
+                                if a in scenario.following_loads else NO_FOLLOWING
+                                for a in range(n)])
         return len(self._rows) - 1
 
     def _checked(self, a: int, scc) -> SafetyFilter | CoupledFilter:
@@ -188,7 +194,8 @@ class Scenarios:
         """Run every scenario added; ``trace`` keeps everything (one scenario only).
 
         With ``lanes`` (untraced single-area runs), the scenarios that allow it
-        (no relay noise, a step load or none, not the coupled filter) run
+        (no relay noise, a step load or none, no following load, not the coupled
+        filter) run
         ``LANES`` at a time in SIMD registers (:func:`lfc.lanes.run_lanes`), a block per
         plant, the others one at a time (:func:`lfc.engine.run_kernel`, the reference), as do a
         plant's last few (fewer than ``LANE_MIN_FILL`` in its last block: a
@@ -209,7 +216,8 @@ class Scenarios:
                         k_freq * self.period, k_tie * self.period)
         rows = Rows(np.array(self._plant_of, np.int64),
                     np.array(self._rows, np.int64).reshape(n, n_a, 5), kinds, params, offsets,
-                    np.array(self._relay_noise, float).reshape(n, n_a, 3))
+                    np.array(self._relay_noise, float).reshape(n, n_a, 3),
+                    np.array(self._following, float).reshape(n, n_a, 4))
         samples = SignalSamples(st, sv, np.array(self._noise) if self._noise
                           else np.zeros((1, self.n_ctrl, 2)))
         estimators = kalman_tables(self._kf.items)
@@ -225,7 +233,7 @@ class Scenarios:
         if lanes and not trace and n_a == 1 and n_s == N_AREA_STATES:
             f_i = rows.index[:, 0, 2]
             fit = ((rows.relay_noise[:, 0, 0] == 0.0) & (rows.relay_noise[:, 0, 1] == 0.0)
-                   & np.isin(kinds[:, 0, LOAD], (STEP, NONE))
+                   & np.isin(kinds[:, 0, LOAD], (STEP, NONE)) & (rows.following[:, 0, 0] == 0.0)
                    & ((f_i < 0) | ~np.isin(filters.methods[np.maximum(f_i, 0)], GRID_WIDE)))
             blocks, left = lane_blocks(rows.plant_of, np.flatnonzero(fit), LANE_MIN_FILL)
             run_lanes(timing, plants, rows, samples, estimators, filters, relays, out, blocks,
@@ -310,10 +318,10 @@ def check_sensed(attacks: dict, filters: dict, estimator) -> None:
 #: the keywords of a scenario in an area's form (lfc.simulate of an LFCParams or a microgrid)
 AREA_KEYS = ("pc_attack", "wref_attack", "load", "scc", "estimator", "noise_std", "seed",
              "load_feedforward", "relay_noise", "anti_windup", "dw_meas_attack",
-             "rocof_meas_attack")
+             "rocof_meas_attack", "following_load")
 #: the keywords of a scenario in a grid's form (lfc.simulate of a MultiAreaParams or a grid)
 GRID_KEYS = ("attacks", "loads", "filters", "estimator", "noise_std", "seed", "feedforward",
-             "relay_noise", "anti_windup")
+             "relay_noise", "anti_windup", "following_loads")
 
 
 
@@ -358,6 +366,11 @@ class Scenario:
         The relays read through the noise too (needs ``noise_std`` > 0).
     anti_windup : bool
         Conditional integration of the AGC behind a held command.
+    following_loads : dict, optional
+        ``{area: FollowingLoad}``: a dynamic load-altering attack in the area, a
+        botnet's load that follows the area's frequency meter
+        (:class:`lfc.load_attacks.FollowingLoad`), added to its load; linear plants
+        only.
     plant : LFCParams or MultiAreaParams, optional
         The plant this scenario runs on when not the one given (a scenario table's
         ``M``, ``D``, ... columns; the filters and the AGC keep the given one as their
@@ -378,6 +391,7 @@ class Scenario:
     feedforward: bool | None = None
     relay_noise: bool = False
     anti_windup: bool = False
+    following_loads: dict = field(default_factory=dict)
     plant: LFCParams | MultiAreaParams | None = None
 
     def __post_init__(self) -> None:
@@ -391,6 +405,12 @@ class Scenario:
         object.__setattr__(self, "attacks", {a: dict(c) for a, c in attacks.items()})
         object.__setattr__(self, "loads", loads)
         object.__setattr__(self, "filters", _areas("filters", self.filters))
+        following = _areas("following_loads", self.following_loads)
+        for a, load in following.items():
+            if not isinstance(load, FollowingLoad):
+                raise ParameterTypeError(f"following_loads[{a}] must be a FollowingLoad "
+                                         f"(lfc.load_attacks), got {load!r:.80}")
+        object.__setattr__(self, "following_loads", following)
         noisy = check_noise(self.noise_std)
         object.__setattr__(self, "noise_std", tuple(float(s) for s in self.noise_std))
         object.__setattr__(self, "seed", check_seed("seed", self.seed))
@@ -410,7 +430,7 @@ class Scenario:
                  estimator=None, noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0,
                  load_feedforward: bool = False, relay_noise: bool = False,
                  anti_windup: bool = False, dw_meas_attack=None,
-                 rocof_meas_attack=None) -> Scenario:
+                 rocof_meas_attack=None, following_load=None) -> Scenario:
         """The scenario of one area from :func:`lfc.simulate`'s keywords of an area."""
         channels = {k: v for k, v in zip(("pc", "wref", *SENSOR_CHANNELS),
                                          (pc_attack, wref_attack, dw_meas_attack,
@@ -419,7 +439,8 @@ class Scenario:
                    loads={} if load is None else {0: load},
                    filters={} if scc is None else {0: scc}, estimator=estimator,
                    noise_std=noise_std, seed=seed, feedforward=load_feedforward,
-                   relay_noise=relay_noise, anti_windup=anti_windup)
+                   relay_noise=relay_noise, anti_windup=anti_windup,
+                   following_loads={} if following_load is None else {0: following_load})
 
     def keywords(self, form: str) -> dict:
         """The scenario as :func:`lfc.simulate`'s keywords of a plant of ``form``:
@@ -431,10 +452,11 @@ class Scenario:
         if form == "grid":
             kw = {k: getattr(self, k) for k in GRID_KEYS}
             return {k: v for k, v in kw.items()
-                    if not (k == "feedforward" and v is None or k == "relay_noise" and not v)}
+                    if not (k == "feedforward" and v is None or k == "relay_noise" and not v
+                            or k == "following_loads" and not v)}
         if form != "area":
             raise ValueError(f"form must be 'area' or 'grid', got {form!r:.40}")
-        for name in ("attacks", "loads", "filters"):
+        for name in ("attacks", "loads", "filters", "following_loads"):
             if set(getattr(self, name)) - {0}:
                 raise ValueError(f"{name}: a single area is area 0, got areas "
                                  f"{sorted(getattr(self, name))}")
@@ -451,6 +473,8 @@ class Scenario:
               "noise_std": self.noise_std, "seed": self.seed,
               "load_feedforward": bool(self.feedforward), "anti_windup": self.anti_windup}
         kw.update({f"{c}_attack": channels[c] for c in SENSOR_CHANNELS if c in channels})
+        if 0 in self.following_loads:
+            kw["following_load"] = self.following_loads[0]
         return {**kw, "relay_noise": True} if self.relay_noise else kw
 
 

@@ -730,6 +730,9 @@ def scenario_row(scenario: Scenario, params: LFCParams) -> dict:
                          "there is noise")
     if kw["load_feedforward"]:
         raise ValueError("a table row has no load feed-forward")
+    if "following_load" in kw:
+        raise ValueError("a table row has no following load (lfc.load_attacks.FollowingLoad): "
+                         "give it to lfc.simulate or a grid's simulate_many")
     plant = scenario.plant
     if plant is not None and plant != params:
         if not isinstance(plant, LFCParams) or any(

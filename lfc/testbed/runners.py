@@ -23,8 +23,9 @@ ANDES_PLANT = tuple(n for n, v in vars(AndesPlant).items()
 
 
 def _no_sensor_attack(scenario: dict) -> None:
-    """``ValueError`` for an attack on the generator side's sensors: on ANDES they
-    read the simulator's own measurements, which these runners do not corrupt."""
+    """``ValueError`` for an attack on the generator side's sensors (on ANDES they
+    read the simulator's own measurements, which these runners do not corrupt) or a
+    load that follows the frequency (the ANDES loads are the case's)."""
     named = [f"{c}_attack" for c in SENSOR_CHANNELS if scenario.get(f"{c}_attack") is not None]
     named += [f"attacks[{a}][{c!r}]" for a, channels in (scenario.get("attacks") or {}).items()
               if isinstance(channels, dict) for c in SENSOR_CHANNELS
@@ -32,6 +33,10 @@ def _no_sensor_attack(scenario: dict) -> None:
     if named:
         raise ValueError(f"{', '.join(named)}: attacks on the sensors run on the linear plants "
                          f"(LFCParams, MultiAreaParams), not on ANDES yet")
+    if scenario.get("following_load") is not None or scenario.get("following_loads"):
+        raise ValueError("following_load(s): a load that follows the frequency "
+                         "(lfc.load_attacks) runs on the linear plants (LFCParams, "
+                         "MultiAreaParams), not on ANDES yet")
 
 
 def _microgrid(case: MicrogridCase, *, duration: float, design=None, **scenario):

@@ -1,0 +1,171 @@
+"""Dynamic load-altering attacks (``lfc.load_attacks``): a botnet's load that follows
+the frequency, the smallest gain that destabilizes an area from the closed loop's
+eigenvalues, and the simulation at either side of it."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import lfc
+from lfc.load_attacks import FollowingLoad, closed_loop, critical_gain, growth_rate
+from lfc.multiarea import MultiAreaParams
+from lfc.scenarios import Scenario
+
+AREA = lfc.LFCParams()
+TWO = MultiAreaParams.two_area()
+
+
+@pytest.mark.parametrize("bad, name", [({"gain": math.nan}, "gain"), ({"gain": math.inf}, "gain"),
+                                       ({"gain": 1.0, "limit": 0.0}, "limit"),
+                                       ({"gain": 1.0, "start": -1.0}, "start"),
+                                       ({"gain": 1.0, "start": 2.0, "stop": 2.0}, "stop")])
+def test_a_following_load_out_of_its_range_is_refused_naming_it(bad, name):
+    with pytest.raises(ValueError, match=name):
+        FollowingLoad(**bad)
+
+
+def test_a_following_load_of_gain_zero_changes_nothing_bit_for_bit():
+    """Gain 0 (or none given) is the run without the attack: the trace and the metrics
+    equal, bit for bit, on an area and on a grid."""
+    step = lfc.Step(0.05, start=1.0)
+    plain = lfc.simulate(AREA, duration=10.0, load=step)
+    zero = lfc.simulate(AREA, duration=10.0, load=step, following_load=FollowingLoad(0.0))
+    assert plain.trace.equals(zero.trace) and plain.metrics() == zero.metrics()
+    grid = lfc.simulate(TWO, duration=10.0, loads={0: step})
+    again = lfc.simulate(TWO, duration=10.0, loads={0: step},
+                         following_loads={1: FollowingLoad(0.0)})
+    assert grid.trace.equals(again.trace)
+
+
+def test_the_load_follows_the_meter_within_its_limit_and_its_window():
+    """The trace's ``p_load`` is the scheduled load plus ``-gain dw_meas`` at each
+    plant step, clipped to ``±limit`` and zero outside ``[start, stop)``; the run is
+    what the engine applied (the same run, replayed by :meth:`FollowingLoad.load`)."""
+    attack = FollowingLoad(4.0, limit=0.005, start=2.0, stop=20.0)
+    r = lfc.simulate(AREA, duration=30.0, load=lfc.Step(0.05, start=1.0), following_load=attack)
+    t, dw, p = (r.trace[c].to_numpy() for c in ("t", "dw_meas", "p_load"))
+    inside = (t >= 2.0) & (t < 20.0)
+    own = np.where(inside, np.clip(-4.0 * dw, -0.005, 0.005), 0.0)
+    np.testing.assert_array_equal(p, 0.05 * (t >= 1.0) + own)
+    np.testing.assert_array_equal(attack.load(t, dw), own)
+    assert np.abs(own).max() == 0.005 and np.any(np.abs(own[inside]) < 0.005)
+
+
+def test_the_smallest_destabilizing_gain_and_the_simulation_agree_at_either_side():
+    """The single area (AGC on: the local integrator) and the two-area preset (area 0):
+    the closed loop's smallest destabilizing gain (eigenvalues of the continuous-time
+    model) — at 0.95 of it a 0.01 pu step's response dies away, at 1.05 it grows,
+    simulated by the engine (1 ms plant steps, AGC every 10 ms).  Measured: 8.10 pu/pu on
+    the default area (its load's damping and droop give D + 1/R = 21), 7.55 on either
+    area of the two-area preset; with the command held (AGC off, or a filter holding it)
+    8.80 and 8.16."""
+    assert critical_gain(AREA) == pytest.approx(8.101, abs=0.001)
+    assert critical_gain(AREA, agc=False) == pytest.approx(8.804, abs=0.001)
+    assert critical_gain(TWO, 0) == pytest.approx(7.555, abs=0.001) == critical_gain(TWO, 1)
+    assert critical_gain(TWO, 0, agc=False) == pytest.approx(8.164, abs=0.001)
+    for plant, kw in ((AREA, "following_load"), (TWO, "following_loads")):
+        k = critical_gain(plant)
+        late = []
+        for factor in (0.95, 1.05):
+            attack = FollowingLoad(factor * k)
+            r = lfc.simulate(plant, duration=60.0,
+                             **({"load": lfc.Step(0.01, start=1.0), kw: attack}
+                                if kw == "following_load" else
+                                {"loads": {1: lfc.Step(0.01, start=1.0)}, kw: {0: attack}}))
+            t = r.trace.t.to_numpy()
+            dw = r.trace["dw_meas" if plant is AREA else "dw_meas_0"].abs().to_numpy()
+            late.append(dw[t > 50.0].max() / dw[(t > 10.0) & (t < 20.0)].max())
+        assert late[0] < 0.2 and late[1] > 1.5, (plant, late)
+
+
+def test_the_held_command_is_the_loop_without_agc():
+    """``agc=False`` is the model with every AGC gain 0: the same eigenvalues but the
+    integrators' (which sit at 0)."""
+    no_agc = lfc.LFCParams(k_i=0.0)
+    held = np.sort_complex(np.linalg.eigvals(closed_loop(AREA, {0: 5.0}, agc=False)))
+    off = np.sort_complex(np.linalg.eigvals(closed_loop(no_agc, {0: 5.0})))
+    np.testing.assert_allclose(off[np.abs(off) > 1e-12], held, atol=1e-9)
+
+
+def test_a_ring_s_circulating_flow_is_not_an_instability():
+    """The three-area ring's circulating line flow is a zero eigenvalue nothing drives
+    (:func:`lfc.filters.coupled_set.reduced_model` leaves it out): without the attack the
+    loop is stable, and each area's smallest destabilizing gain is of the order of the
+    others' (3-13 pu/pu), not the scan's first step."""
+    three = MultiAreaParams.three_area()
+    assert growth_rate(three, {0: 0.0}) < 0
+    gains = [critical_gain(three, a) for a in range(3)]
+    assert all(1.0 < g < 20.0 for g in gains), gains
+
+
+def test_critical_gain_refuses_an_unstable_loop_and_names_a_missing_area():
+    with pytest.raises(ValueError, match="not stable without the attack"):
+        critical_gain(lfc.LFCParams(k_i=1e4))
+    with pytest.raises(ValueError, match="area"):
+        critical_gain(TWO, 2)
+
+
+def test_a_following_load_is_a_scenario_field_a_table_row_cannot_hold_and_andes_refuses():
+    attack = FollowingLoad(3.0)
+    s = Scenario.for_area(following_load=attack)
+    assert s.following_loads == {0: attack}
+    assert s.keywords("area")["following_load"] is attack
+    assert s.keywords("grid")["following_loads"] == {0: attack}
+    assert "following_loads" not in Scenario().keywords("grid")
+    with pytest.raises(TypeError, match="FollowingLoad"):
+        Scenario(following_loads={0: 3.0})
+    from lfc.tables import scenario_row
+    with pytest.raises(ValueError, match="following load"):
+        scenario_row(s, AREA)
+    from lfc.testbed import GridCase
+    with pytest.raises(ValueError, match="not on ANDES"):
+        lfc.simulate(GridCase.kundur(), duration=1.0, following_loads={0: attack})
+    twice = FollowingLoad(2.0 * critical_gain(TWO, 0))     # grows fast enough to trip
+    table = lfc.simulate_many(TWO, [{"following_loads": {0: twice},
+                                     "loads": {1: lfc.Step(0.01, start=1.0)}}], duration=30.0)
+    assert table.tripped.any()
+    run = lfc.simulate(TWO, duration=30.0, following_loads={0: twice},
+                       loads={1: lfc.Step(0.01, start=1.0)})
+    assert run.tripped and "following_loads" in run.areas[0].settings
+
+
+def test_finding_what_a_following_load_does_to_each_filter():
+    """Finding, pinned (measured, not proven: no filter here is built for a load that
+    follows the frequency; each assumes the load moves by at most its bound) — the
+    default area, a 0.01 pu step at 1 s to start it, anti-windup, 120 s:
+
+    * 5 % above the gain that destabilizes the loop with the command held (9.24 pu/pu;
+      with AGC 8.10, held 8.80): without a filter ROCOF trips at 23.4 s; the paper's
+      SCC (α = 20) flags ``outside`` from 21.8 s and ROCOF trips at 24.6 s; the
+      certified filter (exact state) trips nothing — it picks commands within its
+      certified interval at every period, which here act as a stabilizing controller
+      (the frequency within 0.012 pu at the end, 1,802 alarms, never ``outside``).
+    * At twice that gain (17.6 pu/pu) every one trips; the certified filter flags
+      ``outside`` 37 ms before ROCOF trips (2.68 s, then 2.717 s): the operator's
+      warning is one control period's worth, no more.
+    """
+    relays = lfc.RelaySettings()
+    held = critical_gain(AREA, agc=False)
+    filters = {"none": None, "paper": lfc.SafetyFilter(AREA, relays, alpha=20.0),
+               "certified": lfc.SafetyFilter(AREA, relays, method="certified")}
+
+    def run(gain, scc):
+        r = lfc.simulate(AREA, duration=120.0, load=lfc.Step(0.01, start=1.0), scc=scc,
+                         following_load=FollowingLoad(gain), anti_windup=True)
+        m = r.metrics()
+        flagged = r.alarms.query("outside").t
+        return m, (float(flagged.min()) if len(flagged) else None)
+
+    above = {name: run(1.05 * held, f) for name, f in filters.items()}
+    assert above["none"][0]["first_trip_t"] == pytest.approx(23.39, abs=0.05)
+    paper, first = above["paper"]
+    assert paper["tripped"] and first < paper["first_trip_t"]
+    certified, first = above["certified"]
+    assert not certified["tripped"] and first is None and certified["alarms"] > 1000
+    assert certified["final_abs_dw_meas"] < 0.02
+    twice, first = run(2.0 * held, filters["certified"])
+    assert twice["tripped"] and twice["first_trip_relay"] == "ROCOF"
+    assert 0.0 < twice["first_trip_t"] - first < 0.05
