@@ -30,11 +30,11 @@ import numpy as np
 
 from lfc._validate import check_index, check_number, check_range
 from lfc.filters.coupled_set import reduced_model
-from lfc.model import LFCParams
+from lfc.model import STATES, LFCParams
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams, as_grid
 
-#: the state of an area the devices read (``lfc.model.STATES``: the frequency meter)
-DW_MEAS = 3
+#: the state of an area the devices read (the frequency meter)
+DW_MEAS = STATES.index("dw_meas")
 #: the largest gain :func:`critical_gain` searches (pu load per pu frequency)
 LARGEST_GAIN = 1e4
 
