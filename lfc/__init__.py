@@ -32,7 +32,7 @@ _WHERE = {
     "Sinusoid": "lfc.signals", "Square": "lfc.signals", "Step": "lfc.signals",
     "Scenario": "lfc.scenarios", "FollowingLoad": "lfc.load_attacks",
     "Result": "lfc.result",
-    "simulate": "lfc.run", "simulate_many": "lfc.run",
+    "simulate": "lfc.run", "simulate_many": "lfc.run", "design_of": "lfc.run",
 }
 
 __all__ = sorted(_WHERE)

@@ -36,7 +36,7 @@ from typing import Any
 
 from lfc._validate import ParameterTypeError
 
-__all__ = ["simulate", "simulate_many"]
+__all__ = ["design_of", "simulate", "simulate_many"]
 
 #: the modules that register runners, imported when a plant matches no runner (a module
 #: whose optional dependency is missing, the testbed without ANDES, is skipped)
@@ -68,6 +68,9 @@ class Runner:
         None if the plant runs one scenario per call (``many_refused`` says so).
     takes_design : bool
         Whether ``design=`` (the generator sides' model) means anything for it.
+    design : callable, optional
+        ``design(plant)``: the plant's default design model (:func:`design_of`); None for
+        a linear plant, its own design model.
     many_refused : str
         The message of :func:`simulate_many` for a plant without one.
     """
@@ -79,6 +82,7 @@ class Runner:
     simulate_many: Callable[..., Any] | None = None
     takes_design: bool = False
     many_refused: str = ""
+    design: Callable[[Any], Any] | None = None
 
 
 _BY_TYPE: dict[type, Runner] = {}
@@ -138,6 +142,30 @@ def runner_of(plant) -> Runner:
         names = ", ".join(labels[:-1]) + f" or {labels[-1]}" if len(labels) > 1 else labels[0]
         raise ParameterTypeError(f"plant must be {names}, got {type(plant).__name__}")
     return runner
+
+
+def design_of(plant):
+    """The linear model a plant's filters and AGC are designed on, by default.
+
+    Parameters
+    ----------
+    plant : LFCParams, MultiAreaParams, MicrogridCase or GridCase
+        The plant (module docstring).
+
+    Returns
+    -------
+    LFCParams or MultiAreaParams
+        A linear plant itself; an ANDES case's model fitted to it (what
+        :func:`simulate` uses when ``design`` is not given).
+
+    Raises
+    ------
+    ValueError
+        For a plant with no default design model (an ``AndesPlant`` of your own), or
+        no runner.
+    """
+    runner = runner_of(plant)
+    return plant if runner.design is None else runner.design(plant)
 
 
 def simulate(plant, scenario=None, *, duration: float, design=None, **kwargs):

@@ -191,3 +191,21 @@ def test_the_engine_imports_no_particular_filter():
         used = {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)
                 and (node.module or "").startswith("lfc.filters")}
         assert used <= allowed, (name, used - allowed)
+
+
+def test_the_multi_area_chapter_runs_every_plant_without_a_branch_on_it():
+    """Notebook 09 builds its plant by name, takes the plant's design model from
+    :func:`lfc.design_of` and runs every scenario through the two entry points: no
+    ``if`` (statement or expression) on ``plant``, and no private name imported."""
+    import nbformat
+    notebook = nbformat.read(PACKAGE.parent / "notebooks" / "09_multi_area.ipynb", 4)
+    code = "\n".join(c.source for c in notebook.cells if c.cell_type == "code")
+    tree = ast.parse("\n".join(line for line in code.splitlines()
+                               if not line.lstrip().startswith(("%", "!"))))
+    branches = [ast.unparse(node.test) for node in ast.walk(tree)
+                if isinstance(node, (ast.If, ast.IfExp))
+                and "plant" in {n.id for n in ast.walk(node.test) if isinstance(n, ast.Name)}]
+    assert branches == []
+    private = [alias.name for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)
+               for alias in node.names if alias.name.startswith("_")]
+    assert private == []

@@ -87,8 +87,17 @@ def test_multi_area_notebook_shows_its_figures_and_its_claims_hold(tmp_path):
     run the full load step and attacks; only the red team is shortened)."""
     run_chapter("multiarea", tmp_path)
     metrics = json.loads((tmp_path / "res" / "metrics.json").read_text())
-    # (load step + 3 attacks) x (none, paper α=3 and α=20, certified, coupled) x 2 areas
-    assert len(metrics) == 4 * 5 * 2
+    # ((load step + 3 attacks) x (none, paper α=3 and α=20, certified, coupled), and the
+    # 3 attacks' certified runs on the design model) x 2 areas
+    assert len(metrics) == (4 * 5 + 3) * 2
+    # on the linear grid the plant is the design model: the same runs, the same counts
+    for attack in ("single", "coordinated", "ACE"):
+        for a in range(2):
+            plant, model = (metrics[f"{where}{attack}/certified/area{a}"]
+                            for where in ("", "model/"))
+            assert plant["outside"] == model["outside"]
+            assert plant["disturbance_step"] == model["disturbance_step"]
+    assert "outside on the model" in (tmp_path / "fig" / "multiarea_outside_causes.md").read_text()
     claims = json.loads((tmp_path / "res" / "claims.json").read_text())
     assert len(claims) == 21 and all(claims.values())
     for table in ("multiarea_attacks", "multiarea_red_team", "multiarea_red_team_replayed"):

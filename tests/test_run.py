@@ -140,8 +140,9 @@ def test_a_plant_brings_its_runner_and_an_andes_plant_is_known_by_its_methods():
     methods = {name: (lambda *args: None) for name in ANDES_PLANT}
     own = type("Own", (), {**methods, "n_areas": 2})()
     assert runner_of(own).name == "andes plant"
-    with pytest.raises(ValueError, match="design is required for an AndesPlant"):
-        lfc.simulate(own, duration=1.0)
+    for no_design in (lambda: lfc.simulate(own, duration=1.0), lambda: lfc.design_of(own)):
+        with pytest.raises(ValueError, match="has no fitted design model: give"):
+            no_design()
     lacking = type("Lacking", (), {**methods, "n_areas": 2, ANDES_PLANT[0]: None})()
     with pytest.raises(ValueError, match="plant must be"):
         runner_of(lacking)
@@ -149,6 +150,11 @@ def test_a_plant_brings_its_runner_and_an_andes_plant_is_known_by_its_methods():
     class Mine(lfc.LFCParams):
         pass
     assert runner_of(Mine()).name == "area"              # a subclass runs as its base
+    # each plant's design model: a linear plant is its own, an ANDES case's is its fit
+    from lfc.testbed.fit import design_model, grid_design
+    assert lfc.design_of(P) is P and lfc.design_of(TWO) is TWO
+    assert lfc.design_of(MicrogridCase()) == design_model(MicrogridCase())
+    assert lfc.design_of(GridCase.kundur()) == grid_design(GridCase.kundur())
     with pytest.raises(TypeError, match="register takes a type and a Runner"):
         register(Mine(), Runner("area", "x", "an x", lfc.simulate))
 

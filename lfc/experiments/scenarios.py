@@ -29,13 +29,16 @@ from typing import TYPE_CHECKING, Callable
 
 if TYPE_CHECKING:
     from lfc.model import LFCParams
+    from lfc.multiarea import MultiAreaParams
     from lfc.relays import RelaySettings
     from lfc.result import Result
+    from lfc.testbed import GridCase
 
 PLANTS = ("linear", "testbed")   # single-area chapters: the linear model, the ANDES microgrid
 # Notebook 09 runs on all three: the linear model; on ANDES "testbed" is Kundur's two-area
 # system and "ieee39" the IEEE 39-bus system (lfc.testbed.GridCase.kundur / .ieee39).
 ALL_PLANTS = ("linear", "testbed", "ieee39")
+GRIDS = ("two_area", "three_area")   # notebook 09's linear presets (MultiAreaParams)
 
 ATTACK_START = 1.0      # s
 FIG4_AMPLITUDE = 0.5    # pu, trips ROCOF without SCC
@@ -90,6 +93,23 @@ def design_params(plant: str) -> LFCParams:
         return LFCParams()
     from lfc.testbed.fit import design_model
     return design_model()
+
+
+def multiarea_plant(plant: str, grid: str = "two_area") -> MultiAreaParams | GridCase:
+    """Notebook 09's plant: the linear preset ``grid`` (``"two_area"`` or
+    ``"three_area"``, a :class:`~lfc.multiarea.MultiAreaParams` constructor), or on
+    ANDES Kundur's two-area system (``"testbed"``) or the IEEE 39-bus system
+    (``"ieee39"``), where ``grid`` is not used.
+
+    Raises ``ValueError`` naming the plant or the grid if either is unknown."""
+    from lfc.multiarea import MultiAreaParams
+    check_plant(plant, ALL_PLANTS)
+    if plant == "linear":
+        if grid not in GRIDS:
+            raise ValueError(f"grid must be one of {GRIDS}, got {grid!r:.40}")
+        return getattr(MultiAreaParams, grid)()
+    from lfc.testbed import GridCase
+    return GridCase.kundur() if plant == "testbed" else GridCase.ieee39()
 
 
 def rocof_limit_load_step(params: LFCParams, relays: RelaySettings) -> float:

@@ -191,6 +191,19 @@ def figure_name(base: str, plant: str) -> str:
     return base if plant == "linear" else f"{base}_{plant}"
 
 
+def show_fit(plant, directory: str | Path) -> str:
+    """The fit of an ANDES grid case's design model, as a markdown table saved as
+    ``<case>_fit.md`` in ``directory``; for a linear plant, its own design model, a
+    sentence that says so (nothing saved)."""
+    from lfc.run import runner_of
+    if runner_of(plant).design is None:
+        return "The plant is its own design model: nothing is fitted."
+    from lfc.testbed import grid_fit_report
+    table = grid_fit_report(plant).table()
+    save_table(table, directory, f"{plant.name}_fit")
+    return table
+
+
 def write_metrics(results_dir: str | Path, runs: dict[str, Result],
                   parameters: dict, extra: dict[str, dict] | None = None) -> Path:
     """Write ``metrics.json``: each run name -> ``Result.metrics()`` plus

@@ -39,33 +39,45 @@ def _no_sensor_attack(scenario: dict) -> None:
                          "MultiAreaParams), not on ANDES yet")
 
 
-def _microgrid(case: MicrogridCase, *, duration: float, design=None, **scenario):
+def _fitted_model(case: MicrogridCase):
     from lfc.testbed.fit import design_model
+    return design_model(case)
+
+
+def _fitted_grid(case: GridCase):
+    from lfc.testbed.fit import grid_design
+    return grid_design(case)
+
+
+def _no_design(plant):
+    raise ValueError("an AndesPlant of your own has no fitted design model: give "
+                     "simulate(plant, design=...) a MultiAreaParams of its n_areas areas")
+
+
+def _microgrid(case: MicrogridCase, *, duration: float, design=None, **scenario):
     from lfc.testbed.microgrid import simulate_microgrid
     _no_sensor_attack(scenario)
     check_load_measured({None: scenario.get("scc")}, scenario.get("estimator"),
                         scenario.get("load_feedforward", False))
-    return simulate_microgrid(design if design is not None else design_model(case),
+    return simulate_microgrid(design if design is not None else _fitted_model(case),
                               duration=duration, case=case, **scenario)
 
 
 def _grid_case(case: GridCase, *, duration: float, design=None, **scenario):
-    from lfc.testbed.fit import grid_design
     from lfc.testbed.grids import simulate_andes_grid
     _no_sensor_attack(scenario)
     check_load_measured(scenario.get("filters") or {}, scenario.get("estimator"),
                         scenario.get("feedforward", True))
-    return simulate_andes_grid(design if design is not None else grid_design(case),
+    return simulate_andes_grid(design if design is not None else _fitted_grid(case),
                                duration=duration, case=case, **scenario)
 
 
 def _grid_case_many(case: GridCase, scenarios: list[dict], *, duration: float, design=None,
                     keep: str = "metrics", **kwargs):
-    from lfc.testbed.fit import grid_design
     from lfc.testbed.grids import simulate_andes_grid_table
     for scenario in scenarios:
         _no_sensor_attack(scenario if isinstance(scenario, dict) else vars(scenario))
-    results = simulate_andes_grid_table(design if design is not None else grid_design(case),
+    results = simulate_andes_grid_table(design if design is not None else _fitted_grid(case),
                                         grid_scenarios(scenarios), duration=duration,
                                         case=case, **kwargs)
     return results if keep == "results" else results_table(results)
@@ -74,8 +86,7 @@ def _grid_case_many(case: GridCase, scenarios: list[dict], *, duration: float, d
 def _own_plant(plant, *, duration: float, design=None, **scenario):
     from lfc.testbed.grids import simulate_andes_grid
     if design is None:
-        raise ValueError("design is required for an AndesPlant of your own: a "
-                         "MultiAreaParams of its n_areas areas")
+        _no_design(plant)
     _no_sensor_attack(scenario)
     check_load_measured(scenario.get("filters") or {}, scenario.get("estimator"),
                         scenario.get("feedforward", True))
@@ -91,11 +102,13 @@ def is_andes_plant(plant) -> bool:
 
 register(MicrogridCase, Runner(
     "area", "microgrid", "an lfc.testbed.MicrogridCase", _microgrid, takes_design=True,
+    design=_fitted_model,
     many_refused="simulate_many does not run the ANDES microgrid (one scenario per call: "
                  "simulate(MicrogridCase(), ...))"))
 register(GridCase, Runner("grid", "grid case", "an lfc.testbed.GridCase", _grid_case,
-                          _grid_case_many, takes_design=True))
+                          _grid_case_many, takes_design=True, design=_fitted_grid))
 register_protocol(is_andes_plant, Runner(
     "grid", "andes plant", "an lfc.testbed.AndesPlant", _own_plant, takes_design=True,
+    design=_no_design,
     many_refused="simulate_many does not run an AndesPlant of your own (one scenario per "
                  "call: simulate(plant, design=..., ...))"))
