@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lfc._validate import check_index, check_number, check_range
-from lfc.filters.coupled_set import reduced_model
+from lfc.multiarea import reduced_model
 from lfc.model import STATES, LFCParams
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams, as_grid
 
@@ -102,7 +102,7 @@ def closed_loop(params: LFCParams | MultiAreaParams, gains: dict[int, float], *,
     following load of gain ``gains[a]`` in each area ``a`` (no limit) — its ``A``.
 
     The states are the grid's on its tie-line flows' reachable subspace
-    (:func:`lfc.filters.coupled_set.reduced_model`: every area's five, then the
+    (:func:`lfc.multiarea.reduced_model`: every area's five, then the
     flows that can move; a ring's circulating flow, a zero eigenvalue nothing
     drives, left out) and, with ``agc``, every area's AGC integrator
     ``d dPc_a/dt = -k_freq_a dw_meas_a - k_tie_a dP_tie,a``

@@ -23,7 +23,8 @@ import tiers
 from lfc import MultiAreaParams
 from lfc.filters.base import MAX_ABS_INPUT
 from lfc.filters.contract import ContractOptions, contract_design
-from lfc.filters.coupled_set import output_rows, reduced_model
+from lfc.filters.coupled_set import output_rows
+from lfc.multiarea import reduced_model
 from lfc.model import zoh
 from lfc.linear_grid import simulate_grid_linear
 from test_coupled import LIGHT, THREE, battery, ieee39, kundur, ring

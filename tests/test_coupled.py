@@ -22,7 +22,7 @@ from lfc import MultiAreaParams
 from lfc.filters.base import INVALID, OUTSIDE
 from lfc.filters.coupled import CoupledFilter, CoupledOptions
 from lfc.filters.coupled_kernel import row_intervals
-from lfc.filters.coupled_set import reduced_model
+from lfc.multiarea import reduced_model
 from lfc.experiments.restoration import agc_residue, grid_battery, restored_after, restoration
 from lfc.linear_grid import simulate_grid_linear
 import tiers

@@ -25,7 +25,8 @@ from lfc import LFCParams, MultiAreaParams
 from lfc.filters.bounds import expm_at
 from lfc.filters.certified import CertifiedSet, _error_bound, box_plants
 from lfc.filters.coupled import CoupledFilter
-from lfc.filters.coupled_set import load_error_steps, output_rows, reduced_model
+from lfc.filters.coupled_set import load_error_steps, output_rows
+from lfc.multiarea import reduced_model
 from lfc.filters.responses import (load_gains, load_tails, period_step_gain, rate_gains,
                                    responses)
 from lfc.model import lfc_matrices, output_matrix

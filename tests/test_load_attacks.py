@@ -92,7 +92,7 @@ def test_the_held_command_is_the_loop_without_agc():
 
 def test_a_ring_s_circulating_flow_is_not_an_instability():
     """The three-area ring's circulating line flow is a zero eigenvalue nothing drives
-    (:func:`lfc.filters.coupled_set.reduced_model` leaves it out): without the attack the
+    (:func:`lfc.multiarea.reduced_model` leaves it out): without the attack the
     loop is stable, and each area's smallest destabilizing gain is of the order of the
     others' (3-13 pu/pu), not the scan's first step."""
     three = MultiAreaParams.three_area()

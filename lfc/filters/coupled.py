@@ -33,7 +33,7 @@ areas after it re-check, at the same state: their check passes.
 the prediction, so a stiff tie (Kundur's T ≈ 98 pu) costs nothing.  A ring's
 circulating flow (the sum of ``dP_l / T_l`` around a loop never changes) is a
 zero eigenvalue of the line-flow model; the certificate works on the flows'
-reachable subspace (:func:`~lfc.filters.coupled_set.reduced_model`), where the held grid is
+reachable subspace (:func:`~lfc.multiarea.reduced_model`), where the held grid is
 asymptotically stable.
 
 **Guarantee (proven).**  For the grid the filter was built for (its design

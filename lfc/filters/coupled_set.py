@@ -27,7 +27,7 @@ from lfc.filters.certified import NUMERIC_MARGIN, grid, rate_bound
 from lfc.filters.coupled_kernel import DW, HEAD, LIFT, ROCOF
 from lfc.filters.responses import load_gains, period_step_gain
 from lfc.model import zoh
-from lfc.multiarea import N_AREA_STATES, MultiAreaParams, multiarea_matrices
+from lfc.multiarea import N_AREA_STATES, MultiAreaParams, reduced_model
 from lfc.relays import RelaySettings
 
 EXPORT_STD = 1e-4    # pu: the grid Kalman filter's noise model of the metered tie-line exports
@@ -168,40 +168,6 @@ class CoupledOptions:
         if self.noise_std is None and self.confidence != 0.9999:
             raise ValueError(f"confidence={self.confidence!r} has no effect without noise_std "
                              f"(the exact state): leave it at its default")
-
-
-def reduced_model(params: MultiAreaParams) -> tuple[np.ndarray, ...]:
-    """The grid on its tie-line flows' reachable subspace.
-
-    The line flows ``P`` (n_l) move as ``P' = S w`` (``S``: each line's
-    ``T_ij`` on its areas' frequencies), so from equilibrium they stay in the
-    column space of ``S``, of dimension ``n_areas - 1`` for a connected grid;
-    a ring's extra line adds a direction (the circulating flow) that never
-    moves and is a zero eigenvalue of the full model.  With ``W`` an
-    orthonormal basis of that space and ``P = W phi``, the reduced state is
-    ``z = [area states; phi] = R x``.
-
-    Returns
-    -------
-    A, Bu, Bl : ndarray
-        Reduced ``z' = A z + Bu u + Bl p`` (every area's command ``u``, load ``p``).
-    R : ndarray
-        ``z = R x`` from the full state ``x`` of :func:`lfc.multiarea.multiarea_matrices`.
-    """
-    A_full, B_full = multiarea_matrices(params)
-    n_a, m = params.n_areas, N_AREA_STATES
-    head = m * n_a
-    S = A_full[head:, :head]
-    if S.shape[0]:
-        basis, sv, _ = np.linalg.svd(S, full_matrices=False)
-        W = basis[:, sv > 1e-9 * sv.max()]
-    else:
-        W = np.zeros((0, 0))
-    R = np.zeros((head + W.shape[1], A_full.shape[0]))
-    R[:head, :head] = np.eye(head)
-    R[head:, head:] = W.T
-    L = R.T                       # lift: x = L z on the reachable subspace (W orthonormal)
-    return R @ A_full @ L, R @ B_full[:, :n_a], R @ B_full[:, n_a:], R
 
 
 def held_grid(params: MultiAreaParams, needs: str) -> tuple[np.ndarray, ...]:
