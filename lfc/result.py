@@ -161,6 +161,25 @@ class Result:
         first = {"relay": str(row["relay"]), "t": float(row["t"])}
         return {**first, "area": int(row["area"])} if self.grid else first
 
+    @property
+    def first_outside(self) -> dict | None:
+        """The first control sample a filter flagged ``outside``, ``{"t": s}`` (in a
+        grid also ``"area"``: the first area's, at a tie), or None."""
+        flagged = self.alarms[self.alarms["outside"].astype(bool)]
+        if not len(flagged):
+            return None
+        row = flagged.sort_values("t", kind="stable").iloc[0]
+        return {"t": float(row["t"]), "area": int(row["area"])} if self.grid \
+            else {"t": float(row["t"])}
+
+    @property
+    def warning_time(self) -> float | None:
+        """The operator's warning: the first trip's time less the first ``outside``
+        flag's (s; negative if the trip came first), or None if there was no trip or no
+        flag."""
+        trip, flag = self.first_trip, self.first_outside
+        return None if trip is None or flag is None else trip["t"] - flag["t"]
+
     def disturbance_step(self, area: int = 0) -> float:
         """The largest move of area ``area``'s net disturbance (``p_net``; an area's
         own run: its load ``p_load``) within one control period, from its value at the

@@ -192,6 +192,16 @@ def searched(key: str, search: Callable[[], dict]) -> dict:
     return found
 
 
+def recorded(key: str) -> dict:
+    """The search result recorded under ``key`` in ``tests/data/worst_cases.json`` (any
+    tier: what a page quotes is checked against it)."""
+    entry = _read().get(key)
+    if entry is None:
+        raise AssertionError(f"{key}: no search recorded in {RECORD.name}; run "
+                             f"{UPDATE_ENV}=1 python -m pytest --exhaustive -k ... once")
+    return entry["found"]
+
+
 def _write(key: str, entry: dict) -> None:
     """Replace one battery's entry of the record (under a lock: workers write at once)."""
     from lfc._files import folder_lock, write_atomic

@@ -14,7 +14,8 @@ generation with :func:`lfc.simulate_many` (``vectorized=True`` in scipy's
   period, bounded by ``±amplitude``;
 * :func:`coordinated_search`: an interconnected grid (:mod:`lfc.multiarea`),
   one family's parameters chosen separately for every area at once (a
-  coordinated attack; families also on the ACE each area's AGC integrates),
+  coordinated attack; families also on the ACE each area's AGC integrates, and
+  ``LOAD_FAMILIES``: a botnet's load, static or following the frequency),
   severity the worst over the areas, with :func:`lfc.simulate_many`;
 * :func:`lfc.experiments.adaptive.adaptive_search`: an attacker in the loop that
   reads every area's interval from its filter each period and pushes at its
@@ -44,11 +45,12 @@ from lfc.estimation import check_noise_std
 from lfc.experiments.scenarios import ATTACK_START
 from lfc.filters.base import check_choice
 from lfc.filters.certified import BOX
-from lfc.linear_grid import area_filter
+from lfc.linear_grid import area_filter, estimate_noise
 from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams
 from lfc.relays import RelaySettings, relays_or_default
 from lfc.run import simulate_many
+from lfc.signals import Step
 from lfc.tables import scenario_signal
 
 # family -> (channel, waveform, bounds of (amplitude, freq_hz)); one bound: freq unused
@@ -69,6 +71,20 @@ SENSOR_FAMILIES = {
     "bias on rocof_meas": ("rocof_meas", "step", [(-1.0, 1.0)]),
 }
 _SINGLE = {**FAMILIES, **SENSOR_FAMILIES}   # what family_search and replay take
+# the scenario keywords each channel's attack is given as (the others: attacks)
+KEYWORD = {"load": ("loads",), "following": ("following_loads", "loads")}
+# pu: the load a following botnet switches at once in every area it attacks, to start the
+# loop moving from equilibrium (where the meter reads 0 and so would the load)
+FOLLOWING_KICK = 0.01
+# load-altering attacks on a grid (outside every filter's threat model beyond load_bound:
+# searched apart): a step or a square wave on an area's load (pu), or a load that follows
+# the area's frequency meter (lfc.FollowingLoad: gain pu/pu, limit pu, from ATTACK_START)
+LOAD_FAMILIES = {
+    "step on load": ("load", "step", [(-0.3, 0.3)]),
+    "square on load": ("load", "square", [(0.0, 0.3), (0.05, 3.0)]),
+    "following load": ("following", "gain", [(0.0, 20.0), (0.01, 0.3)]),
+}
+_GRID = {**MULTI_FAMILIES, **LOAD_FAMILIES}   # what coordinated_search and its replay take
 
 
 READ_BY = {"none": (), "paper": ("alpha", "Ts"), "certified": ("uncertainty", "declare_noise")}
@@ -353,40 +369,43 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
                        seed: int = 0, maxiter: int = 5, popsize: int = 5,
                        jobs: int = 2, control_period: float = 0.01,
                        scenario: dict | None = None) -> dict:
-    """Worst coordinated attack of one family (``MULTI_FAMILIES``) on an
-    interconnected grid: differential evolution over the family's parameters in
-    every area at once (an area may get amplitude 0: single-area attacks are
-    included), maximizing the worst :func:`severity` over the areas.
+    """Worst coordinated attack of one family (``MULTI_FAMILIES``, or
+    ``LOAD_FAMILIES``: a botnet's load) on an interconnected grid: differential
+    evolution over the family's parameters in every area at once (an area may get
+    amplitude 0: single-area attacks are included), maximizing the worst
+    :func:`severity` over the areas.
 
     ``filters`` is :func:`lfc.simulate`'s ``{area: "paper" |
     "certified" | "coupled" | filter}``, built once for the controller period
     ``control_period`` (s).  ``scenario``: more keys of every run (e.g.
     ``{"estimator": "kalman", "noise_std": (1e-4, 1e-3)}``; not ``attacks`` or
-    ``filters``).  Returns the family, the worst severity, the area it is reached
-    in, whether any area tripped, the samples any filter flagged ``outside``
-    (summed over the areas), the attack per area (text) and its parameters
-    ``theta`` (:func:`coordinated_attacks` rebuilds it).
+    ``filters``, nor what the family sets).  Returns the family, the worst severity,
+    the area it is reached in, whether any area tripped, the samples any filter
+    flagged ``outside`` (summed over the areas), the attack per area (text) and its
+    parameters ``theta`` (:func:`coordinated_scenario` rebuilds it).
     """
     if not isinstance(params, MultiAreaParams):
         raise ParameterTypeError(f"params must be a MultiAreaParams (a grid; one area: "
                                  f"family_search), got {type(params).__name__}")
     filters = check_area_keys(filters, params.n_areas, "filters")
-    check_choice("family", family, tuple(MULTI_FAMILIES))
+    check_choice("family", family, tuple(_GRID))
     scenario = {} if scenario is None else dict(scenario)
-    if {"attacks", "filters"} & set(scenario):
-        raise ValueError(f"scenario must not set attacks or filters (the search sets them), "
-                         f"got keys {sorted(scenario)}")
+    sets = {"filters", *KEYWORD.get(_GRID[family][0], ("attacks",))}
+    if sets & set(scenario):
+        raise ValueError(f"scenario must not set {' or '.join(sorted(sets))} (the search "
+                         f"sets them), got keys {sorted(scenario)}")
     check_search(duration=duration, seed=seed, maxiter=maxiter, popsize=popsize, relays=relays)
     check_count("jobs", jobs)
     relays = relays_or_default(relays)
-    bounds = MULTI_FAMILIES[family][2]
+    bounds = _GRID[family][2]
     k, n = len(bounds), params.n_areas
-    filters = {a: area_filter(params, a, f, relays, control_period)     # built once, not
-               for a, f in filters.items()}                            # per generation
+    noise = estimate_noise(scenario.get("estimator"), scenario.get("noise_std", (0.0, 0.0)))
+    filters = {a: area_filter(params, a, f, relays, control_period, noise)   # built once,
+               for a, f in filters.items()}                                # not per generation
 
     def run(thetas: np.ndarray) -> pd.DataFrame:
         out = simulate_many(
-            params, [{**scenario, "attacks": coordinated_attacks(family, th, n, duration),
+            params, [{**scenario, **coordinated_scenario(family, th, n, duration),
                       "filters": filters} for th in thetas.T],
             duration=duration, relays=relays, jobs=jobs, control_period=control_period)
         out["severity"] = severity(out, relays)
@@ -408,22 +427,40 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
             "theta": tuple(float(v) for v in sol.x)}
 
 
-def coordinated_attacks(family: str, theta, n_areas: int, duration: float) -> dict:
-    """The ``attacks`` argument of :func:`lfc.simulate` for parameters ``theta`` of
-    ``family`` (``MULTI_FAMILIES``) in each of ``n_areas`` areas, as
-    :func:`coordinated_search` runs them (its result's ``search`` and ``theta``
-    replay its winner, e.g. on ANDES); ``duration`` (s) ends a chirp."""
-    check_choice("family", family, tuple(MULTI_FAMILIES))
-    channel, waveform, bounds = MULTI_FAMILIES[family]
+def coordinated_scenario(family: str, theta, n_areas: int, duration: float) -> dict:
+    """The scenario keywords of :func:`lfc.simulate` for parameters ``theta`` of
+    ``family`` in each of ``n_areas`` areas, as :func:`coordinated_search` runs them
+    (its result's ``search`` and ``theta`` replay its winner, e.g. on ANDES):
+    ``attacks`` for ``MULTI_FAMILIES``, ``loads`` or ``following_loads`` for
+    ``LOAD_FAMILIES`` (with a following load, ``loads`` holds its
+    ``FOLLOWING_KICK`` in every area it attacks); ``duration`` (s) ends a chirp."""
+    from lfc.load_attacks import FollowingLoad
+    check_choice("family", family, tuple(_GRID))
+    channel, waveform, bounds = _GRID[family]
     k = len(bounds)
     theta = np.asarray(theta, float)
     if theta.shape != (k * n_areas,):
         raise ValueError(f"theta must hold {k} parameters per area ({k * n_areas} for "
                          f"{n_areas} areas), got shape {theta.shape}")
-    return {a: {channel: scenario_signal(
+    if channel == "following":
+        attacked = [a for a in range(n_areas) if theta[k * a] != 0.0]
+        return {"following_loads": {a: FollowingLoad(float(theta[k * a]), float(
+                    theta[k * a + 1]), start=ATTACK_START) for a in range(n_areas)},
+                "loads": {a: Step(FOLLOWING_KICK, start=ATTACK_START) for a in attacked}}
+    signals = {a: scenario_signal(
         {"waveform": waveform, "amplitude": float(theta[k * a]),
          "freq_hz": float(theta[k * a + 1]) if k > 1 else 0.0, "start": ATTACK_START},
-        duration)} for a in range(n_areas)}
+        duration) for a in range(n_areas)}
+    if channel == "load":
+        return {"loads": signals}
+    return {"attacks": {a: {channel: signal} for a, signal in signals.items()}}
+
+
+def coordinated_attacks(family: str, theta, n_areas: int, duration: float) -> dict:
+    """The ``attacks`` argument of :func:`lfc.simulate` for ``theta`` of ``family``
+    (``MULTI_FAMILIES``: attacks on the signals): :func:`coordinated_scenario`'s."""
+    check_choice("family", family, tuple(MULTI_FAMILIES))
+    return coordinated_scenario(family, theta, n_areas, duration)["attacks"]
 
 
 def piecewise_attack_table(*, n: int, amplitude: float, duration: float, seed: int,
