@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lfc._validate import check_folder, check_index
+from lfc._validate import check_folder, check_index, check_positive
 from lfc.engine import CTRL_COLUMNS
 from lfc.filters import SafetyFilter, binding_names
 from lfc.filters.base import (ACTIVE, ALARM_BITS, INFEASIBLE, INVALID, MAX_ABS_INPUT, OUTSIDE,
@@ -179,6 +179,49 @@ class Result:
         flag."""
         trip, flag = self.first_trip, self.first_outside
         return None if trip is None or flag is None else trip["t"] - flag["t"]
+
+    def load_alarms(self, threshold: float, window: float = 0.1) -> pd.DataFrame:
+        """The control samples at which an area's load, as its controller side holds it,
+        had moved by more than ``threshold`` (pu) within the last ``window`` (s): the
+        alarm that the load, not a command, is moving.
+
+        The load is the ``controls`` frame's ``p_load_hat``: with the exact state on a
+        grid, or ``load_feedforward`` on one area, the load itself (then the alarm is
+        exact: a move beyond ``threshold`` within ``window`` is flagged at the first
+        sample that sees it); with ``estimator="kalman"``, its Kalman filter's estimate.
+        That filter takes the applied command as a known input, so its estimate is the
+        same function of the loads and the noise whatever the commands: a command attack
+        alone never changes these alarms.  On one area with the exact state and no load
+        given, ``p_load_hat`` is 0 and nothing is flagged.  ``window`` (s) should cover
+        the estimate's lag (``docs/guarantees.md``: the threshold and window measured).
+
+        Returns
+        -------
+        DataFrame
+            ``t`` (s), ``p_load_hat`` (pu) and ``moved`` (pu: the largest
+            ``|p_load_hat(t) - p_load_hat(s)|`` over ``t - window <= s < t``), one row per
+            flagged sample; in a grid after an ``area`` column.
+
+        Raises
+        ------
+        ValueError
+            ``threshold`` not > 0 or ``window`` not > 0.
+        """
+        check_positive("threshold", threshold)
+        check_positive("window", window)
+        frames = []
+        for a, r in enumerate(self.areas):
+            t, p = r.controls["t"].to_numpy(), r.controls["p_load_hat"].to_numpy()
+            moved = np.zeros_like(p)
+            for lag in range(1, len(p)):
+                if not t[lag] - t[0] <= window * (1 + 1e-9):
+                    break
+                moved[lag:] = np.maximum(moved[lag:], np.abs(p[lag:] - p[:-lag]))
+            hit = moved > threshold
+            frame = pd.DataFrame({"t": t[hit], "p_load_hat": p[hit], "moved": moved[hit]})
+            frames.append(frame.assign(area=a)[["area", *frame.columns]] if self.grid
+                          else frame)
+        return pd.concat(frames, ignore_index=True) if self.grid else frames[0]
 
     def disturbance_step(self, area: int = 0) -> float:
         """The largest move of area ``area``'s net disturbance (``p_net``; an area's

@@ -1,25 +1,33 @@
 """Loads as the weapon (issue "Sensors", item 4): the red team's load-altering families
-(``lfc.experiments.redteam.LOAD_FAMILIES``: a step or a square wave on every area's load,
-a botnet's load that follows the area's frequency meter) searched against no filter, the
+(``lfc.experiments.redteam.LOAD_FAMILIES``: a step, a square wave or a ramp on every area's
+load, a botnet's load that follows the area's frequency meter) searched against no filter, the
 certified filter at every area and the coupled certificate, on the two- and three-area
 presets and the design models of Kundur's and the IEEE 39-bus ANDES cases.  Every
 filter's guarantee assumes the load moves by at most ``load_bound``: these loads are
 beyond it, so a trip is possible, and the question is whether the filter says so first
 (``Result.first_outside``) and by how much (``Result.warning_time``, the operator's
-warning).
+warning), and whether the load alarm (``Result.load_alarms``: the load as the controller
+side holds it moved too far too fast; a command attack never raises it) comes first.
 
 Findings, pinned: with the exact state every winner that trips was flagged ``outside``
 first, but on the presets by 20–122 ms only (a grid's filter is given its area's net
 disturbance and flags at the first sample after a load no command can absorb; such a load
 trips within a few control periods), on the fitted grids by 0.1–10 s.  On the Kalman
-estimate the trip comes first in 13 of the 20 winners that trip (``TRIP_FIRST``: the
+estimate the trip comes first in 17 of the 25 winners that trip (``TRIP_FIRST``: the
 estimate catches up with the load too late), and on one area without the load given a
 0.3 pu step trips ROCOF 4 ms before the flag
-(:func:`test_finding_on_one_area_a_large_step_trips_before_the_flag`)."""
+(:func:`test_finding_on_one_area_a_large_step_trips_before_the_flag`).  The load alarm at
+0.03 pu came before every one of the 63 winners' trips."""
 
 from __future__ import annotations
 
+import math
+
+import numpy as np
+import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import lfc
 import tiers
@@ -38,6 +46,9 @@ FILTERS = {"none": (None, {}), "certified": ("certified", {}), "coupled": ("coup
            "certified-estimate": ("certified", ESTIMATE),
            "coupled-estimate": ("coupled", ESTIMATE)}
 TARGETS = [(g, f, fam) for g in GRIDS for f in FILTERS for fam in LOAD_FAMILIES]
+# pu, s: the load alarm (Result.load_alarms) at 3.6 times the largest 0.1 s move of the
+# load estimate in a clean minute at the chapters' noise (0.0082 pu), over 0.1 s
+LOAD_ALARM = (0.03, 0.1)
 DEFAULT = {"two-area"}             # searched in the exhaustive tier; replayed in both
 
 
@@ -53,10 +64,11 @@ def _replay(grid: MultiAreaParams, name: str, family: str, theta) -> lfc.Result:
 
 
 def _timing(r: lfc.Result) -> dict:
-    trip, flag = r.first_trip, r.first_outside
+    trip, flag, load = r.first_trip, r.first_outside, r.load_alarms(*LOAD_ALARM)
     return {"first_outside_t": None if flag is None else flag["t"],
             "first_trip_t": None if trip is None else trip["t"],
-            "warning_s": r.warning_time}
+            "warning_s": r.warning_time,
+            "load_alarm_t": float(load.t.min()) if len(load) else None}
 
 
 def _found(grid_name: str, name: str, family: str) -> dict:
@@ -71,15 +83,13 @@ def _found(grid_name: str, name: str, family: str) -> dict:
 
 # Findings, pinned: on the Kalman estimate the filter learns of a static load only as its
 # estimate catches up, so where the load outruns ROCOF's setting the trip comes first
-TRIP_FIRST = {("two-area", "certified-estimate", f) for f in LOAD_FAMILIES} | {
-    ("two-area", "coupled-estimate", "step on load"),
-    ("two-area", "coupled-estimate", "square on load"),
-    *{("three-area", "certified-estimate", f) for f in LOAD_FAMILIES},
-    ("three-area", "coupled-estimate", "step on load"),
-    ("three-area", "coupled-estimate", "square on load"),
-    ("kundur", "coupled-estimate", "square on load"),
-    ("ieee39", "certified-estimate", "square on load"),
-    ("ieee39", "coupled-estimate", "square on load")}
+STATIC = ("step on load", "square on load", "ramp on load")
+TRIP_FIRST = {*{(g, "certified-estimate", f) for g in ("two-area", "three-area")
+                for f in LOAD_FAMILIES},
+              *{(g, "coupled-estimate", f) for g in ("two-area", "three-area") for f in STATIC},
+              ("kundur", "coupled-estimate", "square on load"),
+              ("ieee39", "certified-estimate", "square on load"),
+              ("ieee39", "coupled-estimate", "square on load")}
 
 
 def _check(grid_name: str, name: str, family: str) -> None:
@@ -90,6 +100,8 @@ def _check(grid_name: str, name: str, family: str) -> None:
     worst = max(float(severity(a.metrics(), RELAYS)) for a in r.areas)
     assert worst >= found["severity"] - 1e-9          # the search may stop at the trip
     assert r.tripped == found["tripped"]
+    if r.tripped:                                      # the load alarm always came first
+        assert found["load_alarm_t"] < found["first_trip_t"], (grid_name, name, family)
     if name == "none":
         assert r.first_outside is None                 # nothing to flag
     elif r.tripped:                                    # beyond load_bound: flagged, and
@@ -122,23 +134,28 @@ def test_every_tripping_load_attack_on_the_other_grids_is_flagged_outside_first(
 
 def warning_table() -> str:
     """The recorded winners as ``docs/guarantees.md`` shows them: per grid and family,
-    the first trip without a filter, and with each filter its first ``outside`` and its
-    first trip (s) and the warning between them (ms; negative: the trip came first)."""
-    def cell(found: dict) -> str:
-        flag, trip = found["first_outside_t"], found["first_trip_t"]
-        if trip is None:
-            return "no trip" + ("" if flag is None else f", `outside` from {flag:.3f}")
-        return f"{flag:.3f} / {trip:.3f} ({1e3 * found['warning_s']:+.0f} ms)"
+    without a filter the first trip and the first load alarm (s); with each filter its
+    first ``outside``, first trip and the warning between them (ms; negative: the trip
+    came first), and the first load alarm."""
+    def time(t: float | None) -> str:
+        return "—" if t is None else f"{t:.3f}"
+
+    def cell(name: str, found: dict) -> str:
+        flag, trip, load = (found[k] for k in ("first_outside_t", "first_trip_t",
+                                               "load_alarm_t"))
+        if name == "none":
+            head = "no trip" if trip is None else f"trips {trip:.3f}"
+        elif trip is None:
+            head = "no trip" + ("" if flag is None else f", `outside` {flag:.3f}")
+        else:
+            head = f"{time(flag)} / {trip:.3f} ({1e3 * found['warning_s']:+.0f} ms)"
+        return f"{head}; load {time(load)}"
     lines = ["| grid | family | " + " | ".join(FILTERS) + " |",
              "|---|---|" + "---|" * len(FILTERS)]
     for grid_name in GRIDS:
         for family in LOAD_FAMILIES:
-            cells = []
-            for name in FILTERS:
-                found = tiers.recorded(f"laa:{grid_name}-{name}[{family}]")
-                trip = found["first_trip_t"]
-                cells.append(("no trip" if trip is None else f"trips {trip:.3f}")
-                             if name == "none" else cell(found))
+            cells = [cell(name, tiers.recorded(f"laa:{grid_name}-{name}[{family}]"))
+                     for name in FILTERS]
             lines.append(f"| {grid_name} | {family} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -149,6 +166,27 @@ def test_the_guarantees_page_quotes_every_recorded_warning():
     from pathlib import Path
     page = Path(__file__).parents[1].joinpath("docs", "guarantees.md").read_text()
     assert warning_table() in page, warning_table()
+    leads = [found["first_trip_t"] - found["load_alarm_t"] for found in
+             (tiers.recorded(f"laa:{g}-{n}[{f}]") for g, n, f in TARGETS)
+             if found["first_trip_t"] is not None]
+    text = " ".join(page.split())
+    assert (f"came first in every one of the {len(leads)} winners that trip**, by "
+            f"{1e3 * min(leads):.0f} ms") in text
+    assert f"to {max(leads):.1f} s. A load fast enough" in text
+
+
+@pytest.mark.parametrize("estimate", [{}, ESTIMATE])
+def test_a_ramp_below_the_load_alarm_trips_nothing_on_two_areas(estimate):
+    """A ramp slower than the alarm's 0.3 pu/s (0.03 pu in 0.1 s) up to 0.3 pu, in both
+    areas of the two-area preset at once, either sign, with no filter or the coupled
+    one: no trip (20 s)."""
+    two = MultiAreaParams.two_area()
+    for slope in (0.1, 0.2, 0.28, -0.28):
+        for filters in ({}, {0: "coupled", 1: "coupled"}):
+            ramp = lfc.Ramp(slope, start=1.0, stop=1.0 + 0.3 / abs(slope))
+            r = lfc.simulate(two, duration=20.0, filters=filters, loads={0: ramp, 1: ramp},
+                             **estimate)
+            assert not r.tripped, (slope, filters, estimate, r.first_trip)
 
 
 def test_finding_on_one_area_a_large_step_trips_before_the_flag():
@@ -162,6 +200,10 @@ def test_finding_on_one_area_a_large_step_trips_before_the_flag():
     assert big.first_trip == {"relay": "ROCOF", "t": pytest.approx(1.056, abs=1e-9)}
     assert big.first_outside == {"t": pytest.approx(1.06, abs=1e-9)}
     assert big.warning_time == pytest.approx(-0.004, abs=1e-9)
+    noisy = lfc.SafetyFilter(area, RELAYS, method="certified", noise_std=ESTIMATE["noise_std"])
+    late = lfc.simulate(area, duration=3.0, scc=noisy, load=lfc.Step(0.3, start=1.0),
+                        **ESTIMATE).controls.set_index("t").p_load_hat
+    assert late[1.04] < 0.1 < late[1.05]           # the estimate, 40 and 50 ms after
     small = lfc.simulate(area, duration=3.0, scc=scc, load=lfc.Step(0.2, start=1.0))
     assert small.first_trip is None and small.first_outside is None
     assert small.warning_time is None
@@ -191,3 +233,76 @@ def test_the_load_families_build_the_scenario_keywords():
                                maxiter=1, popsize=1, jobs=1)
     with pytest.raises(ValueError, match="family"):
         coordinated_search(two, {}, "chirp on load", duration=2.0, maxiter=1, popsize=1)
+
+
+NOISE_RUN = {"estimator": "kalman", "noise_std": ESTIMATE["noise_std"]}
+
+
+@pytest.mark.parametrize("seed", range(tiers.examples(4)))
+def test_the_load_alarm_raises_nothing_on_clean_runs_and_small_steps(seed):
+    """No load alarm in a clean minute with the chapters' noise (one area on its Kalman
+    estimate, the two-area preset with coupled filters on their grid estimate), nor
+    with a ±0.02 pu step (below the threshold) at 30 s."""
+    area, two = lfc.LFCParams(), MultiAreaParams.two_area()
+    scc = lfc.SafetyFilter(area, RELAYS, method="certified", noise_std=ESTIMATE["noise_std"])
+    for load in (None, lfc.Step(0.02, start=30.0), lfc.Step(-0.02, start=30.0)):
+        one = lfc.simulate(area, duration=60.0, scc=scc, seed=seed, load=load, **NOISE_RUN)
+        grid = lfc.simulate(two, duration=60.0, filters={0: "coupled", 1: "coupled"},
+                            seed=seed, loads={} if load is None else {1: load}, **NOISE_RUN)
+        for r in (one, grid):
+            assert r.load_alarms(*LOAD_ALARM).empty, (seed, load)
+            assert len(r.controls) >= 6000
+
+
+@settings(max_examples=tiers.examples(6), deadline=None)
+@given(amplitude=st.floats(0.05, 3.0), freq=st.floats(0.05, 3.0),
+       channel=st.sampled_from(["pc", "wref"]), seed=st.integers(0, 3))
+def test_a_command_attack_alone_never_changes_the_load_alarm(amplitude, freq, channel, seed):
+    """The Kalman filter takes the applied command as a known input: its load estimate,
+    and so every load alarm, is the same with and without any command attack (same
+    loads, same noise), on one area and on a grid — the alarm log tells a load from a
+    command."""
+    area, two = lfc.LFCParams(), MultiAreaParams.two_area()
+    load = lfc.Step(0.1, start=2.0)
+    attack = lfc.Square(amplitude, freq, start=1.0)
+    scc = lfc.SafetyFilter(area, RELAYS, method="certified", noise_std=ESTIMATE["noise_std"])
+    key = "pc_attack" if channel == "pc" else "wref_attack"
+    runs = [lfc.simulate(area, duration=4.0, scc=scc, seed=seed, load=load, **NOISE_RUN,
+                         **({key: attack} if attacked else {})) for attacked in (False, True)]
+    grids = [lfc.simulate(two, duration=4.0, filters={0: "coupled", 1: "coupled"},
+                          seed=seed, loads={0: load}, **NOISE_RUN,
+                          attacks={1: {channel: attack}} if attacked else {})
+             for attacked in (False, True)]
+    for plain, attacked in (runs, grids):
+        assert not plain.controls.pc_ref.equals(attacked.controls.pc_ref)
+        np.testing.assert_allclose(attacked.controls.p_load_hat, plain.controls.p_load_hat,
+                                   rtol=0, atol=1e-12)
+        pd.testing.assert_frame_equal(attacked.load_alarms(*LOAD_ALARM),
+                                      plain.load_alarms(*LOAD_ALARM))
+        assert len(plain.load_alarms(0.01, 0.1))       # the load itself is seen
+
+
+def test_on_the_exact_load_the_alarm_is_exact():
+    """With the load given (a grid's exact state; ``load_feedforward`` on one area) a move
+    beyond the threshold within the window is flagged at the first sample that holds it,
+    with its size; one at the threshold is not.  On one area with the exact state and no
+    load given, nothing is flagged (``p_load_hat`` is 0)."""
+    two = MultiAreaParams.two_area()
+    r = lfc.simulate(two, duration=2.0, loads={1: lfc.Step(0.031, start=1.0)})
+    alarms = r.load_alarms(*LOAD_ALARM)
+    assert alarms.area.unique().tolist() == [1]
+    assert alarms.t.iloc[0] == pytest.approx(1.0) and alarms.moved.iloc[0] == pytest.approx(
+        0.031, abs=1e-12)
+    assert r.load_alarms(0.031 + 1e-9, 0.1).empty
+    area = lfc.LFCParams()
+    scc = lfc.SafetyFilter(area, RELAYS, method="certified")
+    fed = lfc.simulate(area, duration=2.0, scc=scc, load=lfc.Step(0.3, start=1.0),
+                       load_feedforward=True)
+    assert fed.load_alarms(*LOAD_ALARM).t.iloc[0] == pytest.approx(1.0)
+    assert fed.first_trip["t"] > 1.05                  # 56 ms of warning
+    blind = lfc.simulate(area, duration=2.0, scc=scc, load=lfc.Step(0.3, start=1.0))
+    assert blind.load_alarms(*LOAD_ALARM).empty
+    for bad, name in (((0.0, 0.1), "threshold"), ((math.nan, 0.1), "threshold"),
+                      ((0.03, -1.0), "window")):
+        with pytest.raises(ValueError, match=name):
+            r.load_alarms(*bad)

@@ -77,11 +77,13 @@ KEYWORD = {"load": ("loads",), "following": ("following_loads", "loads")}
 # loop moving from equilibrium (where the meter reads 0 and so would the load)
 FOLLOWING_KICK = 0.01
 # load-altering attacks on a grid (outside every filter's threat model beyond load_bound:
-# searched apart): a step or a square wave on an area's load (pu), or a load that follows
-# the area's frequency meter (lfc.FollowingLoad: gain pu/pu, limit pu, from ATTACK_START)
+# searched apart): a step or a square wave on an area's load (pu), a ramp (slope pu/s, up
+# to a size in pu, then held), or a load that follows the area's frequency meter
+# (lfc.FollowingLoad: gain pu/pu, limit pu); every one from ATTACK_START
 LOAD_FAMILIES = {
     "step on load": ("load", "step", [(-0.3, 0.3)]),
     "square on load": ("load", "square", [(0.0, 0.3), (0.05, 3.0)]),
+    "ramp on load": ("load", "ramp", [(-2.0, 2.0), (0.0, 0.3)]),
     "following load": ("following", "gain", [(0.0, 20.0), (0.01, 0.3)]),
 }
 _GRID = {**MULTI_FAMILIES, **LOAD_FAMILIES}   # what coordinated_search and its replay take
@@ -447,10 +449,16 @@ def coordinated_scenario(family: str, theta, n_areas: int, duration: float) -> d
         return {"following_loads": {a: FollowingLoad(float(theta[k * a]), float(
                     theta[k * a + 1]), start=ATTACK_START) for a in range(n_areas)},
                 "loads": {a: Step(FOLLOWING_KICK, start=ATTACK_START) for a in attacked}}
-    signals = {a: scenario_signal(
-        {"waveform": waveform, "amplitude": float(theta[k * a]),
-         "freq_hz": float(theta[k * a + 1]) if k > 1 else 0.0, "start": ATTACK_START},
-        duration) for a in range(n_areas)}
+    def row(a: int) -> dict:
+        first, second = theta[k * a], theta[k * a + 1] if k > 1 else 0.0
+        if channel == "load" and waveform == "ramp":   # slope (pu/s) to a size (pu), held
+            held = first != 0.0 and second > 0.0
+            return {"waveform": "ramp", "amplitude": float(first) if held else 0.0,
+                    "freq_hz": 0.0, "start": ATTACK_START,
+                    "stop": ATTACK_START + second / abs(first) if held else math.inf}
+        return {"waveform": waveform, "amplitude": float(first), "freq_hz": float(second),
+                "start": ATTACK_START}
+    signals = {a: scenario_signal(row(a), duration) for a in range(n_areas)}
     if channel == "load":
         return {"loads": signals}
     return {"attacks": {a: {channel: signal} for a, signal in signals.items()}}
