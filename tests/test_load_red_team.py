@@ -173,6 +173,13 @@ def test_the_guarantees_page_quotes_every_recorded_warning():
     assert (f"came first in every one of the {len(leads)} winners that trip**, by "
             f"{1e3 * min(leads):.0f} ms") in text
     assert f"to {max(leads):.1f} s. A load fast enough" in text
+    estimated = [found for found in (tiers.recorded(f"laa:{g}-{n}[{f}]")
+                                     for g, n, f in TARGETS if n.endswith("-estimate"))
+                 if found["first_trip_t"] is not None]
+    late = sum(found["warning_s"] < 0 for found in estimated)
+    readme = Path(__file__).parents[1].joinpath("README.md").read_text()
+    assert f"every trip of the red team's {len(leads)} tripping load attacks" in readme
+    assert f"`outside` after {late} of {len(estimated)} trips on the estimate" in readme
 
 
 @pytest.mark.parametrize("estimate", [{}, ESTIMATE])
