@@ -215,3 +215,15 @@ def test_the_eigenvalues_predict_the_simulated_growth_on_every_grid(name, agc):
             simulated = math.log(dw[t > T - 10.0].max() / early) / (T / 2)
             assert np.sign(simulated) == np.sign(factor - 1.0), (name, area, factor)
             assert simulated == pytest.approx(predicted, rel=0.1), (name, area, factor)
+
+
+def test_finding_two_following_loads_at_once_are_neither_a_box_nor_a_triangle():
+    """On the two-area preset (each area alone: 7.55 pu/pu) two botnets of 7.0 each
+    destabilize the grid, below either's own gain (the stable set is not the box of the
+    single-area gains), and 8.0 in area 0 — unstable alone — is stable with 6.75 in area
+    1 (nor is it the triangle, or any set that holds every smaller gain): the least load
+    to secure is not found area by area.  Chapter 12's gain map shows it."""
+    alone = critical_gain(TWO, 0)
+    assert 7.0 < alone and growth_rate(TWO, {0: 7.0, 1: 7.0}) > 0.001
+    assert growth_rate(TWO, {0: 8.0}) > 0.04 and growth_rate(TWO, {0: 8.0, 1: 6.75}) < -0.01
+    assert growth_rate(TWO, {0: 6.5, 1: 6.5}) < -0.05

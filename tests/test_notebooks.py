@@ -25,7 +25,7 @@ PANELS = {"tutorial": {"no_scc", "scc"}, "fig4": {"a", "b", "c", "d"},
           "kalman": {"no_scc", "scc_true", "scc_kalman"}}
 EXTRA_METRICS = {"fig7": {"oc_trip_t"}}
 RUNS = [(c.name, plant) for c in CHAPTERS for plant in c.plants
-        if c.name not in ("surface", "redteam", "multiarea", "coupled", "wire")]
+        if c.name not in ("surface", "redteam", "multiarea", "coupled", "wire", "loads")]
 
 
 def images(notebook: Path) -> int:
@@ -730,6 +730,17 @@ def test_wire_notebook_shows_its_figures_and_its_claims_hold(tmp_path):
     the attack equals the simulation, trips without the filter, not with it; the
     operator's estimate recovers it)."""
     run_chapter("wire", tmp_path, check_claims=True)
+
+
+@pytest.mark.exhaustive
+def test_loads_notebook_shows_its_figures_and_its_claims_hold(tmp_path):
+    """Notebook 12 with its short parameters and its claims checked (a following load
+    decays below its gain and grows above it; the load alarm comes before every trip of
+    the red team's load attacks, ``outside`` too on the exact state; a command attack
+    leaves the load alarm unchanged; the certified filter trusts a lying sensor)."""
+    run_chapter("loads", tmp_path, check_claims=True)
+    claims = json.loads((tmp_path / "res" / "claims.json").read_text())
+    assert len(claims) == 8 and all(claims.values())
 
 
 def test_a_notebook_runs_kernel_gets_the_environment_it_is_given(tmp_path):

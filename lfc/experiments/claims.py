@@ -9,6 +9,7 @@ names are the figures': Fig. 4 ``a`` (no SCC), ``b`` and ``c`` (SCC at two
 
 from __future__ import annotations
 
+import numpy as np
 import pandas as pd
 
 from lfc.experiments.scenarios import ATTACK_START
@@ -259,4 +260,44 @@ def detection_claims(detection: pd.DataFrame) -> dict[str, bool]:
             (by.xs("fig5-told", level="attack")["detected by"] == "SCC only").all()
             and hidden["substation (s)"].isna().all()
             and hidden["end-to-end (s)"].notna().all(),
+    })
+
+
+def loads_claims(growth: pd.DataFrame, gain_map: tuple, warnings: pd.DataFrame,
+                 invariant: bool, lie: Runs, lie_pu: float) -> dict[str, bool]:
+    """Loads and sensors as weapons (chapter 12).  ``growth``: a row per area and
+    ``factor`` of its smallest destabilizing gain with the ``simulated`` growth rate
+    (1/s) — below the gain the response decays, above it grows.  ``gain_map``:
+    ``(axis, rates, critical)``, the growth rate (1/s) over two areas' gains
+    (``rates[i, j]``: area 0 at ``axis[j]``, area 1 at ``axis[i]``, pu/pu) and each
+    area's own smallest destabilizing gain — on the diagonal, both at once destabilize
+    below either's own.  ``warnings``: a row
+    per red-team winner with ``filters`` (``"none"``: no filter), ``estimate`` (bool),
+    ``trip``, ``outside`` and
+    ``load alarm`` (first times, s; NaN: none) — the load alarm comes before every
+    trip, and on the exact state so does ``outside``.  ``invariant``: a command attack
+    alone left the load alarms unchanged.  ``lie``: a constant lie of ``lie_pu`` (pu) on
+    the frequency reading, the runs ``"none"`` and ``"certified"`` — without a filter
+    the AGC moves the frequency by the lie; the certified filter trusts the reading: it
+    flags ``outside`` and holds its command (the frequency never moves), no trip."""
+    axis, rates, critical = gain_map
+    tripped = warnings[warnings["trip"].notna()]
+    exact = tripped[~tripped["estimate"].astype(bool) & (tripped["filters"] != "none")]
+    certified = lie["certified"].metrics()
+    return _bools({
+        "a following load below its smallest destabilizing gain decays, above it grows":
+            ((growth.factor < 1) == (growth.simulated < 0)).all(),
+        "two following loads at once destabilize below either area's own gain":
+            any(rate > 0 for k, rate in zip(axis, np.diag(rates)) if k < min(critical)),
+        "the red team's load attacks trip relays": len(tripped) > 0,
+        "the load alarm comes before every trip": (tripped["load alarm"]
+                                                   < tripped["trip"]).all(),
+        "on the exact state `outside` comes before every trip":
+            (exact["outside"] < exact["trip"]).all(),
+        "a command attack alone leaves the load alarm unchanged": invariant,
+        "without a filter the AGC moves the frequency by a lie on its reading":
+            lie["none"].metrics()["max_abs_dw_meas"] >= 0.9 * abs(lie_pu),
+        "the certified filter trusts a lying frequency sensor (outside, the AGC frozen)":
+            certified["outside"] > 0 and certified["max_abs_dw_meas"] == 0.0
+            and not lie["certified"].tripped,
     })

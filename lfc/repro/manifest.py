@@ -104,6 +104,11 @@ CHAPTERS = (
             "Beyond the paper: the attack on a real industrial protocol (Modbus/TCP)",
             ("linear",), ("wire",),
             {"duration": 4.0, "realtime_duration": 2.0, "forensic_draws": 1}),
+    Chapter("loads", "12_loads_and_sensors.ipynb",
+            "Beyond the paper: loads and sensors as weapons", ("linear",),
+            ("laa_gain_map", "laa_warning"),
+            {"duration": 5.0, "families": ["step on load"], "maxiter": 1, "popsize": 2,
+             "map_points": 9}),
 )
 
 

@@ -30,10 +30,10 @@ COLORS = {"a": "tab:blue", "b": "tab:orange", "c": "tab:green", "d": "tab:red",
           "scc_kalman": "tab:green"}
 
 
-def wrap_title(title: str) -> str:
-    """``title`` with each of its lines wrapped at ``TITLE_WIDTH`` characters; a line
-    break the caller wrote is kept (``textwrap.fill`` alone would join the lines)."""
-    return "\n".join(textwrap.fill(line, TITLE_WIDTH) for line in title.split("\n"))
+def wrap_title(title: str, width: int = TITLE_WIDTH) -> str:
+    """``title`` with each of its lines wrapped at ``width`` characters; a line break
+    the caller wrote is kept (``textwrap.fill`` alone would join the lines)."""
+    return "\n".join(textwrap.fill(line, width) for line in title.split("\n"))
 
 
 def rocof_setting_label(relays: RelaySettings, f_nominal: float) -> str:
@@ -595,4 +595,59 @@ def sweep_figure(table, x: str, y: str, by: str | None = None,
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1))
     ax.set_title(f"{SWEEP_LABELS.get(y, y).split(' (')[0]} against "
                  f"{SWEEP_LABELS.get(x, x).split(' (')[0].lower()}")
+    return fig
+
+
+def gain_map_figure(gains: np.ndarray, rates: np.ndarray, critical: tuple[float, float],
+                    title: str) -> Figure:
+    """The growth rate (1/s) of a two-area grid's closed loop over the gains of a
+    following load in either area (``gains``: the axis of both, pu/pu; ``rates[i, j]``
+    at area 0's ``gains[j]`` and area 1's ``gains[i]``): the stability boundary
+    (growth rate 0) solid, each area's own smallest destabilizing gain (``critical``,
+    the other at 0) dashed."""
+    fig, ax = plt.subplots(figsize=(7.5, 6), layout="constrained")
+    top = float(np.max(np.abs(rates)))
+    mesh = ax.pcolormesh(gains, gains, rates, cmap="RdBu_r", vmin=-top, vmax=top,
+                         shading="nearest")
+    fig.colorbar(mesh, ax=ax, label="Growth rate of the closed loop (1/s; > 0 unstable)")
+    ax.contour(gains, gains, rates, levels=[0.0], colors="k", linewidths=1.5)
+    ax.plot([], [], color="k", lw=1.5, label="stability boundary (growth rate 0)")
+    ax.axvline(critical[0], color="k", ls="--", lw=1,
+               label=f"area 0 alone: {critical[0]:.2f} pu/pu")
+    ax.axhline(critical[1], color="k", ls=":", lw=1,
+               label=f"area 1 alone: {critical[1]:.2f} pu/pu")
+    ax.set_xlabel("Gain of the following load in area 0 (pu load per pu frequency)")
+    ax.set_ylabel("Gain of the following load in area 1 (pu/pu)")
+    ax.legend(fontsize=8, loc="upper right")
+    ax.set_title(wrap_title(title, 60))
+    return fig
+
+
+def load_warning_figure(runs: dict[str, Result], labels: dict[str, str],
+                        alarms: dict[str, dict[str, float | None]], relays: RelaySettings,
+                        title: str, f_nominal: float = 60.0) -> Figure:
+    """A load attack on one area, as each run's controller side saw it: the true
+    load and each run's load as its filter holds it (``p_load_hat``, pu, top), the
+    measured ROCOF (pu/s, bottom) with the setting dashed; each run's first trip, first
+    ``outside`` and first load alarm (``alarms[key]``: ``"trip"``, ``"outside"``,
+    ``"load alarm"`` times in s, or None) as vertical lines."""
+    fig, (top, bot) = plt.subplots(2, 1, sharex=True, figsize=(10, 6.5), layout="constrained")
+    first = next(iter(runs.values())).trace
+    top.plot(first.t, first.p_load, color="k", lw=1.5, label="true load $\\Delta P_L$")
+    styles = {"trip": "-", "outside": ":", "load alarm": "-."}
+    for color, (key, label) in zip(("tab:blue", "tab:orange", "tab:green"), labels.items()):
+        r = runs[key]
+        top.step(r.controls.t, r.controls.p_load_hat, where="post", color=color, lw=1.1,
+                 label=f"{label}: the load the filter holds")
+        bot.plot(r.trace.t, r.trace.rocof_meas, color=color, lw=1.2, label=label)
+        for what, t in alarms[key].items():
+            if t is not None:
+                for ax in (top, bot):
+                    ax.axvline(t, color=color, ls=styles[what], lw=1.2,
+                               label=f"{label}: {what} at {t:.3f} s" if ax is bot else None)
+    _limits(bot, [relays.rocof_limit, -relays.rocof_limit],
+            rocof_setting_label(relays, f_nominal))
+    top.set_ylabel("Load $\\Delta P_L$ (pu)")
+    bot.set_ylabel("Measured ROCOF $\\hat{\\dot\\omega}$ (pu/s)")
+    _finish((top, bot), title)
     return fig
