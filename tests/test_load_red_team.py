@@ -313,3 +313,26 @@ def test_on_the_exact_load_the_alarm_is_exact():
                       ((0.03, -1.0), "window")):
         with pytest.raises(ValueError, match=name):
             r.load_alarms(*bad)
+
+
+def test_finding_a_slow_large_ramp_trips_without_the_fast_load_alarm():
+    """Attacking the load alarm where it is weakest: a ramp slower than its 0.3 pu/s
+    (−0.28 pu/s) but large (1 pu in every area of the three-area preset, exact state)
+    trips OF2 at 3.36 s without a filter, and the fast alarm (0.03 pu in 0.1 s) never
+    fires; 0.5 pu trips nothing.  A slow alarm on the same estimate (0.3 pu in 10 s)
+    flags it at 2.04 s.  The certified filter at every area stops the trip; the coupled
+    filter on its grid estimate trips OF2 1.1 s after its first ``outside``."""
+    three = MultiAreaParams.three_area()
+
+    def run(size: float, name: str = "none", **extra) -> lfc.Result:
+        ramp = lfc.Ramp(-0.28, start=1.0, stop=1.0 + size / 0.28)
+        return lfc.simulate(three, duration=20.0, loads=dict.fromkeys(range(3), ramp),
+                            filters=_filters(three, name), **extra)
+    plain = run(1.0)
+    assert plain.first_trip == {"relay": "OF2", "t": pytest.approx(3.36, abs=1e-9), "area": 2}
+    assert plain.load_alarms(*LOAD_ALARM).empty
+    assert plain.load_alarms(0.3, 10.0).t.min() == pytest.approx(2.04)
+    assert not run(0.5).tripped
+    assert not run(1.0, "certified").tripped
+    coupled = run(1.0, "coupled", **ESTIMATE)
+    assert coupled.warning_time == pytest.approx(1.114, abs=1e-9)
