@@ -46,6 +46,7 @@ from lfc.experiments.scenarios import ATTACK_START
 from lfc.filters.base import check_choice
 from lfc.filters.certified import BOX
 from lfc.linear_grid import area_filter, estimate_noise
+from lfc.load_attacks import FollowingLoad
 from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams
 from lfc.relays import RelaySettings, relays_or_default
@@ -436,7 +437,6 @@ def coordinated_scenario(family: str, theta, n_areas: int, duration: float) -> d
     ``attacks`` for ``MULTI_FAMILIES``, ``loads`` or ``following_loads`` for
     ``LOAD_FAMILIES`` (with a following load, ``loads`` holds its
     ``FOLLOWING_KICK`` in every area it attacks); ``duration`` (s) ends a chirp."""
-    from lfc.load_attacks import FollowingLoad
     check_choice("family", family, tuple(_GRID))
     channel, waveform, bounds = _GRID[family]
     k = len(bounds)
@@ -449,6 +449,7 @@ def coordinated_scenario(family: str, theta, n_areas: int, duration: float) -> d
         return {"following_loads": {a: FollowingLoad(float(theta[k * a]), float(
                     theta[k * a + 1]), start=ATTACK_START) for a in range(n_areas)},
                 "loads": {a: Step(FOLLOWING_KICK, start=ATTACK_START) for a in attacked}}
+
     def row(a: int) -> dict:
         first, second = theta[k * a], theta[k * a + 1] if k > 1 else 0.0
         if channel == "load" and waveform == "ramp":   # slope (pu/s) to a size (pu), held
