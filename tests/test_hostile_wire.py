@@ -296,3 +296,39 @@ def test_the_setpoint_range_holds_at_its_corners(modbus, dnp3):
         points[point] = (point, value)
         assert operate(dnp3, points)[point] == status, (point, value)
         assert (dnp3.take() is None) == (status != 0)
+
+
+def test_modbus_closes_a_connection_idle_for_its_timeout_and_logs_it():
+    """A device frees its few sockets: an outsider's connection that sends nothing for
+    ``idle_timeout`` is closed (its next read sees the end of the stream) and logged in
+    ``rejected``, while the control centre's, writing every 0.1 s, stays open and its
+    commands land; a timeout that is not > 0 is refused naming it."""
+    import socket
+    import time
+
+    from pymodbus.client import ModbusTcpClient
+
+    from lfc.wire import modbus as mb
+    for bad in (0.0, -1.0, math.nan):
+        with pytest.raises(ValueError, match="idle_timeout"):
+            mb.Outstation(idle_timeout=bad)
+    loop = mb.EventLoop()
+    station = mb.Outstation(idle_timeout=0.4)
+    port = loop.run(station.start())
+    centre = ModbusTcpClient("127.0.0.1", port=port, timeout=5)
+    try:
+        assert centre.connect()
+        outsider = socket.create_connection(("127.0.0.1", port))
+        outsider.settimeout(5.0)
+        for seq in range(12):                                      # 1.2 s, busy
+            reply = centre.write_registers(0, command_registers(COMMAND, seq), device_id=1)
+            assert not reply.isError(), seq
+            time.sleep(0.1)
+        assert outsider.recv(16) == b""                            # closed by the device
+        assert station.take() == (COMMAND, 11)
+        assert [r[2] for r in station.rejected] == ["idle for more than 0.4 s: closed"]
+        assert station.rejected[0][1].startswith("connection from ('127.0.0.1', ")
+    finally:
+        centre.close()
+        loop.run(station.stop())
+        loop.close()
