@@ -23,7 +23,7 @@ from scipy.linalg import expm
 import lfc
 from lfc.experiments.redteam import Defender, Search, family_search, piecewise_attack_table
 from lfc.experiments.surface import attack_map, bias_map
-from lfc.filters.certified import BOX
+from lfc.filters.box import BOX
 from lfc.model import lfc_matrices, output_matrix
 
 P, RELAYS = lfc.LFCParams(), lfc.RelaySettings()

@@ -198,7 +198,7 @@ def test_robust_filter_with_the_fitted_models_box_holds_on_the_testbed(params, f
     beats the paper's SCC here, and the Fig. 4 attack and a 0.1 pu load step
     do not trip either (ROCOF well below the setting: 0.036 against 0.049 pu/s
     for the design-model certificate)."""
-    from lfc.filters.certified import BOX
+    from lfc.filters.box import BOX
     assert all(abs(getattr(fit.initial, n) / getattr(params, n) - 1) <= 0.2 for n in BOX)
     robust = lfc.SafetyFilter(params, method="certified", uncertainty=0.2)
     fig5 = lfc.simulate(CASE, design=params, duration=20.0, wref_attack=lfc.Step(0.04, start=1.0),

@@ -264,7 +264,7 @@ def detection_claims(detection: pd.DataFrame) -> dict[str, bool]:
 
 
 def loads_claims(growth: pd.DataFrame, gain_map: tuple, warnings: pd.DataFrame,
-                 invariant: bool, lie: Runs, lie_pu: float) -> dict[str, bool]:
+                 invariant: bool, lie: Runs, lie_pu: float, redundant: Runs) -> dict[str, bool]:
     """Loads and sensors as weapons (chapter 12).  ``growth``: a row per area and
     ``factor`` of its smallest destabilizing gain with the ``simulated`` growth rate
     (1/s) — below the gain the response decays, above it grows.  ``gain_map``:
@@ -279,7 +279,10 @@ def loads_claims(growth: pd.DataFrame, gain_map: tuple, warnings: pd.DataFrame,
     alone left the load alarms unchanged.  ``lie``: a constant lie of ``lie_pu`` (pu) on
     the frequency reading, the runs ``"none"`` and ``"certified"`` — without a filter
     the AGC moves the frequency by the lie; the certified filter trusts the reading: it
-    flags ``outside`` and holds its command (the frequency never moves), no trip."""
+    flags ``outside`` and holds its command (the frequency never moves), no trip.
+    ``redundant``: three sensors, one lying, read through their median by the certified
+    filter ``"without sensor_bound"`` (it trips) and ``"with sensor_bound"`` (it does
+    not)."""
     axis, rates, critical = gain_map
     tripped = warnings[warnings["trip"].notna()]
     exact = tripped[~tripped["estimate"].astype(bool) & (tripped["filters"] != "none")]
@@ -300,4 +303,8 @@ def loads_claims(growth: pd.DataFrame, gain_map: tuple, warnings: pd.DataFrame,
         "the certified filter trusts a lying frequency sensor (outside, the AGC frozen)":
             certified["outside"] > 0 and certified["max_abs_dw_meas"] == 0.0
             and not lie["certified"].tripped,
+        "three sensors, one lying: the filter built for their median trips nothing":
+            not redundant["with sensor_bound"].tripped,
+        "three sensors, one lying: the filter that trusts their median trips":
+            redundant["without sensor_bound"].tripped,
     })

@@ -44,7 +44,7 @@ from lfc.engine import check_area_keys
 from lfc.estimation import check_noise_std
 from lfc.experiments.scenarios import ATTACK_START
 from lfc.filters.base import check_choice
-from lfc.filters.certified import BOX
+from lfc.filters.box import BOX
 from lfc.linear_grid import area_filter, estimate_noise
 from lfc.load_attacks import FollowingLoad
 from lfc.model import LFCParams

@@ -130,24 +130,22 @@ limits by a fraction for anything else (no guarantee there).
 
 from __future__ import annotations
 
-import itertools
 import math
-from dataclasses import dataclass, fields, replace
-from numbers import Real
+from dataclasses import dataclass, fields
 from typing import ClassVar
 
 import numpy as np
 from scipy.linalg import expm, solve_continuous_lyapunov
 
 from lfc._jit import inline, maxnum, minnum
-from lfc._validate import (check_nonnegative, check_pair, check_positive, check_range,
-                           is_sequence)
+from lfc._validate import check_nonnegative, check_pair, check_positive, check_range
 from lfc.estimation import KalmanFilter, check_noise_std, measurement_std
 from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, OUTSIDE, Backend, Layout, METHOD_IDS,
                               Options, applied_flags, built_once, check_limits, given,
                               hold_invalid, option, valid_input)
 from lfc.filters.bounds import (band_moves_terminal, curvature_gains, expm_at, intersample,
                                 load_moves_terminal, merge_intervals, pair, tie_step_bound)
+from lfc.filters.box import box_plants
 from lfc.filters.responses import (L1_HORIZON, load_gains, load_tails, peak_norm,
                                    period_step_gain)
 from lfc.model import LFCParams, lfc_matrices, output_matrix
@@ -155,7 +153,6 @@ from lfc.relays import RelaySettings
 
 GRID = ((0.05, 1e-3), (0.1, 2e-3), (0.2, 5e-3), (2.0, 1e-2), (60.0, 2e-2))  # (until, step) s
 MIN_STEP, MAX_STEP = 1e-3, 0.1  # s: the sample spacing of adaptive_grid
-BOX = ("M", "D", "tau_g", "tau_t", "droop")  # the parameters an uncertainty box may cover
 LOAD_KINDS = ("band", "steps", "period")   # what load_bound bounds (module docstring)
 LP_LOAD = 1.0          # pu: load range of _derivative_bound's programs (V does not depend on it)
 NUMERIC_MARGIN = 1e-6  # relative tightening that absorbs floating-point differences
@@ -180,44 +177,6 @@ N_COLS = COLUMNS.size
 ELLIPSOID = Layout(("E", 25), ("el", 5), ("eu", 5), ("P", 25))
 ELL_E, ELL_EL, ELL_EU, ELL_P = ELLIPSOID.offsets()
 ELL_SIZE = ELLIPSOID.size
-
-
-def box_plants(params: LFCParams, uncertainty: float | dict) -> list[LFCParams]:
-    """The design model and the corners of the declared parameter box.
-
-    ``uncertainty``: a relative half-width for all of ``BOX`` (0.2: each within
-    ±20 %), or a dict naming some of them with ``(low, high)`` factors.
-    """
-    if isinstance(uncertainty, dict):
-        unknown = [k for k in uncertainty if k not in BOX]
-        if unknown:
-            raise ValueError(f"uncertainty names unknown parameter(s) "
-                             f"{', '.join(map(repr, unknown))}; choose from {BOX}")
-        factors = {}
-        for name, pair in uncertainty.items():
-            numbers = (is_sequence(pair) and len(pair) == 2 and all(_is_real(v) for v in pair))
-            low, high = (float(pair[0]), float(pair[1])) if numbers else (math.nan, math.nan)
-            if not (0 < low <= 1 <= high < math.inf):
-                raise ValueError(f"uncertainty[{name!r}] must be factors (low, high) with "
-                                 f"0 < low <= 1 <= high, got {pair!r}")
-            factors[name] = (float(low), float(high))
-    else:
-        if not _is_box_width(uncertainty):
-            raise ValueError(f"uncertainty must be a relative half-width in [0, 1) or a dict "
-                             f"of factors, got {uncertainty!r}")
-        factors = {name: (1 - uncertainty, 1 + uncertainty) for name in BOX} \
-            if uncertainty > 0 else {}
-    corners = [replace(params, **{n: getattr(params, n) * f for n, f in zip(factors, combo)})
-               for combo in itertools.product(*factors.values())]
-    return [params] + [c for c in corners if c != params]
-
-
-def _is_real(value: object) -> bool:
-    return isinstance(value, Real) and not isinstance(value, (bool, np.bool_))
-
-
-def _is_box_width(value: object) -> bool:
-    return _is_real(value) and 0.0 <= value < 1.0
 
 
 def grid(horizon: float) -> np.ndarray:
@@ -258,6 +217,10 @@ class CertifiedOptions(Options):
     noise_std: tuple[float, float] | None = option(
         None, "pu, pu/s", "None or two numbers >= 0",
         "measurement noise std of the Kalman estimate given; None: the exact state")
+    sensor_bound: tuple[float, float] | None = option(
+        None, "pu, pu/s", "None or two numbers > 0 (not with noise_std)",
+        "how far the fused frequency and ROCOF readings may be from the meters' state "
+        "(lfc.sensors: the median of redundant sensors); None: the exact state")
     confidence: float = option(0.9999, "", "(0, 1)",
                                "probability the estimation error lies in the covered ellipsoid")
     trips_per_hour: float | None = option(None, "1/h", "None or > 0 (needs noise_std)",
@@ -300,6 +263,12 @@ class CertifiedOptions(Options):
             pair = check_pair("noise_std", self.noise_std, positive=True)
             check_noise_std("noise_std", pair)
             object.__setattr__(self, "noise_std", pair)
+        if self.sensor_bound is not None:
+            bound = check_pair("sensor_bound", self.sensor_bound, positive=True)
+            if self.noise_std is not None or not min(bound) > 0:
+                raise ValueError(f"sensor_bound must be two numbers > 0 (pu, pu/s) and "
+                                 f"without noise_std, got {self.sensor_bound!r}")
+            object.__setattr__(self, "sensor_bound", bound)
         defaults = {f.name: f.default for f in fields(self)}
         for name, needs, needed in (("confidence", "noise_std", self.noise_std),
                                     ("relay_rate", "trips_per_hour", self.trips_per_hour)):
@@ -398,10 +367,11 @@ class CertifiedSet:
         self.plants = box_plants(params, o.uncertainty)
         _check_stable(self.plants)
         cov = (_estimate_covariance(params, o.noise_std, o.control_period)
-               if o.noise_std is not None else None)
+               if o.noise_std is not None else _sensor_cover(o.sensor_bound))
         from scipy.stats import chi2, norm   # here: scipy.stats takes 0.3 s to import
 
-        self.kappa = math.sqrt(chi2.ppf(o.confidence, len(cov))) if cov is not None else 0.0
+        self.kappa = (math.sqrt(chi2.ppf(o.confidence, len(cov))) if o.noise_std is not None
+                      else 0.0 if cov is None else 1.0)
         limits = np.array([relays.F, relays.rocof_limit]) * (1 - o.margin) * (1 - NUMERIC_MARGIN)
         if o.trips_per_hour is not None:
             kappa_r = -norm.ppf(o.trips_per_hour / (2 * 3600 * o.relay_rate))
@@ -727,6 +697,16 @@ def _estimate_covariance(params: LFCParams, noise_std: tuple[float, float],
     filter ``simulate(estimator="kalman", noise_std=noise_std,
     control_period=period)`` uses."""
     return KalmanFilter(params, period, meas_std=noise_std).posterior_covariance
+
+
+def _sensor_cover(bound: tuple[float, float] | None) -> np.ndarray | None:
+    """An ellipsoid ``e' cov^-1 e <= 1`` holding every error of the fused readings,
+    ``|e_dw_meas| <= bound[0]``, ``|e_rocof_meas| <= bound[1]``, the other states and the
+    load exact: ``cov`` = diag(0, 0, 0, 2 b0^2, 2 b1^2, 0) (a box's corner is on it), the
+    zeros 1e-30 so that it factors."""
+    if bound is None:
+        return None
+    return np.diag([1e-30, 1e-30, 1e-30, 2 * bound[0] ** 2, 2 * bound[1] ** 2, 1e-30])
 
 
 def _check_stable(plants: list[LFCParams]) -> None:
