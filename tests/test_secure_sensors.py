@@ -110,8 +110,9 @@ def test_finding_two_colluding_sensors_beat_the_median():
     agreeing on a lie of 0.05 pu on the frequency out-vote the honest one, which is
     named ``spoofed`` in their place and nothing is ``beyond``; the filter reads the lie,
     as with one lying sensor (``tests/test_sensors.py``): nothing certified, ``outside``
-    at every sample from the lie on, the AGC frozen, no trip.  Two liars that disagree (+0.05, -0.05)
-    leave no two readings within twice the bound: ``beyond`` at every sample."""
+    at every sample from the lie on, the AGC frozen, no trip.  Two liars that disagree
+    (+0.05, -0.05) leave no two readings within twice the bound: ``beyond`` at every
+    sample."""
     secure = lfc.SafetyFilter(P, RELAYS, method="certified", sensor_bound=WIDE.bound)
     lie = {s: {"dw_meas": lfc.Step(0.05, start=1.0)} for s in (0, 1)}
     run = simulate_sensors(P, WIDE, scc=secure, duration=DURATION, attacks=lie,
@@ -148,3 +149,26 @@ def test_bad_sensor_models_are_refused_naming_what():
                          noise_std=(1e-4, 1e-3))
     with pytest.raises(ValueError, match="sensor_bound"):
         lfc.SafetyFilter(P, RELAYS, method="certified", sensor_bound=(0.0, math.inf))
+
+
+@pytest.mark.parametrize("array, load_bound", [(WIDE, 0.02),
+                                               (SensorArray(bound=(1e-4, 1e-3)), 0.05)],
+                         ids=["coarse", "fine"])
+def test_the_secure_filter_trips_nothing_with_loads_within_its_bound(array, load_bound):
+    """The statement with its load assumption at its edge: a step of exactly
+    ``load_bound`` (either sign, 3 ms after a control sample or at 4.5 s) during every
+    attack, the liar far off on each sensor, the honest noise at its corners: no trip
+    (``outside`` is flagged — the re-check of the held command fails on the next
+    sample's error — but the held command was certified for it).  The default tier runs
+    the flipping noise and the first instant; the exhaustive tier all 144 per bound."""
+    secure = lfc.SafetyFilter(P, RELAYS, method="certified", sensor_bound=array.bound,
+                              load_bound=load_bound)
+    patterns = ("high", "low", "flipping") if tiers.exhaustive() else ("flipping",)
+    instants = (2.003, 4.5) if tiers.exhaustive() else (2.003,)
+    for attack, sensor, pattern, start, sign in itertools.product(
+            ATTACKS, range(3), patterns, instants, (1, -1)):
+        r = simulate_sensors(P, array, scc=secure, duration=DURATION,
+                             attacks=lies(sensor, "far", array), honest=honest(pattern, array),
+                             pc_attack=ATTACKS[attack],
+                             load=lfc.Step(sign * load_bound, start=start)).result
+        assert not r.tripped, (attack, sensor, pattern, start, sign, r.first_trip)
