@@ -45,7 +45,8 @@ CHANNELS = ("dw_meas", "rocof_meas")
 @dataclass(frozen=True)
 class SensorArray:
     """``count`` redundant sensors of frequency and ROCOF, at most ``tolerate`` of them
-    lying; an honest one's noise is uniform within ``±bound`` (pu, pu/s).
+    lying; an honest one's noise stays within ``±bound`` (pu, pu/s: the meters' own
+    accuracy, no default — a PMU's is not a governor pickup's), drawn uniformly there.
 
     Raises
     ------
@@ -53,8 +54,8 @@ class SensorArray:
         ``count`` < ``2 tolerate + 1``, ``tolerate`` < 1, or a bound not > 0.
     """
 
+    bound: tuple[float, float]
     count: int = 3
-    bound: tuple[float, float] = (1e-4, 1e-3)
     tolerate: int = 1
 
     def __post_init__(self) -> None:

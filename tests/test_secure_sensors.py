@@ -133,7 +133,7 @@ def test_bad_sensor_models_are_refused_naming_what():
                          ({"bound": (0.0, 1e-3)}, "bound"), ({"bound": (1e-4,)}, "bound"),
                          ({"count": 4, "tolerate": 2}, "count")):
         with pytest.raises(ValueError, match=name):
-            SensorArray(**kwargs)
+            SensorArray(**{"bound": WIDE.bound, **kwargs})
     t = np.arange(3) * 0.01
     for attacks, what in (({3: {"dw_meas": lfc.Step(1.0)}}, "sensor"),
                           ({0: {"pc": lfc.Step(1.0)}}, "channel")):
