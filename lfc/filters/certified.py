@@ -29,37 +29,36 @@ control-invariant set with a *hold* backup law:
   binding ``"certified"``); if even that fails its check it still holds it and
   flags ``outside`` (its meaning: below).
 
-**Guarantee (proven).**  For every plant whose M, D, tau_g, tau_t and droop are
-among the certified plants (``uncertainty``: the design model and the 32
-corners of the box), with the state known within the estimation bound
-(``noise_std``: the Kalman filter's error ellipsoid at ``confidence``; exact
-state without it), a command held between calls, a load that moves by at most
-``load_bound`` from the load ``p_load`` given to the filter when the command was
-certified (``load_kind``: ``"band"``, ``|dP_L(t) - p_load| <= load_bound`` at
-every instant after it, any signal; ``"steps"``, the total variation of ``dP_L - p_load``
-from the certification on, its initial offset included, at most ``load_bound``:
-one step, a ramp or any monotone change of at most ``load_bound``, at any
-instant; ``"period"``, ``|dP_L(t) - p_k| <= load_bound`` within each control
-period from the load ``p_k`` given at its start, the command applied then
-certified, new or held, for that period) and a start from a state where some
-command is certified (e.g. equilibrium): the measured frequency and ROCOF stay
-inside ``|dw_meas| <= F`` and ``|rocof_meas| <= rocof_limit`` at every instant,
-whatever the incoming commands are — OF2, UF2 and ROCOF never trip, for any
-relay sampling.  No bound on ``|p_load|`` is needed: a constant load only
-shifts the equilibrium (command ``u = p`` with ``dPg = dPm = p`` keeps both
-outputs at 0), so in the shifted coordinates ``(x - x_eq(p), u - p)`` every
-condition, the derivative bound included, is the same for every ``p``
-(:func:`_derivative_bound`; ``tests/test_proven_recovery.py``).  The load is
-covered by tightening every limit by ``load_bound`` times the load-to-output
-gain of its kind (:func:`load_gains`: the L1 norm of the impulse response for
-``"band"``, exact for the worst signal; the peak of the step response for
-``"steps"``, exact for one step, 3.7 times smaller on the default plant's
-ROCOF), and an error ``e_p`` in the load estimate by the estimation bound; a
-bound that leaves nothing is rejected at construction, naming what is left
-(:func:`largest_load_bound` finds the largest).  Not covered with
-``noise_std``: the Kalman estimate's transient after a load step (its error
-leaves the steady-state ellipsoid until the load estimate has caught up).  With
-``trips_per_hour``, the limits are tightened further so that relays reading the
+**Guarantee (proven).** For every plant whose M, D, tau_g, tau_t and droop are among
+the certified plants (``uncertainty``: the design model and the 32 corners of the
+box), with the state known within the estimation bound (``noise_std``: the Kalman
+filter's error ellipsoid at ``confidence``; ``sensor_bound``: the box the median of
+redundant sensors stays in, :mod:`lfc.sensors`; exact state without either), a
+command held between calls, a load that moves by at most ``load_bound`` from the
+load ``p_load`` given to the filter when the command was certified (``load_kind``:
+``"band"``, ``|dP_L(t) - p_load| <= load_bound`` at every instant after it, any
+signal; ``"steps"``, the total variation of ``dP_L - p_load`` from the certification
+on, its initial offset included, at most ``load_bound``: one step, a ramp or any
+monotone change of at most ``load_bound``, at any instant; ``"period"``, ``|dP_L(t)
+- p_k| <= load_bound`` within each control period from the load ``p_k`` given at its
+start, the command applied then certified, new or held, for that period) and a start
+from a state where some command is certified (e.g. equilibrium): the measured
+frequency and ROCOF stay inside ``|dw_meas| <= F`` and ``|rocof_meas| <=
+rocof_limit`` at every instant, whatever the incoming commands are — OF2, UF2 and
+ROCOF never trip, for any relay sampling. No bound on ``|p_load|`` is needed: a
+constant load only shifts the equilibrium (command ``u = p`` with ``dPg = dPm = p``
+keeps both outputs at 0), so in the shifted coordinates ``(x - x_eq(p), u - p)``
+every condition, the derivative bound included, is the same for every ``p``
+(:func:`_derivative_bound`; ``tests/test_proven_recovery.py``). The load is covered
+by tightening every limit by ``load_bound`` times the load-to-output gain of its
+kind (:func:`load_gains`: the L1 norm of the impulse response for ``"band"``, exact
+for the worst signal; the peak of the step response for ``"steps"``, exact for one
+step, 3.7 times smaller on the default plant's ROCOF), and an error ``e_p`` in the
+load estimate by the estimation bound; a bound that leaves nothing is rejected at
+construction, naming what is left (:func:`largest_load_bound` finds the largest).
+Not covered with ``noise_std``: the Kalman estimate's transient after a load step
+(its error leaves the steady-state ellipsoid until the load estimate has caught up).
+With ``trips_per_hour``, the limits are tightened further so that relays reading the
 outputs through white Gaussian noise ``noise_std`` at ``relay_rate`` trip at most
 that often (a union bound over an hour of samples).
 
