@@ -64,10 +64,7 @@ class SensorArray:
         if self.count < 2 * self.tolerate + 1:
             raise ValueError(f"count must be >= 2 tolerate + 1 = {2 * self.tolerate + 1} "
                              f"(a median outvotes tolerate liars), got {self.count!r}")
-        bound = check_pair("bound", self.bound, positive=True)
-        if not min(bound) > 0:
-            raise ValueError(f"bound must be two numbers > 0 (pu, pu/s), got {self.bound!r}")
-        object.__setattr__(self, "bound", bound)
+        object.__setattr__(self, "bound", check_pair("bound", self.bound, positive=True))
 
     def readings(self, times: np.ndarray, attacks: dict[int, dict[str, Signal]] | None,
                  seed: int = 0, honest: np.ndarray | None = None) -> np.ndarray:
@@ -92,7 +89,7 @@ class SensorArray:
                 if channel not in CHANNELS:
                     raise ValueError(f"attacks[{sensor}]: channel must be one of {CHANNELS}, "
                                      f"got {channel!r}")
-                errors[:, sensor, CHANNELS.index(channel)] += [signal(t) for t in times]
+                errors[:, sensor, CHANNELS.index(channel)] += signal(times)
         return errors
 
 

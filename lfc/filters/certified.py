@@ -264,9 +264,9 @@ class CertifiedOptions(Options):
             object.__setattr__(self, "noise_std", pair)
         if self.sensor_bound is not None:
             bound = check_pair("sensor_bound", self.sensor_bound, positive=True)
-            if self.noise_std is not None or not min(bound) > 0:
-                raise ValueError(f"sensor_bound must be two numbers > 0 (pu, pu/s) and "
-                                 f"without noise_std, got {self.sensor_bound!r}")
+            if self.noise_std is not None:
+                raise ValueError(f"sensor_bound={self.sensor_bound!r} and noise_std cover the "
+                                 f"same error: give one of them")
             object.__setattr__(self, "sensor_bound", bound)
         defaults = {f.name: f.default for f in fields(self)}
         for name, needs, needed in (("confidence", "noise_std", self.noise_std),

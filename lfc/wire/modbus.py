@@ -67,10 +67,13 @@ class Outstation:
         self._request: tuple[int, int, int] = (0, 0, 0)
         self._refused = False             # the request under way was refused and logged
 
-    def _refuse(self, function_code: int, address: int, count: int, reason: str, code):
-        what = f"function {function_code}: {count} register(s) at {address}"
+    def _log(self, what: str, reason: str) -> None:
+        """One row of ``rejected``: now (wall clock), what was refused, why."""
         with self.lock:
             self.rejected.append((time.perf_counter(), what, reason))
+
+    def _refuse(self, function_code: int, address: int, count: int, reason: str, code):
+        self._log(f"function {function_code}: {count} register(s) at {address}", reason)
         self._refused = True
         return code
 
@@ -167,10 +170,8 @@ class Outstation:
                 elif now - seen > self.idle_timeout:
                     del self._seen[handler]
                     peer = handler.transport.get_extra_info("peername")
-                    with self.lock:
-                        self.rejected.append((time.perf_counter(), f"connection from {peer}",
-                                              f"idle for more than {self.idle_timeout:g} s: "
-                                              f"closed"))
+                    self._log(f"connection from {peer}",
+                              f"idle for more than {self.idle_timeout:g} s: closed")
                     handler.close()
 
     async def stop(self) -> None:
