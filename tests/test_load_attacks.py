@@ -194,7 +194,7 @@ def test_the_eigenvalues_predict_the_simulated_growth_on_every_grid(name, agc):
     the area's critical gain, the response to a 0.01 pu, 0.5 s pulse on its load decays
     and grows at the rate the closed loop's eigenvalues predict, within 10 % (the
     simulated rate: the log-ratio of the largest ``|dw_meas|`` in the last 10 s of either
-    half of a run of at least eight e-foldings; measured within 6 %)."""
+    half of a run of at least eight e-foldings)."""
     from pathlib import Path
     page = Path(__file__).parents[1].joinpath("docs", "guarantees.md").read_text()
     grid = _grids()[name]()
