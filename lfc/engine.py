@@ -38,6 +38,7 @@ from lfc.filters.dispatch import GRID_WIDE, decide, decide_grid, grid_wide
 from lfc.model import LFCParams
 from lfc.multiarea import N_AREA_STATES
 from lfc.relays import relay_sample
+from lfc.sensor_attacks import READING, SCALE, lag_samples
 from lfc.signals import GRID, N_PARAMS, NONE, SAMPLES, STEP, Signal, value_at
 
 #: signal channels: ACE an attack on the area control error, DW_MEAS and ROCOF_MEAS on the
@@ -168,15 +169,18 @@ class Work(NamedTuple):
     #                         coupled filter's grid Kalman filter)
     xe: np.ndarray          # (n_s,): the estimate of the grid's state
     sums: np.ndarray        # a coupled filter's scratch (rows_scratch entries)
+    seen: np.ndarray        # (n_a, n_ctrl, 2): what each area's sensors reported
 
     @classmethod
-    def sized(cls, n_s: int, n_a: int, n_kf: int, n_sums: int) -> Work:
+    def sized(cls, n_s: int, n_a: int, n_kf: int, n_sums: int, n_ctrl: int) -> Work:
         """Zeros for a grid of ``n_s`` states and ``n_a`` areas, Kalman filters of up
-        to ``n_kf`` states and ``n_sums`` entries of filter scratch."""
+        to ``n_kf`` states, ``n_sums`` entries of filter scratch and ``n_ctrl``
+        control samples."""
         return cls(np.zeros(n_s), np.zeros(n_s), np.zeros(n_a), np.zeros(n_a),
                    np.zeros(N_AREA_STATES), np.zeros((n_a, MEMORY)), np.zeros((n_a, 1)),
                    np.zeros((n_a, 2, n_kf)), np.zeros((n_a, 3)), np.zeros((n_a, 3)),
-                   np.zeros(6 * n_a), np.zeros(n_s), np.zeros(n_sums))
+                   np.zeros(6 * n_a), np.zeros(n_s), np.zeros(n_sums),
+                   np.zeros((n_a, n_ctrl, 2)))
 
 
 @inline
@@ -187,6 +191,32 @@ def signal_value(channel: int, kinds: np.ndarray, params: np.ndarray, offsets: n
     if kind == GRID:
         return sv[offsets[channel, 0] + index]
     return value_at(kind, params, channel, t, st, sv, offsets[channel, 0], offsets[channel, 1])
+
+
+@inline
+def sensor_reading(channel: int, honest: float, channels: Channels, seen: np.ndarray,
+                   t: float, j: int) -> tuple:
+    """What the sensor on ``channel`` (``DW_MEAS`` or ``ROCOF_MEAS``) reports at control
+    sample ``j`` (time ``t``, s), and the lie: ``(report, report - honest)``.
+
+    ``honest`` is the reading (state plus measurement noise).  A waveform on the
+    channel (:mod:`lfc.signals`) is added to it; a reading transform
+    (:mod:`lfc.sensor_attacks`) replaces it inside its window: ``SCALE`` reports
+    ``params[0]`` times it, ``FREEZE`` and ``REPLAY`` the report ``params[5]``
+    samples earlier (``seen``; the honest reading before the run's first report)."""
+    kinds, params, offsets, st, sv = channels
+    kind = kinds[channel]
+    if kind < READING:
+        lie = signal_value(channel, kinds, params, offsets, st, sv, t, j)
+        return honest + lie, lie
+    if t < params[channel, 2] or t >= params[channel, 3]:
+        return honest, 0.0
+    if kind == SCALE:
+        report = params[channel, 0] * honest
+    else:
+        lag = int(params[channel, 5])
+        report = seen[j - lag, channel - DW_MEAS] if j >= lag else honest
+    return report, report - honest
 
 
 @inline
@@ -246,13 +276,16 @@ class Controller(NamedTuple):
 class Memory(NamedTuple):
     """What an area's generator side keeps between samples and writes: the filter's
     memory ``mem`` (MEMORY,), the integrator ``gstate`` (1,: pu), ``x_hat`` (5,: the
-    state the filter sees) and the control trace ``ctrl`` (a row of N_CTRL values per
-    sample; no rows: no trace)."""
+    state the filter sees), the control trace ``ctrl`` (a row of N_CTRL values per
+    sample; no rows: no trace) and ``seen`` (n_ctrl, 2: what its frequency and ROCOF
+    sensors reported at every sample, read by a freeze or a replay; no rows: no
+    reading transform)."""
 
     mem: np.ndarray
     gstate: np.ndarray
     x_hat: np.ndarray
     ctrl: np.ndarray
+    seen: np.ndarray
 
 
 class GridView(NamedTuple):
@@ -300,11 +333,12 @@ def generator_period(j: int, t: float, x: np.ndarray, p_true: float, noise: tupl
     kinds, params, offsets, st, sv = channels
     est, ka, kb, kc, kg, kstate = estimate
     k_i_period, k_tie_period, feedforward, anti_windup, method, fd = controller
-    mem, gstate, x_hat, ctrl = memory
+    mem, gstate, x_hat, ctrl, seen = memory
     noise0, noise1 = noise
-    lie0 = signal_value(DW_MEAS, kinds, params, offsets, st, sv, t, j)
-    lie1 = signal_value(ROCOF_MEAS, kinds, params, offsets, st, sv, t, j)
-    y0, y1 = x[3] + noise0 + lie0, x[4] + noise1 + lie1
+    y0, lie0 = sensor_reading(DW_MEAS, x[3] + noise0, channels, seen, t, j)
+    y1, lie1 = sensor_reading(ROCOF_MEAS, x[4] + noise1, channels, seen, t, j)
+    if seen.shape[0]:
+        seen[j, 0], seen[j, 1] = y0, y1
     if est >= 0 and not grid_wide(method):
         n = ka.shape[0]
         kf_correct(kg, kc, kstate, (y0, y1), x_hat)     # x_hat: scratch until below
@@ -427,7 +461,7 @@ def run_kernel(timing: Timing, plants: Plants, rows: Rows, samples: SignalSample
     methods, fdata, foff = filters
     limits, delays = relays
     metrics, ends, trace_x, trace_ctrl, trace_trips = out
-    x, xn, u, pl, x_hat, mem, gstate, kstate, start, due, ym, xe, sums = work
+    x, xn, u, pl, x_hat, mem, gstate, kstate, start, due, ym, xe, sums, seen = work
     n_ctrl = -(-n_steps // ratio)
     n_a, n_l, n_s = inc.shape[0], inc.shape[1], ad.shape[1]
     m = N_AREA_STATES
@@ -477,12 +511,13 @@ def run_kernel(timing: Timing, plants: Plants, rows: Rows, samples: SignalSample
             if grid_wide(method0) and index[i, 0, 0] >= 0:   # what its estimator measures
                 for a in range(n_a):
                     q_a = index[i, a, 1]
-                    ym[2 * a] = x[m * a + 3] + (noise[q_a, j, 0] if q_a >= 0 else 0.0) \
-                        + signal_value(DW_MEAS, kinds[i, a], params[i, a], offsets[i, a], st,
-                                       sv, t, j)
-                    ym[2 * a + 1] = x[m * a + 4] + (noise[q_a, j, 1] if q_a >= 0 else 0.0) \
-                        + signal_value(ROCOF_MEAS, kinds[i, a], params[i, a], offsets[i, a],
-                                       st, sv, t, j)
+                    sensors = Channels(kinds[i, a], params[i, a], offsets[i, a], st, sv)
+                    ym[2 * a] = sensor_reading(
+                        DW_MEAS, x[m * a + 3] + (noise[q_a, j, 0] if q_a >= 0 else 0.0),
+                        sensors, seen[a], t, j)[0]
+                    ym[2 * a + 1] = sensor_reading(
+                        ROCOF_MEAS, x[m * a + 4] + (noise[q_a, j, 1] if q_a >= 0 else 0.0),
+                        sensors, seen[a], t, j)[0]
                     s = 0.0
                     for line in range(n_l):
                         s += inc[a, line] * x[m * n_a + line]
@@ -511,7 +546,8 @@ def run_kernel(timing: Timing, plants: Plants, rows: Rows, samples: SignalSample
                     tie + ace, Channels(kinds_a, params_a, offsets_a, st, sv),
                     Estimate(e_i, ka_a, kb_a, kc_a, kg_a, ks_a),
                     Controller(k_freq[a], k_tie[a], ff == 1, aw, method, fd),
-                    Memory(mem_a, gs_a, x_hat, ctrl_a), GridView(a, x, u, pl, ym, xe, ks_0, sums))
+                    Memory(mem_a, gs_a, x_hat, ctrl_a, seen[a]),
+                    GridView(a, x, u, pl, ym, xe, ks_0, sums))
                 u[a] = ua
                 met[a, 4] += (flags & ACTIVE) != 0
                 met[a, 5] += (flags & ALARM_BITS) != 0
@@ -664,8 +700,9 @@ def scenario_signals(pc_attack, wref_attack, load, tc: np.ndarray, t: np.ndarray
     """One scenario's (or area's) signals as the engine reads them: ``(kinds (6,),
     params (6, 6), offsets (6, 2), sample times, sample values)``, channels
     ``PC, WREF, LOAD, ACE, DW_MEAS, ROCOF_MEAS``.  A :class:`~lfc.signals.Signal` is passed as its
-    spec; any other callable is sampled on its grid (control samples ``tc`` for
-    the attacks, plant samples ``t`` for the load)."""
+    spec (a reading transform of :mod:`lfc.sensor_attacks` on a sensor's channel
+    only, its lag in control samples); any other callable is sampled on its grid
+    (control samples ``tc`` for the attacks, plant samples ``t`` for the load)."""
     kinds, params = np.zeros(N_CHANNELS, np.int64), np.zeros((N_CHANNELS, N_PARAMS))
     offsets, st, sv, n = np.zeros((N_CHANNELS, 2), np.int64), [], [], 0
     for c, (signal, name, grid) in enumerate(((pc_attack, "pc_attack", tc),
@@ -684,6 +721,13 @@ def scenario_signals(pc_attack, wref_attack, load, tc: np.ndarray, t: np.ndarray
                                      f"it one of the two")
         if isinstance(signal, Signal) and type(signal).spec is not Signal.spec:
             kinds[c], params[c], times, values = signal.spec()
+            if kinds[c] >= READING:                           # lfc.sensor_attacks
+                if c < DW_MEAS:
+                    raise ValueError(f"{name}: a {type(signal).__name__} transforms what a "
+                                     f"sensor reads; give it as dw_meas_attack or "
+                                     f"rocof_meas_attack")
+                params[c, 5] = lag_samples(kinds[c], params[c, 5],
+                                           tc[1] - tc[0] if len(tc) > 1 else math.inf)
             if kinds[c] != SAMPLES:                           # a closed form: no samples
                 offsets[c, 0] = n
                 continue

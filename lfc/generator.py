@@ -18,6 +18,9 @@ from lfc.filters.base import MEMORY
 from lfc.filters.dispatch import GRID_WIDE, scratch_size
 from lfc.model import LFCParams
 
+#: the generator side's sensors have no reading transform here (its attacks are the
+#: command channels'): nothing reported is kept
+_NO_READINGS = np.zeros((0, 2))
 
 class GridReading(NamedTuple):
     """What a coupled filter's generator side reads of the grid at a sample
@@ -148,6 +151,6 @@ class GeneratorSide:
             Estimate(self.est, self.ka, self.kb, self.kc, self.kg, self.kstate),
             Controller(self.k_i_period, self.k_tie_period, self.feedforward, self.anti_windup,
                        self.method, self.data),
-            Memory(self.memory, self.gstate, self.x_hat, self.ctrl), view)
+            Memory(self.memory, self.gstate, self.x_hat, self.ctrl, _NO_READINGS), view)
         self.n_done = j + 1
         return u

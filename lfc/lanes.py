@@ -136,14 +136,16 @@ class LaneWork(NamedTuple):
     due: np.ndarray         # (3,): whether their trips are due at t = 0
     ctrl: np.ndarray        # (0, N_CTRL): no trace
     scratch: np.ndarray     # (1,): the load now (pu)
+    seen: np.ndarray        # (LANES, n_ctrl, 2): what each lane's sensors reported
 
     @classmethod
-    def sized(cls, n_kf: int) -> LaneWork:
-        """Zeros for Kalman filters of up to ``n_kf`` states."""
+    def sized(cls, n_kf: int, n_ctrl: int) -> LaneWork:
+        """Zeros for Kalman filters of up to ``n_kf`` states and ``n_ctrl`` control
+        samples."""
         return cls(np.zeros(N_Z * LANES), np.zeros(N_Z * LANES), np.zeros(N_AREA_STATES),
                    np.zeros(N_AREA_STATES), np.zeros((LANES, MEMORY)), np.zeros((LANES, 1)),
                    np.zeros((LANES, 2, n_kf)), np.zeros(3), np.zeros(3),
-                   np.zeros((0, N_CTRL)), np.zeros(1))
+                   np.zeros((0, N_CTRL)), np.zeros(1), np.zeros((LANES, n_ctrl, 2)))
 
 
 @kernel
@@ -168,7 +170,7 @@ def run_lanes(timing: Timing, plants: Plants, rows: Rows, samples: SignalSamples
     methods, fdata, foff = filters
     limits, delays = relays
     metrics, ends = out.metrics, out.ends
-    z, w, xs, x_hat, mem, gstate, kstate, start, due, ctrl, scratch = work
+    z, w, xs, x_hat, mem, gstate, kstate, start, due, ctrl, scratch, seen = work
     L = LANES
     n_ctrl = -(-n_steps // ratio)
     empty = x_hat[:0]
@@ -217,7 +219,7 @@ def run_lanes(timing: Timing, plants: Plants, rows: Rows, samples: SignalSamples
                     Estimate(e_i, ka_i, kb_i, kc_i, kg_i, kstate[l]),
                     Controller(k_freq, k_tie, index[i, 0, 3] == 1, index[i, 0, 4] == 1, method,
                                fd),
-                    Memory(mem[l], gstate[l], x_hat, ctrl),
+                    Memory(mem[l], gstate[l], x_hat, ctrl, seen[l]),
                     GridView(0, xs, scratch, scratch, scratch, scratch, kstate[l], scratch))
                 z[Z_U * L + l] = ua
                 met = metrics[i, 0]

@@ -237,7 +237,7 @@ class Scenarios:
                    & ((f_i < 0) | ~np.isin(filters.methods[np.maximum(f_i, 0)], GRID_WIDE)))
             blocks, left = lane_blocks(rows.plant_of, np.flatnonzero(fit), LANE_MIN_FILL)
             run_lanes(timing, plants, rows, samples, estimators, filters, relays, out, blocks,
-                      LaneWork.sized(estimators.a.shape[1]))
+                      LaneWork.sized(estimators.a.shape[1], self.n_ctrl))
             rest = np.sort(np.concatenate([np.flatnonzero(~fit), left]))
         if len(rest):
             rest = slice(None) if len(rest) == n else rest   # all of them: views, no copies
@@ -245,7 +245,7 @@ class Scenarios:
             part = Outputs(out.metrics[rest], out.ends[rest], *out[2:])
             n_sums = max((scratch_size(f) for f in self._filters.items), default=0)
             run_kernel(timing, plants, mine, samples, estimators, filters, relays, part,
-                       Work.sized(n_s, n_a, estimators.a.shape[1], n_sums))
+                       Work.sized(n_s, n_a, estimators.a.shape[1], n_sums, self.n_ctrl))
             out.metrics[rest], out.ends[rest] = part.metrics, part.ends
         metrics, ends = out.metrics, out.ends
         final = metrics[:, :, METRICS.index("final_abs_dw_meas")]

@@ -53,9 +53,12 @@ from lfc.relays import RELAY_NAMES, RelaySettings, relays_or_default
 from lfc.result import METRIC_KEYS
 from lfc.run import Runner, only_for_metrics, register
 from lfc.scenarios import Scenario, Scenarios
+from lfc.sensor_attacks import Freeze, Replay, Scale
 from lfc.signals import Chirp, Ramp, Samples, Signal, Sinusoid, Square, Step
 
-WAVEFORMS = ("sinusoid", "square", "chirp", "step", "ramp", "samples", "none")
+WAVEFORMS = ("sinusoid", "square", "chirp", "step", "ramp", "samples", "scale", "freeze",
+             "replay", "none")
+READINGS_OF = ("scale", "freeze", "replay")    # what a sensor reports (lfc.sensor_attacks)
 CHANNELS = ("pc", "wref", "load", "dw_meas", "rocof_meas")
 REQUIRED = ("waveform", "channel", "amplitude", "freq_hz", "start", "alpha", "Ts")
 READINGS = {"outside_rule": OUTSIDE_RULES, "conflict": CONFLICT_RULES,
@@ -83,7 +86,10 @@ def scenario_signal(row: pd.Series, duration: float) -> Signal | None:
     stop is a pulse; a ramp holds its value after it).  A
     ``"samples"`` row (free-form attacks) carries a sequence ``values`` (pu),
     one every ``sample_period`` s from ``start``, interpolated linearly (so a
-    sequence on the control grid is applied exactly as given).
+    sequence on the control grid is applied exactly as given).  On a sensor's
+    channel, ``"scale"`` reports ``amplitude`` times the reading, ``"freeze"`` holds
+    it, ``"replay"`` plays back the reports of ``amplitude`` s earlier
+    (:mod:`lfc.sensor_attacks`).
     """
     w, a, f, start = row["waveform"], row["amplitude"], row["freq_hz"], row["start"]
     stop = row.get("stop", math.inf)
@@ -99,6 +105,12 @@ def scenario_signal(row: pd.Series, duration: float) -> Signal | None:
         return Step(a, start=start, stop=stop)
     if w == "ramp":
         return Ramp(a, start=start, stop=stop)
+    if w == "scale":
+        return Scale(a, start=start, stop=stop)
+    if w == "freeze":
+        return Freeze(start=start, stop=stop)
+    if w == "replay":
+        return Replay(a, start=start, stop=stop)
     if w == "samples":  # free-form: one value per sample_period from start, held after
         values = np.asarray(row["values"], float)
         return Samples(start + row["sample_period"] * np.arange(len(values)), values)
@@ -145,6 +157,16 @@ def check_scenarios(scenarios: pd.DataFrame) -> pd.DataFrame:
             raise ValueError(f"column {col!r} must be finite{' and > 0' if col == 'Ts' else ''}"
                              f"{' and >= 0' if col in ('freq_hz', 'start') else ''}; row "
                              f"{scenarios.index[bad][0]!r} has {scenarios[col][bad].iloc[0]!r}")
+    bad = scenarios["waveform"].isin(READINGS_OF) & ~scenarios["channel"].isin(
+        ["dw_meas", "rocof_meas"])
+    bad |= (scenarios["waveform"] == "replay") & ~(
+        (scenarios["amplitude"] > 0) & (scenarios["amplitude"] <= scenarios["start"]))
+    if bad.any():
+        row = scenarios.loc[scenarios.index[bad][0]]
+        raise ValueError(f"a {row['waveform']!r} row reads a sensor (channel 'dw_meas' or "
+                         f"'rocof_meas'); a 'replay' row's amplitude is its lag, in (0, "
+                         f"start] s; row {scenarios.index[bad][0]!r} has channel "
+                         f"{row['channel']!r}, amplitude {row['amplitude']!r}")
     if "stop" in scenarios.columns:
         stop = pd.to_numeric(scenarios["stop"], errors="coerce")
         start = pd.to_numeric(scenarios["start"], errors="coerce")
@@ -456,7 +478,8 @@ def simulate_table(params: LFCParams, scenarios: pd.DataFrame, *, duration: floa
         One row per scenario with the columns ``REQUIRED``: ``waveform`` (one of
         ``WAVEFORMS``), ``channel`` (``"pc"`` command, ``"wref"`` frequency
         reference, ``"load"``, or what the sensors read: ``"dw_meas"``,
-        ``"rocof_meas"``), ``amplitude`` (pu; pu/s for a ramp), ``freq_hz``
+        ``"rocof_meas"``), ``amplitude`` (pu; pu/s for a ramp; the factor of a
+        ``"scale"``, the lag in s of a ``"replay"``), ``freq_hz``
         (Hz; a chirp's end frequency, from ``CHIRP_F0``), ``start`` (s),
         ``alpha`` (1/s; NaN runs without SCC) and ``Ts`` (s); optionally
         ``stop`` (s), ``values`` and ``sample_period`` (``"samples"`` rows),
@@ -686,7 +709,8 @@ def _digest(chunk: pd.DataFrame, args: tuple) -> str:
 # -- the table's rows as lfc.Scenario, and back ----------------------------------------------
 #: the waveform a table row names, by signal class (:func:`scenario_signal`'s inverse)
 SIGNAL_WAVEFORMS = {Sinusoid: "sinusoid", Square: "square", Chirp: "chirp", Step: "step",
-                    Ramp: "ramp", Samples: "samples"}
+                    Ramp: "ramp", Samples: "samples", Scale: "scale", Freeze: "freeze",
+                    Replay: "replay"}
 
 
 def table_scenarios(table: pd.DataFrame, params: LFCParams, *, duration: float,
@@ -765,8 +789,9 @@ def _waveform(signal) -> dict:
                 "start": signal.start, "stop": signal.stop}
     if getattr(signal, "phase", 0.0) != 0.0:
         raise ValueError("a table row's sinusoid has no phase")
-    amplitude = {"step": "value", "ramp": "slope"}.get(kind, "amplitude")
-    return {"waveform": kind, "amplitude": getattr(signal, amplitude),
+    amplitude = {"step": "value", "ramp": "slope", "scale": "factor", "replay": "lag"}.get(
+        kind, "amplitude")
+    return {"waveform": kind, "amplitude": getattr(signal, amplitude, 0.0),
             "freq_hz": getattr(signal, "freq_hz", 0.0), "start": signal.start,
             "stop": signal.stop}
 

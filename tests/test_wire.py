@@ -120,7 +120,7 @@ def test_an_attack_spec_is_checked():
     """Bad specs raise ``ValueError`` naming what is wrong."""
     for spec, match in (([{"op": "warp", "field": "pc"}], "op among"),
                         ([{"op": "add", "field": "pc", "signal": {"kind": "noise"}}], "kind"),
-                        ([{"op": "delay", "field": "dw_meas", "periods": 1}], "field"),
+                        ([{"op": "delay", "field": "speed", "periods": 1}], "field"),
                         ([{"op": "delay", "field": "pc", "periods": 0}], "periods"),
                         ([{"op": "replay", "field": "pc", "record": 2.0, "start": 1.0}],
                          "record"),

@@ -19,6 +19,8 @@ bias      ``value`` (pu)                             ``+= value``
 delay     ``periods`` (>= 1)                         the value sent ``periods`` earlier
 replay    ``record`` (s, < ``start``)                the value sent at ``record + (t -
                                                      start)``: a recorded window replayed
+freeze    (none)                                     the value sent in the last period
+                                                     before ``start`` (a stuck meter)
 drop      (command fields only; ``field`` omitted)   the frame is not forwarded: the
                                                      generator holds its last command
                                                      and flags the link
@@ -41,7 +43,7 @@ from lfc import signals
 from lfc._validate import as_float, check_finite, check_integer, check_number
 from lfc.wire.registers import COMMAND, REPORT
 
-OPS = ("add", "scale", "bias", "delay", "replay", "drop")
+OPS = ("add", "scale", "bias", "delay", "replay", "freeze", "drop")
 SIGNALS = {"sinusoid": signals.Sinusoid, "square": signals.Square, "step": signals.Step,
            "ramp": signals.Ramp, "chirp": signals.Chirp, "samples": signals.Samples}
 SCALE = {"sinusoid": "amplitude", "square": "amplitude", "step": "value", "ramp": "slope",
@@ -129,6 +131,7 @@ class WireAttack:
             raise ValueError(f"attack must be a list of operations (dicts), got {spec!r}")
         self.spec, self.ops = spec, [self._check(k, op) for k, op in enumerate(spec)]
         self.sent: list[dict[str, float]] = []      # every period's command as sent
+        self.told: list[dict[str, float]] = []      # every period's report as sent
 
     def __repr__(self) -> str:
         return f"WireAttack({self.spec!r})"
@@ -138,7 +141,7 @@ class WireAttack:
         if not isinstance(op, dict) or op.get("op") not in OPS:
             raise ValueError(f"attack[{k}] must be a dict with op among {OPS}, got {op!r}")
         kind, field = op["op"], op.get("field")
-        fields = COMMAND if kind in ("delay", "replay") else COMMAND + REPORT
+        fields = COMMAND + REPORT
         if kind == "drop":
             if field is not None:
                 raise ValueError(f"attack[{k}]: drop takes no field (the whole frame)")
@@ -182,6 +185,7 @@ class WireAttack:
     def report(self, j: int, t: float, period: float,
                values: dict[str, float]) -> dict[str, float]:
         """Period ``j``'s report (time ``t``, s) as the control centre reads it."""
+        self.told.append(dict(values))
         out = dict(values)
         for op in self.ops:
             if op["start"] <= t < op["stop"] and op.get("field") in REPORT:
@@ -196,7 +200,11 @@ class WireAttack:
             return value * op["factor"]
         if kind == "bias":
             return value + op["value"]
+        history = self.sent if op["field"] in COMMAND else self.told
         if kind == "delay":
-            return self.sent[max(j - op["periods"], 0)][op["field"]]
-        back = int(round((op["start"] - op["record"]) / period))     # replay
-        return self.sent[max(j - back, 0)][op["field"]]
+            back = op["periods"]
+        elif kind == "freeze":          # back to the last period before start
+            back = j - int(math.ceil(op["start"] / period - 1e-9)) + 1
+        else:                           # replay
+            back = int(round((op["start"] - op["record"]) / period))
+        return history[max(j - back, 0)][op["field"]]

@@ -1,0 +1,213 @@
+"""Attacks on what a sensor reports that depend on what it reads (issue "Sensors", item 1):
+scale, freeze and replay (``lfc.sensor_attacks``), wherever the generator side reads the
+sensor — one area, a table in lanes or one at a time, a grid's coupled filter, a row of a
+scenario table, the wire.  What each does to the filters is measured and pinned."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import lfc
+import tiers
+from lfc.filters import build
+from lfc.multiarea import MultiAreaParams
+from lfc.sensor_attacks import Freeze, Replay, Scale
+from lfc.tables import scenario_row, table_scenarios
+from lfc.wire.attacks import WireAttack
+
+P, RELAYS = lfc.LFCParams(), lfc.RelaySettings()
+LOAD = lfc.Step(0.05, start=0.5)          # pu: something for the sensors to read
+KW = dict(duration=6.0, load=LOAD)
+
+
+def reports(result: lfc.Result) -> pd.Series:
+    """What the filter read of the frequency at every control sample (pu; exact state)."""
+    return result.controls.set_index("t").dw_hat
+
+
+@settings(max_examples=tiers.examples(10), deadline=None)
+@given(start=st.floats(0.0, 5.0), channel=st.sampled_from(["dw_meas", "rocof_meas"]))
+def test_a_scale_of_one_changes_nothing_bit_for_bit(start, channel):
+    plain = lfc.simulate(P, **KW)
+    scaled = lfc.simulate(P, **KW, **{f"{channel}_attack": Scale(1.0, start=start)})
+    pd.testing.assert_frame_equal(plain.trace, scaled.trace, check_exact=True)
+    pd.testing.assert_frame_equal(plain.controls, scaled.controls, check_exact=True)
+
+
+def test_a_scale_reports_factor_times_the_reading_in_its_window_only():
+    plain = reports(lfc.simulate(P, **KW))
+    seen = reports(lfc.simulate(P, **KW, dw_meas_attack=Scale(-2.0, start=2.0, stop=3.0)))
+    inside = (seen.index >= 2.0 - 1e-9) & (seen.index < 3.0 - 1e-9)
+    before = seen.index < 2.0 - 1e-9
+    np.testing.assert_array_equal(seen[before], plain[before])
+    # inside, the report is -2 times what the sensor reads of the (changed) state
+    assert np.all(np.sign(seen[inside]) == -np.sign(plain[inside]))
+
+
+def test_a_freeze_holds_the_last_report_and_lets_go_at_its_stop():
+    plain = reports(lfc.simulate(P, **KW))
+    seen = reports(lfc.simulate(P, **KW, dw_meas_attack=Freeze(start=2.0, stop=4.0)))
+    held = seen.loc[2.0 - 1e-9:4.0 - 1e-6]
+    assert len(held) == 200 and (held == seen.loc[1.99 - 1e-9:1.99 + 1e-9].iloc[0]).all()
+    assert seen.iloc[-1] != held.iloc[0]           # it reads the plant again after
+    np.testing.assert_array_equal(seen.loc[:1.99 + 1e-9], plain.loc[:1.99 + 1e-9])
+
+
+def test_a_replay_plays_the_recording_back_in_a_loop():
+    seen = reports(lfc.simulate(P, **KW, dw_meas_attack=Replay(0.5, start=2.0)))
+    recorded = seen.loc[1.5 - 1e-9:2.0 - 1e-6].to_numpy()
+    assert len(recorded) == 50 and np.ptp(recorded) > 0
+    for k in range(1, 7):       # each half second from 2 s plays it again
+        t0 = 1.5 + 0.5 * k
+        np.testing.assert_array_equal(seen.loc[t0 - 1e-9:t0 + 0.5 - 1e-6].to_numpy(), recorded)
+
+
+def test_the_agc_and_the_kalman_filter_read_the_report_too():
+    noisy = dict(KW, noise_std=(1e-4, 1e-3), estimator="kalman", seed=1)
+    base = lfc.simulate(P, **noisy).controls.set_index("t")
+    frozen = lfc.simulate(P, **noisy, dw_meas_attack=Freeze(start=1.0)).controls.set_index("t")
+    # the AGC integrates a frozen frequency error: its command ramps at a constant rate
+    ramp = np.diff(frozen.pc_ref.loc[1.0 + 1e-9:].to_numpy())
+    np.testing.assert_allclose(ramp, ramp[0], rtol=1e-9)
+    assert np.ptp(np.diff(base.pc_ref.loc[1.0 + 1e-9:].to_numpy())) > 1e-3 * abs(ramp[0])
+    # the Kalman filter, fed the frozen reading, loses the frequency the plant has
+    assert np.abs(frozen.dw_hat - base.dw_hat).loc[3.0:].min() > 1e-4
+
+
+def test_in_lanes_and_one_at_a_time_the_same_bit_for_bit():
+    rows = [dict(waveform=w, channel=c, amplitude=a, freq_hz=0.0, start=s, alpha=al, Ts=0.01)
+            for w, a in (("scale", -1.0), ("scale", 2.5), ("freeze", 0.0), ("replay", 0.3))
+            for c in ("dw_meas", "rocof_meas") for s in (0.6, 1.0) for al in (math.nan, 5.0)]
+    table = pd.DataFrame(rows * 2)
+    table["noise_w"] = np.repeat([0.0, 2e-4], len(rows))
+    table["noise_rocof"] = np.repeat([0.0, 1e-3], len(rows))
+    kw = dict(duration=4.0, progress=False, executor=None, chunk_size=len(table) + 1)
+    lanes = lfc.simulate_many(P, table, lanes=True, **kw)
+    scalar = lfc.simulate_many(P, table, lanes=False, **kw)
+    pd.testing.assert_frame_equal(lanes, scalar, check_exact=True)
+    assert lanes["max_abs_dw_meas"].nunique() > 8      # they are not all one run
+
+
+def test_a_table_row_holds_each_and_reads_it_back():
+    for attack in (Scale(0.5, start=1.0, stop=3.0), Freeze(start=2.0), Replay(0.4, start=1.0)):
+        scenario = lfc.Scenario(attacks={0: {"rocof_meas": attack}})
+        row = scenario_row(scenario, P)
+        back = table_scenarios(pd.DataFrame([{**row, "alpha": math.nan, "Ts": 0.01}]), P,
+                               duration=4.0)[0]
+        assert back.keywords("area")["rocof_meas_attack"] == attack
+
+
+def test_a_grid_coupled_filter_estimates_from_the_report():
+    grid = MultiAreaParams.two_area()
+    coupled = build("coupled", grid, relays=RELAYS, noise_std=(1e-4, 1e-3))
+    kw = dict(duration=5.0, loads={0: lfc.Step(0.05, start=0.5)},
+              filters={0: coupled, 1: coupled}, noise_std=(1e-4, 1e-3), seed=2,
+              estimator="kalman")
+    base = lfc.simulate(grid, **kw)
+    same = lfc.simulate(grid, **kw, attacks={1: {"dw_meas": Scale(1.0, start=1.0)}})
+    frozen = lfc.simulate(grid, **kw, attacks={1: {"dw_meas": Freeze(start=1.0)}})
+    pd.testing.assert_frame_equal(base.table(), same.table(), check_exact=True)
+    assert not base.table().equals(frozen.table())
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda: Scale(math.nan), "factor"),
+    (lambda: Scale(1.0, start=-1.0), "start"),
+    (lambda: Freeze(start=2.0, stop=1.0), "stop"),
+    (lambda: Replay(0.0, start=1.0), "lag"),
+    (lambda: Replay(2.0, start=1.0), "lag"),
+    (lambda: lfc.simulate(P, duration=1.0, pc_attack=Scale(2.0)), "pc_attack"),
+    (lambda: lfc.simulate(P, duration=1.0, load=Freeze()), "load"),
+])
+def test_bad_input_is_refused_by_name(make, message):
+    with pytest.raises(ValueError, match=message):
+        make()
+
+
+def test_a_transform_is_not_a_function_of_time():
+    with pytest.raises(TypeError, match="not a function of time"):
+        Freeze(start=1.0)(2.0)
+
+
+def test_a_table_row_puts_them_on_a_sensor_only():
+    row = dict(waveform="freeze", channel="pc", amplitude=0.0, freq_hz=0.0, start=1.0,
+               alpha=math.nan, Ts=0.01)
+    with pytest.raises(ValueError, match="reads a sensor"):
+        lfc.simulate_many(P, pd.DataFrame([row]), duration=2.0, progress=False)
+    with pytest.raises(ValueError, match="lag"):
+        lfc.simulate_many(P, pd.DataFrame([dict(row, channel="dw_meas", waveform="replay",
+                                                amplitude=3.0)]), duration=2.0, progress=False)
+
+
+def test_on_the_wire_a_report_is_frozen_delayed_or_replayed():
+    period = 0.1
+    attack = WireAttack([{"op": "freeze", "field": "dw_meas", "start": 0.5, "stop": 1.0},
+                         {"op": "delay", "field": "rocof_meas", "periods": 2},
+                         {"op": "replay", "field": "u", "record": 0.1, "start": 0.6}])
+    told = [attack.report(j, j * period, period,
+                          {"dw_meas": float(j), "rocof_meas": 10.0 * j, "pc_received": 0.0,
+                           "u_ref": 0.0, "u": 100.0 * j}) for j in range(12)]
+    assert [r["dw_meas"] for r in told] == [0, 1, 2, 3, 4, 4, 4, 4, 4, 4, 10, 11]
+    assert [r["rocof_meas"] for r in told] == [0, 0, 0, 10, 20, 30, 40, 50, 60, 70, 80, 90]
+    assert [r["u"] for r in told][6:] == [100, 200, 300, 400, 500, 600]
+
+
+# -- what they do to the filters, measured -------------------------------------------------
+#: the command attacks of tests/test_secure_sensors.py (pu on P_c, from 1 s)
+ATTACKS = {"sinusoid 0.5 pu 1 Hz": lfc.Sinusoid(0.5, 1.0, start=1.0),
+           "square 1 pu 0.3 Hz": lfc.Square(1.0, 0.3, start=1.0),
+           "square 3 pu 0.5 Hz": lfc.Square(3.0, 0.5, start=1.0),
+           "step 2 pu": lfc.Step(2.0, start=1.0)}
+#: the sensor blinded from 0.9 s, just before the attack
+BLINDING = {"frozen": Freeze(start=0.9), "scaled by 0": Scale(0.0, start=0.9),
+            "replaying 0.5 s": Replay(0.5, start=0.9), "scaled by -1": Scale(-1.0, start=0.9)}
+
+
+def outcomes(kind: str) -> dict:
+    """(attack, blinding, sensor) -> (first relay to trip or "-", outside flagged)."""
+    scc = build(kind, P, relays=RELAYS)
+    out = {}
+    for (a, attack), (b, blind), sensor in itertools.product(
+            ATTACKS.items(), BLINDING.items(), ("dw_meas", "rocof_meas")):
+        m = lfc.simulate(P, duration=8.0, pc_attack=attack, scc=scc,
+                         load_feedforward=kind == "certified",
+                         **{f"{sensor}_attack": blind}).metrics()
+        out[a, b, sensor] = (m["first_trip_relay"] if m["tripped"] else "-", m["outside"] > 0)
+    return out
+
+
+def test_the_certified_filter_blinded_on_rocof_passes_the_square_attacks():
+    """Finding: the certified filter trusts what its ROCOF sensor reports.  Blinded
+    from 0.9 s (frozen, scaled to 0, replaying a quiet recording), it passes the
+    square attacks, which trip ROCOF, without flagging ``outside`` (what it reads is
+    inside the safe set); a sign-flipped ROCOF trips too, flagged.  Blinding the
+    frequency sensor alone, and the other two attacks, trip nothing; unblinded, none
+    of the four attacks trips.
+    The defence is redundancy (``lfc.sensors``: a blinded sensor of three is a
+    liar like any other, and the median covers any lie)."""
+    got = outcomes("certified")
+    scc = build("certified", P, relays=RELAYS)
+    for attack in ATTACKS.values():
+        assert not lfc.simulate(P, duration=8.0, pc_attack=attack, scc=scc,
+                                load_feedforward=True).metrics()["tripped"]
+    for (a, b, sensor), (trip, outside) in got.items():
+        tripping = sensor == "rocof_meas" and a.startswith("square")
+        assert trip == ("ROCOF" if tripping else "-"), (a, b, sensor)
+        if tripping:
+            assert outside == (b == "scaled by -1"), (a, b, sensor)
+
+
+def test_the_papers_scc_blinded_on_either_sensor_trips_nothing_here():
+    """Measured: the paper's SCC (its default reading) trips under none of the 32
+    blinded runs, flagging ``outside`` in every one (as it does unblinded under these
+    attacks)."""
+    got = outcomes("paper")
+    assert len(got) == 32
+    assert all(trip == "-" and outside for trip, outside in got.values())
