@@ -38,7 +38,7 @@ from lfc.filters.dispatch import GRID_WIDE, decide, decide_grid, grid_wide
 from lfc.model import LFCParams
 from lfc.multiarea import N_AREA_STATES
 from lfc.relays import relay_sample
-from lfc.sensor_attacks import READING, SCALE, lag_samples
+from lfc.sensor_attacks import SCALE, lag_samples
 from lfc.signals import GRID, N_PARAMS, NONE, SAMPLES, STEP, Signal, value_at
 
 #: signal channels: ACE an attack on the area control error, DW_MEAS and ROCOF_MEAS on the
@@ -206,7 +206,7 @@ def sensor_reading(channel: int, honest: float, channels: Channels, seen: np.nda
     samples earlier (``seen``; the honest reading before the run's first report)."""
     kinds, params, offsets, st, sv = channels
     kind = kinds[channel]
-    if kind < READING:
+    if kind < SCALE:                      # a waveform (lfc.signals)
         lie = signal_value(channel, kinds, params, offsets, st, sv, t, j)
         return honest + lie, lie
     if t < params[channel, 2] or t >= params[channel, 3]:
@@ -721,7 +721,7 @@ def scenario_signals(pc_attack, wref_attack, load, tc: np.ndarray, t: np.ndarray
                                      f"it one of the two")
         if isinstance(signal, Signal) and type(signal).spec is not Signal.spec:
             kinds[c], params[c], times, values = signal.spec()
-            if kinds[c] >= READING:                           # lfc.sensor_attacks
+            if kinds[c] >= SCALE:                             # lfc.sensor_attacks
                 if c < DW_MEAS:
                     raise ValueError(f"{name}: a {type(signal).__name__} transforms what a "
                                      f"sensor reads; give it as dw_meas_attack or "

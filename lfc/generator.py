@@ -10,17 +10,18 @@ from typing import NamedTuple
 import numpy as np
 
 from lfc._validate import check_flag
-from lfc.engine import (ACE, N_CTRL, N_KF, PC, WREF, Controller, Estimate, GridView, Memory,
+from lfc.engine import (ACE, DW_MEAS, N_CTRL, N_KF, PC, ROCOF_MEAS, SENSOR_CHANNELS, WREF,
+                        Controller, Estimate, GridView, Memory, check_attacks,
                         generator_period, make_estimator, make_noise, scenario_signals,
-                        signal_value)
+                        sensor_reading, signal_value)
 from lfc.filters import SafetyFilter
 from lfc.filters.base import MEMORY
 from lfc.filters.dispatch import GRID_WIDE, scratch_size
 from lfc.model import LFCParams
 
-#: the generator side's sensors have no reading transform here (its attacks are the
-#: command channels'): nothing reported is kept
+#: what a generator side without sensor attacks keeps of its reports: nothing
 _NO_READINGS = np.zeros((0, 2))
+
 
 class GridReading(NamedTuple):
     """What a coupled filter's generator side reads of the grid at a sample
@@ -67,13 +68,17 @@ class GeneratorSide:
         runs elsewhere (a control centre across a network).
     network : bool
         The command channels arrive by :meth:`receive` each period (:mod:`lfc.wire`).
+    sensor_attacks : dict, optional
+        ``{"dw_meas" | "rocof_meas": signal}``: what an attacker makes of what the
+        generator side's frequency and ROCOF sensors read (a waveform added, or a
+        reading transform of :mod:`lfc.sensor_attacks`), as in :func:`lfc.simulate`.
     """
 
     def __init__(self, design: LFCParams, scc: SafetyFilter | None, estimator,
                  noise_std: tuple[float, float], seed: int, tc: np.ndarray, pc_attack,
                  wref_attack, load_feedforward: bool, period: float, *, ace_attack=None,
                  k_agc: tuple[float, float] | None = None, anti_windup: bool = False,
-                 network: bool = False) -> None:
+                 network: bool = False, sensor_attacks: dict | None = None) -> None:
         if scc is not None:
             scc.check_period(period)
         self.tc, self.scc = tc, scc
@@ -93,8 +98,14 @@ class GeneratorSide:
                              "no pc_attack, wref_attack or ace_attack")
         zero = (lambda t: np.zeros_like(t)) if network else None
         self.network = network
+        sensors = check_attacks({0: sensor_attacks or {}}, 1)[0]
+        if set(sensors) - set(SENSOR_CHANNELS):
+            raise ValueError(f"sensor_attacks must be a dict with keys among "
+                             f"{SENSOR_CHANNELS}, got {sorted(sensors)}")
         self.signals = scenario_signals(pc_attack or zero, wref_attack or zero, None, tc, tc,
-                                        ace_attack or zero)
+                                        ace_attack or zero, sensors.get("dw_meas"),
+                                        sensors.get("rocof_meas"))
+        self.seen = np.zeros((len(tc), 2)) if sensors else _NO_READINGS
         k_freq, k_tie = (design.k_i, 0.0) if k_agc is None else k_agc
         self.k_i_period, self.k_tie_period = k_freq * period, k_tie * period
         self.feedforward = load_feedforward
@@ -118,6 +129,16 @@ class GeneratorSide:
         _, _, offsets, _, sv = self.signals
         for channel, value in ((PC, pc), (WREF, wref), (ACE, ace)):
             sv[offsets[channel, 0] + j] = value
+
+    def reports(self, j: int, x: np.ndarray) -> tuple[float, float]:
+        """What the frequency and ROCOF sensors report at control sample ``j`` when
+        the meters' state is ``x`` (``dw_meas``, ``rocof_meas``: pu, pu/s): the
+        reading with this side's noise and the attack on it
+        (:func:`lfc.engine.sensor_reading`; called before :meth:`step` of ``j``)."""
+        t = float(self.tc[j])
+        return tuple(sensor_reading(c, float(x[c - DW_MEAS]) + float(self.noise[j, c - DW_MEAS]),
+                                    self.signals, self.seen, t, j)[0]
+                     for c in (DW_MEAS, ROCOF_MEAS))
 
     def step(self, j: int, x: np.ndarray, p_load: float, tie: float = 0.0,
              grid: GridReading | None = None) -> float:
@@ -151,6 +172,6 @@ class GeneratorSide:
             Estimate(self.est, self.ka, self.kb, self.kc, self.kg, self.kstate),
             Controller(self.k_i_period, self.k_tie_period, self.feedforward, self.anti_windup,
                        self.method, self.data),
-            Memory(self.memory, self.gstate, self.x_hat, self.ctrl, _NO_READINGS), view)
+            Memory(self.memory, self.gstate, self.x_hat, self.ctrl, self.seen), view)
         self.n_done = j + 1
         return u

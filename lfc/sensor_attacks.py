@@ -40,10 +40,9 @@ import numpy as np
 from lfc._validate import check_finite
 from lfc.signals import N_PARAMS, Signal
 
-# the engine's codes for the three, after lfc.signals' waveform codes (0 ... 7)
+#: the engine's codes for the three, after lfc.signals' waveform codes (0 ... 7): a kind
+#: at or above SCALE is a reading transform
 SCALE, FREEZE, REPLAY = 8, 9, 10
-#: the codes of a reading transform (a kind at or above READING is one)
-READING = SCALE
 
 
 def _window(start: float, stop: float) -> None:
@@ -55,8 +54,9 @@ def _window(start: float, stop: float) -> None:
                          f"got {stop!r}")
 
 
-class _Reading(Signal):
-    """A transform of the reading; described to the engine by :meth:`spec`."""
+class Reading(Signal):
+    """A transform of the reading (base class); described to the engine by
+    :meth:`spec`."""
 
     def __call__(self, t):
         raise TypeError(f"{type(self).__name__} transforms what a sensor reads: it is not a "
@@ -70,7 +70,7 @@ class _Reading(Signal):
 
 
 @dataclass(frozen=True)
-class Scale(_Reading):
+class Scale(Reading):
     """The report is ``factor`` (finite) times the honest reading on ``[start, stop)``.
 
     Raises
@@ -94,7 +94,7 @@ class Scale(_Reading):
 
 
 @dataclass(frozen=True)
-class Freeze(_Reading):
+class Freeze(Reading):
     """The report holds its value of the last sample before ``start`` on ``[start, stop)``.
 
     Raises
@@ -115,7 +115,7 @@ class Freeze(_Reading):
 
 
 @dataclass(frozen=True)
-class Replay(_Reading):
+class Replay(Reading):
     """The report of ``lag`` s earlier on ``[start, stop)``: ``[start - lag, start)``
     played back, looped.
 

@@ -36,6 +36,7 @@ import pandas as pd
 
 from lfc._validate import check_count, check_pair, check_positive
 from lfc.result import Result
+from lfc.sensor_attacks import Reading
 from lfc.signals import Samples, Signal
 
 #: the channels each sensor reads: frequency (pu) and ROCOF (pu/s)
@@ -89,6 +90,11 @@ class SensorArray:
                 if channel not in CHANNELS:
                     raise ValueError(f"attacks[{sensor}]: channel must be one of {CHANNELS}, "
                                      f"got {channel!r}")
+                if isinstance(signal, Reading):
+                    raise ValueError(f"attacks[{sensor}][{channel!r}]: a "
+                                     f"{type(signal).__name__} reads the state, which these "
+                                     f"errors are computed without; give its lie as a "
+                                     f"waveform of time (the proof covers any lie)")
                 errors[:, sensor, CHANNELS.index(channel)] += signal(times)
         return errors
 

@@ -121,9 +121,9 @@ def test_a_following_load_is_a_scenario_field_a_table_row_cannot_hold_and_andes_
     from lfc.tables import scenario_row
     with pytest.raises(ValueError, match="following load"):
         scenario_row(s, AREA)
-    from lfc.testbed import GridCase
-    with pytest.raises(ValueError, match="not on ANDES"):
-        lfc.simulate(GridCase.kundur(), duration=1.0, following_loads={0: attack})
+    from lfc.testbed import MicrogridCase
+    with pytest.raises(ValueError, match="not on the microgrid"):
+        lfc.simulate(MicrogridCase(), duration=1.0, following_load=attack)
     twice = FollowingLoad(2.0 * critical_gain(TWO, 0))     # grows fast enough to trip
     table = lfc.simulate_many(TWO, [{"following_loads": {0: twice},
                                      "loads": {1: lfc.Step(0.01, start=1.0)}}], duration=30.0)

@@ -211,3 +211,22 @@ def test_the_papers_scc_blinded_on_either_sensor_trips_nothing_here():
     got = outcomes("paper")
     assert len(got) == 32
     assert all(trip == "-" and outside for trip, outside in got.values())
+
+
+def test_the_redundant_sensors_take_their_lies_as_waveforms():
+    from lfc.sensors import SensorArray, simulate_sensors
+    with pytest.raises(ValueError, match=r"attacks\[1\]\['dw_meas'\].*waveform of time"):
+        simulate_sensors(P, SensorArray(bound=(1e-3, 1e-2)), duration=1.0,
+                         attacks={1: {"dw_meas": Freeze(start=0.5)}})
+
+
+def test_a_generator_side_takes_attacks_on_its_sensors_only():
+    from lfc.generator import GeneratorSide
+    tc = np.arange(100) * 0.01
+    with pytest.raises(ValueError, match="sensor_attacks"):
+        GeneratorSide(P, None, None, (0.0, 0.0), 0, tc, None, None, False, 0.01,
+                      sensor_attacks={"pc": lfc.Step(1.0)})
+    side = GeneratorSide(P, None, None, (0.0, 0.0), 0, tc, None, None, False, 0.01,
+                         sensor_attacks={"rocof_meas": Scale(-1.0, start=0.5)})
+    assert side.reports(10, np.array([1e-3, 2e-3])) == (1e-3, 2e-3)
+    assert side.reports(60, np.array([1e-3, 2e-3])) == (1e-3, -2e-3)

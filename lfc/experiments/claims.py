@@ -264,7 +264,8 @@ def detection_claims(detection: pd.DataFrame) -> dict[str, bool]:
 
 
 def loads_claims(growth: pd.DataFrame, gain_map: tuple, warnings: pd.DataFrame,
-                 invariant: bool, lie: Runs, lie_pu: float, redundant: Runs) -> dict[str, bool]:
+                 invariant: bool, lie: Runs, lie_pu: float, redundant: Runs,
+                 blinded: Runs) -> dict[str, bool]:
     """Loads and sensors as weapons (chapter 12).  ``growth``: a row per area and
     ``factor`` of its smallest destabilizing gain with the ``simulated`` growth rate
     (1/s) — below the gain the response decays, above it grows.  ``gain_map``:
@@ -282,7 +283,9 @@ def loads_claims(growth: pd.DataFrame, gain_map: tuple, warnings: pd.DataFrame,
     flags ``outside`` and holds its command (the frequency never moves), no trip.
     ``redundant``: three sensors, one lying, read through their median by the certified
     filter ``"without sensor_bound"`` (it trips) and ``"with sensor_bound"`` (it does
-    not)."""
+    not).  ``blinded``: the certified filter under a square attack, its ROCOF sensor
+    ``"honest"`` (no trip) and blinded in other ways (frozen, scaled, replayed: each
+    trips, never flagging ``outside``)."""
     axis, rates, critical = gain_map
     tripped = warnings[warnings["trip"].notna()]
     exact = tripped[~tripped["estimate"].astype(bool) & (tripped["filters"] != "none")]
@@ -307,4 +310,8 @@ def loads_claims(growth: pd.DataFrame, gain_map: tuple, warnings: pd.DataFrame,
             not redundant["with sensor_bound"].tripped,
         "three sensors, one lying: the filter that trusts their median trips":
             redundant["without sensor_bound"].tripped,
+        "a blinded ROCOF sensor lets an attack the filter holds off trip, unflagged":
+            not blinded["honest"].tripped and all(
+                r.tripped and r.metrics()["outside"] == 0
+                for k, r in blinded.items() if k != "honest"),
     })

@@ -509,9 +509,10 @@ class _PlantBlock:
         spent = load - recheck[0] if load_kind == "steps" else 0.0
         self._terminal(A, B[:, 1], C, q, times[-1],
                        {"new": lim, "held": np.min(np.atleast_2d(held), axis=0)}, t_max, cov,
-                       kappa, spent, recheck[0] > 0, load if since else 0.0)
+                       kappa, spent=spent, load_given=recheck[0] > 0,
+                       band=load if since else 0.0)
 
-    def _terminal(self, A, bl, C, q, horizon, lims, t_max, cov, kappa, spent,
+    def _terminal(self, A, bl, C, q, horizon, lims, t_max, cov, kappa, *, spent,
                   load_given, band) -> None:
         """Continuous-time Lyapunov ellipsoid around the held command's equilibrium,
         the room that leaves the equilibrium, and ``e_T = E x + eu u + el p``.

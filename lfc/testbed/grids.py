@@ -99,15 +99,18 @@ from pathlib import Path
 import numpy as np
 
 import lfc.testbed.stored_runs as stored_runs
-from lfc._validate import check_count, check_flag, check_multiple, check_positive
-from lfc.engine import check_area_keys, check_attacks, sample_signal
+from lfc._validate import (ParameterTypeError, check_count, check_flag, check_multiple,
+                           check_positive)
+from lfc.engine import SENSOR_CHANNELS, check_area_keys, check_attacks, sample_signal
 from lfc.filters.coupled import check_coupled
 from lfc.generator import GeneratorSide
 from lfc.linear_grid import area_filter, estimate_noise
+from lfc.load_attacks import FollowingLoad
 from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams
 from lfc.relays import RelaySettings, relays_or_default
 from lfc.result import Result, grid_result
+from lfc.scenarios import check_sensed
 from lfc.testbed.loop import AndesLoop, AndesPlant, GeneratorSides, RecordedSides, TestbedError
 
 GOVERNORS = ("TGOV1", "TGOV1N")
@@ -317,6 +320,7 @@ def _bus_kv(ss, bus: int) -> float:
 
 def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
                         attacks: dict | None = None, loads: dict | None = None,
+                        following_loads: dict | None = None,
                         filters: dict | None = None, relays: RelaySettings | None = None,
                         estimator=None, noise_std: tuple[float, float] = (0.0, 0.0),
                         seed: int = 0, control_period: float = 0.01, step: float = 0.005,
@@ -337,6 +341,10 @@ def simulate_andes_grid(params: MultiAreaParams, *, duration: float,
         ``{area: signal}``: load change (pu of the area's base at nominal
         voltage), a constant-impedance load at the area's ``load_buses`` bus,
         updated every ANDES step.
+    following_loads : dict, optional
+        ``{area: FollowingLoad}`` (:mod:`lfc.load_attacks`): a botnet's load at the
+        same bus, following the area's frequency meter, held over each ANDES step
+        from the meter at its start (:class:`lfc.testbed.loop.AndesLoop`).
     step : float
         ANDES time step (s); ``control_period`` must be a multiple of it.
     case : GridCase
@@ -385,6 +393,7 @@ class _Setup:
     tc: np.ndarray
     built: dict
     settings: dict
+    following: dict
 
     @property
     def shareable(self) -> bool:
@@ -409,7 +418,7 @@ class _Shared:
 
 def _setup(params: MultiAreaParams, *, duration: float, attacks, loads, filters, relays,
            estimator, noise_std, seed, control_period, step, stop_on_trip, feedforward,
-           anti_windup, case, plant, network) -> _Setup:
+           anti_windup, case, plant, network, following_loads=None) -> _Setup:
     """:func:`simulate_andes_grid`'s checks, then its plant and generator sides."""
     if plant is not None and case is not None:
         raise ValueError("give case (a GridCase) or plant (an AndesPlant), not both")
@@ -431,8 +440,14 @@ def _setup(params: MultiAreaParams, *, duration: float, attacks, loads, filters,
     attacks = check_attacks(attacks, n_a)
     loads = check_area_keys(loads, n_a, "loads")
     filters = check_area_keys(filters, n_a, "filters")
+    check_sensed(attacks, filters, estimator)
     for a, load in loads.items():
         sample_signal(load, np.arange(0.0, duration + step, step), f"loads[{a}]")
+    following = check_area_keys(following_loads, n_a, "following_loads")
+    for a, botnet in following.items():
+        if not isinstance(botnet, FollowingLoad):
+            raise ParameterTypeError(f"following_loads[{a}] must be a FollowingLoad "
+                                     f"(lfc.load_attacks), got {botnet!r:.80}")
     estimate = estimate_noise(estimator, noise_std)
     built = {a: area_filter(params, a, f, relays, control_period, estimate)
              for a, f in filters.items()}
@@ -444,18 +459,21 @@ def _setup(params: MultiAreaParams, *, duration: float, attacks, loads, filters,
                           tc, attacks.get(a, {}).get("pc"), attacks.get(a, {}).get("wref"),
                           feedforward, control_period, ace_attack=attacks.get(a, {}).get("ace"),
                           k_agc=(float(k_freq[a]), float(k_tie[a])), anti_windup=anti_windup,
-                          network=network is not None)
+                          network=network is not None,
+                          sensor_attacks={c: attacks[a][c] for c in SENSOR_CHANNELS
+                                          if attacks.get(a, {}).get(c) is not None})
             for a, area in enumerate(params.areas)]
     settings = {"plant": "testbed", "case": repr(getattr(plant, "case", plant)),
                 "params": repr(params),
                 "relays": vars(relays), "duration": duration, "step": step,
                 "control_period": control_period, "seed": seed, "noise_std": list(noise_std),
                 "estimator": repr(estimator), "attacks": repr(attacks), "loads": repr(loads),
+                "following_loads": repr(following),
                 "filters": {a: repr(f) for a, f in built.items()},
                 "stop_on_trip": stop_on_trip, "feedforward": feedforward,
                 "anti_windup": anti_windup}
     return _Setup(params, plant, loads, gens, relays, stop_on_trip, network, duration, step,
-                  tc, built, settings)
+                  tc, built, settings, following)
 
 
 def _run_stored(make: Callable[[], _Setup], share: bytes | None, key: str | None
@@ -485,7 +503,7 @@ def _run_stored(make: Callable[[], _Setup], share: bytes | None, key: str | None
 def _run(setup: _Setup) -> _Shared:
     """Run ``setup`` on ANDES: what it leaves to share (its result: :func:`_result`)."""
     loop = AndesLoop(setup.plant, setup.loads, setup.gens, setup.relays, setup.stop_on_trip,
-                     setup.network)
+                     setup.network, setup.following)
     loop.run(setup.duration, setup.step)
     rows = np.array(loop.rows)
     t = rows[:, 0].round(9)              # ANDES accumulates its time in floating point
@@ -527,7 +545,8 @@ def rerun(rec: stored_runs.Recording) -> _Shared:
     control samples (no generator side computes them): what checks a recording
     (``tests/test_stored_runs.py``)."""
     setup = _setup(**pickle.loads(rec.call), filters=None)   # the committed call
-    loop = AndesLoop(setup.plant, setup.loads, setup.gens, setup.relays, setup.stop_on_trip)
+    loop = AndesLoop(setup.plant, setup.loads, setup.gens, setup.relays, setup.stop_on_trip,
+                     following=setup.following)
     loop.sides = RecordedSides(rec.run.commands)
     loop.run(setup.duration, setup.step)
     rows = np.array(loop.rows)

@@ -35,6 +35,7 @@ from lfc.testbed.andes_setup import quiet_load
 
 # columns of AndesPlant.measure, per area
 MEASURED = ("dPg", "dPm", "dw", "dw_meas", "rocof_meas", "p_load", "p_tie", "p_net")
+_METER = MEASURED.index("dw_meas")     # what a following load reads
 
 #: An environment variable naming a file to which every ANDES run appends, as one
 #: line, the CPU seconds ANDES itself took (its process's, so runs in parallel
@@ -164,6 +165,10 @@ class AndesLoop:
         sample the control centre writes them, each generator side (built with
         ``network=True``) receives what arrived, and the reports go back (their
         trip bits 0: on ANDES the relays are applied to the logged trace).
+    following : dict, optional
+        ``{area: FollowingLoad}`` (:mod:`lfc.load_attacks`): a botnet's load added to
+        the area's, from its frequency meter (``dw_meas``) at the last accepted
+        step, held over the next (as the linear engine holds it over a plant step).
 
     Attributes
     ----------
@@ -184,8 +189,10 @@ class AndesLoop:
     """
 
     def __init__(self, plant: AndesPlant, loads: dict, gens: list[GeneratorSide],
-                 relays: RelaySettings, stop_on_trip: bool, network=None) -> None:
+                 relays: RelaySettings, stop_on_trip: bool, network=None,
+                 following: dict | None = None) -> None:
         self.plant, self.loads, self.gens, self.relays = plant, loads, gens, relays
+        self.following = following or {}
         self.bank = (RelayBank(relays, plant.n_areas)
                      if check_flag("stop_on_trip", stop_on_trip) else None)
         t0 = time.process_time()
@@ -240,6 +247,9 @@ class AndesLoop:
             p = np.zeros(self.plant.n_areas)
             for a, load in self.loads.items():
                 p[a] = float(sample_signal(load, np.array([t]), f"loads[{a}]")[0])
+            for a, botnet in self.following.items():     # its meter at the last step
+                meter = self.rows[-1][1 + len(MEASURED) * a + _METER] if self.rows else 0.0
+                p[a] += float(botnet.load(t, meter))
             self._load_at = (t, p)
         return self._load_at[1]
 
@@ -324,8 +334,9 @@ class GeneratorSides:
     def _estimate(self, coupled: CoupledFilter, state: np.ndarray, j: int) -> tuple:
         """What a coupled filter on its grid Kalman estimate reads at control sample
         ``j`` besides the grid (:meth:`lfc.generator.GeneratorSide.step`): each area's
-        metered ``dw_meas`` and ``rocof_meas`` with its generator side's noise, each
-        area's metered export, the scratch, and the estimator's state, kept
+        ``dw_meas`` and ``rocof_meas`` as its sensors report them (its generator side's
+        noise and any attack on them: :meth:`~lfc.generator.GeneratorSide.reports`),
+        each area's metered export, the scratch, and the estimator's state, kept
         across samples; nothing without the estimate."""
         if coupled.kalman is None:
             return ()
@@ -335,7 +346,7 @@ class GeneratorSides:
                             np.zeros((2, coupled.kalman.n)))
         ym = self._kalman[0]
         for a, gen in enumerate(self.gens):
-            ym[2 * a:2 * a + 2] = state[a, 3:5] + gen.noise[j]
+            ym[2 * a:2 * a + 2] = gen.reports(j, state[a, 3:5])
             ym[2 * n_a + a] = state[a, 6]
         return self._kalman
 

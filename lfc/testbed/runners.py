@@ -22,21 +22,18 @@ ANDES_PLANT = tuple(n for n, v in vars(AndesPlant).items()
                     if callable(v) and not n.startswith("_"))
 
 
-def _no_sensor_attack(scenario: dict) -> None:
-    """``ValueError`` for an attack on the generator side's sensors (on ANDES they
-    read the simulator's own measurements, which these runners do not corrupt) or a
-    load that follows the frequency (the ANDES loads are the case's)."""
+def _microgrid_refuses(scenario: dict) -> None:
+    """``ValueError`` for an attack on the microgrid's sensors or a load that follows
+    the frequency: its runner (:func:`lfc.testbed.microgrid.simulate_microgrid`) takes
+    neither yet (a grid case does)."""
     named = [f"{c}_attack" for c in SENSOR_CHANNELS if scenario.get(f"{c}_attack") is not None]
-    named += [f"attacks[{a}][{c!r}]" for a, channels in (scenario.get("attacks") or {}).items()
-              if isinstance(channels, dict) for c in SENSOR_CHANNELS
-              if channels.get(c) is not None]
     if named:
         raise ValueError(f"{', '.join(named)}: attacks on the sensors run on the linear plants "
-                         f"(LFCParams, MultiAreaParams), not on ANDES yet")
-    if scenario.get("following_load") is not None or scenario.get("following_loads"):
-        raise ValueError("following_load(s): a load that follows the frequency "
-                         "(lfc.load_attacks) runs on the linear plants (LFCParams, "
-                         "MultiAreaParams), not on ANDES yet")
+                         f"and the ANDES grid cases (GridCase), not on the microgrid yet")
+    if scenario.get("following_load") is not None:
+        raise ValueError("following_load: a load that follows the frequency "
+                         "(lfc.load_attacks) runs on the linear plants and the ANDES grid "
+                         "cases (GridCase), not on the microgrid yet")
 
 
 def _fitted_model(case: MicrogridCase):
@@ -56,7 +53,7 @@ def _no_design(plant):
 
 def _microgrid(case: MicrogridCase, *, duration: float, design=None, **scenario):
     from lfc.testbed.microgrid import simulate_microgrid
-    _no_sensor_attack(scenario)
+    _microgrid_refuses(scenario)
     check_load_measured({None: scenario.get("scc")}, scenario.get("estimator"),
                         scenario.get("load_feedforward", False))
     return simulate_microgrid(design if design is not None else _fitted_model(case),
@@ -65,7 +62,6 @@ def _microgrid(case: MicrogridCase, *, duration: float, design=None, **scenario)
 
 def _grid_case(case: GridCase, *, duration: float, design=None, **scenario):
     from lfc.testbed.grids import simulate_andes_grid
-    _no_sensor_attack(scenario)
     check_load_measured(scenario.get("filters") or {}, scenario.get("estimator"),
                         scenario.get("feedforward", True))
     return simulate_andes_grid(design if design is not None else _fitted_grid(case),
@@ -75,8 +71,6 @@ def _grid_case(case: GridCase, *, duration: float, design=None, **scenario):
 def _grid_case_many(case: GridCase, scenarios: list[dict], *, duration: float, design=None,
                     keep: str = "metrics", **kwargs):
     from lfc.testbed.grids import simulate_andes_grid_table
-    for scenario in scenarios:
-        _no_sensor_attack(scenario if isinstance(scenario, dict) else vars(scenario))
     results = simulate_andes_grid_table(design if design is not None else _fitted_grid(case),
                                         grid_scenarios(scenarios), duration=duration,
                                         case=case, **kwargs)
@@ -87,7 +81,6 @@ def _own_plant(plant, *, duration: float, design=None, **scenario):
     from lfc.testbed.grids import simulate_andes_grid
     if design is None:
         _no_design(plant)
-    _no_sensor_attack(scenario)
     check_load_measured(scenario.get("filters") or {}, scenario.get("estimator"),
                         scenario.get("feedforward", True))
     return simulate_andes_grid(design, duration=duration, plant=plant, **scenario)
