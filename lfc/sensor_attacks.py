@@ -95,7 +95,8 @@ class Scale(Reading):
 
 @dataclass(frozen=True)
 class Freeze(Reading):
-    """The report holds its value of the last sample before ``start`` on ``[start, stop)``.
+    """The report holds its value of the last sample before ``start`` on ``[start, stop)``
+    (from ``start`` 0: the first sample's).
 
     Raises
     ------

@@ -116,3 +116,17 @@ def test_on_andes_the_coupled_filters_estimate_reads_the_report():
     pd.testing.assert_frame_equal(base.table(), same.table(), check_exact=True)
     hat = [r.areas[0].controls.set_index("t").dw_hat.loc[2.0:] for r in (base, frozen)]
     assert not np.allclose(hat[0], hat[1])
+
+
+def test_on_andes_simulate_many_runs_both_threats_as_simulate_does():
+    """A following load and a frozen sensor as :class:`lfc.Scenario` rows of
+    ``simulate_many`` on a grid case: the metrics of ``simulate`` of each."""
+    rows = [lfc.Scenario(loads={0: lfc.Step(KICK, start=1.0)},
+                         following_loads={0: FollowingLoad(10.0, limit=0.5, start=1.0)}),
+            lfc.Scenario(loads={0: lfc.Step(KICK, start=1.0)},
+                         attacks={0: {"dw_meas": Freeze(start=2.0)}})]
+    many = lfc.simulate_many(CASE, rows, duration=5.0)
+    for i, row in enumerate(rows):
+        one = lfc.simulate(CASE, duration=5.0, **row.keywords("grid")).table()
+        got = many[many.scenario == i].drop(columns="scenario").reset_index(drop=True)
+        pd.testing.assert_frame_equal(got[one.columns], one, check_exact=True, check_dtype=False)
