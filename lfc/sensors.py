@@ -143,6 +143,25 @@ class SensorRun:
     result: Result
     fused: Fused
 
+    @property
+    def alarms(self) -> pd.DataFrame:
+        """The run's alarm log: the filter's (``result.alarms``, ``ALARM_COLUMNS``) with
+        a row for each reading named a lie (``reason`` ``"spoofed: sensor k
+        (channel)"``) and each sample beyond the statement (``"beyond: more than
+        tolerate lie (channel)"``), in time order (the filter's first at a tie)."""
+        named = [pd.DataFrame({"t": f.t, "reason": reason})
+                 for f, reason in ((self.fused.spoofed, "spoofed: sensor "
+                                    + self.fused.spoofed.sensor.astype(str) + " ("
+                                    + self.fused.spoofed.channel + ")"),
+                                   (self.fused.beyond, "beyond: more than tolerate lie ("
+                                    + self.fused.beyond.channel + ")"))
+                 if len(f)]
+        log = self.result.alarms
+        if not named:
+            return log
+        return (pd.concat([log, *named], ignore_index=True)[log.columns]
+                .sort_values("t", kind="stable").reset_index(drop=True))
+
 
 def simulate_sensors(params, array: SensorArray, *, duration: float,
                      attacks: dict[int, dict[str, Signal]] | None = None, seed: int = 0,

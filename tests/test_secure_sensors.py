@@ -172,3 +172,20 @@ def test_the_secure_filter_trips_nothing_with_loads_within_its_bound(array, load
                              pc_attack=ATTACKS[attack],
                              load=lfc.Step(sign * load_bound, start=start)).result
         assert not r.tripped, (attack, sensor, pattern, start, sign, r.first_trip)
+
+
+def test_the_alarm_log_names_the_spoofed_sensor_and_what_is_beyond():
+    """``SensorRun.alarms``: the filter's log with a row per lie named, in time order;
+    two disagreeing liars put ``beyond`` rows in it."""
+    scc = lfc.SafetyFilter(P, RELAYS, method="certified", sensor_bound=WIDE.bound)
+    one = simulate_sensors(P, WIDE, duration=3.0, scc=scc, honest=honest("high")[:301],
+                           attacks=lies(2, "far"))
+    log = one.alarms
+    spoofed = log[log.reason.astype(str).str.startswith("spoofed")]
+    assert len(spoofed) == len(one.fused.spoofed) > 0
+    assert set(spoofed.reason) == {"spoofed: sensor 2 (dw_meas)", "spoofed: sensor 2 (rocof_meas)"}
+    assert log.t.is_monotonic_increasing and len(log) == len(spoofed) + len(one.result.alarms)
+    two = simulate_sensors(P, WIDE, duration=3.0, scc=scc, honest=honest("high")[:301],
+                           attacks={**lies(1, "far"),
+                                    2: {"dw_meas": lfc.Step(-1.0, start=1.0)}})
+    assert two.alarms.reason.astype(str).str.startswith("beyond").any()
