@@ -230,3 +230,21 @@ def test_a_generator_side_takes_attacks_on_its_sensors_only():
                          sensor_attacks={"rocof_meas": Scale(-1.0, start=0.5)})
     assert side.reports(10, np.array([1e-3, 2e-3])) == (1e-3, 2e-3)
     assert side.reports(60, np.array([1e-3, 2e-3])) == (1e-3, -2e-3)
+
+
+def test_the_red_team_against_a_blinded_defender_finds_a_trip_nobody_flags():
+    """The coordinated red team (``coordinated_search``) with area 0's ROCOF sensor
+    frozen from 0.9 s (``scenario={"attacks": ...}``): against the certified filter of
+    each area of the two-area preset a square attack on the commands trips, and no
+    filter ever flags ``outside``; the same search unblinded finds no trip."""
+    from lfc.experiments.redteam import coordinated_search
+    grid, filters = MultiAreaParams.two_area(), {0: "certified", 1: "certified"}
+    kw = dict(maxiter=3, popsize=4, duration=10.0)
+    honest = coordinated_search(grid, filters, "square on P_c", **kw)
+    blind = coordinated_search(grid, filters, "square on P_c", **kw,
+                               scenario={"attacks": {0: {"rocof_meas": Freeze(start=0.9)}}})
+    assert not honest["tripped"] and honest["severity"] < 1.0
+    assert blind["tripped"] and blind["severity"] > 1.0 and blind["outside"] == 0
+    with pytest.raises(ValueError, match="must not be on 'pc'"):
+        coordinated_search(grid, filters, "square on P_c", **kw,
+                           scenario={"attacks": {1: {"pc": lfc.Step(1.0)}}})

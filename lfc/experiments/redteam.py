@@ -40,7 +40,7 @@ from scipy.optimize import differential_evolution
 from lfc._format import number
 from lfc._validate import (ParameterTypeError, check_array, check_count, check_flag,
                            check_multiple, check_number, check_positive, check_seed)
-from lfc.engine import check_area_keys
+from lfc.engine import check_area_keys, check_attacks
 from lfc.estimation import check_noise_std
 from lfc.experiments.scenarios import ATTACK_START
 from lfc.filters.base import check_choice
@@ -381,8 +381,10 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
     ``filters`` is :func:`lfc.simulate`'s ``{area: "paper" |
     "certified" | "coupled" | filter}``, built once for the controller period
     ``control_period`` (s).  ``scenario``: more keys of every run (e.g.
-    ``{"estimator": "kalman", "noise_std": (1e-4, 1e-3)}``; not ``attacks`` or
-    ``filters``, nor what the family sets).  Returns the family, the worst severity,
+    ``{"estimator": "kalman", "noise_std": (1e-4, 1e-3)}``, or ``attacks`` on other
+    channels than the family's — a sensor blinded by :mod:`lfc.sensor_attacks` while
+    the search attacks the command; not ``filters``, nor what the family sets).
+    Returns the family, the worst severity,
     the area it is reached in, whether any area tripped, the samples any filter
     flagged ``outside`` (summed over the areas), the attack per area (text) and its
     parameters ``theta`` (:func:`coordinated_scenario` rebuilds it).
@@ -393,10 +395,15 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
     filters = check_area_keys(filters, params.n_areas, "filters")
     check_choice("family", family, tuple(_GRID))
     scenario = {} if scenario is None else dict(scenario)
-    sets = {"filters", *KEYWORD.get(_GRID[family][0], ("attacks",))}
+    channel = _GRID[family][0]
+    sets = {"filters", *KEYWORD.get(channel, ())}
     if sets & set(scenario):
         raise ValueError(f"scenario must not set {' or '.join(sorted(sets))} (the search "
                          f"sets them), got keys {sorted(scenario)}")
+    fixed = check_attacks(scenario.pop("attacks", None), params.n_areas)
+    if any(channel in channels for channels in fixed.values()):
+        raise ValueError(f"scenario's attacks must not be on {channel!r} (the family "
+                         f"{family!r} searches it), got {fixed!r:.120}")
     check_search(duration=duration, seed=seed, maxiter=maxiter, popsize=popsize, relays=relays)
     check_count("jobs", jobs)
     relays = relays_or_default(relays)
@@ -406,9 +413,14 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
     filters = {a: area_filter(params, a, f, relays, control_period, noise)   # built once,
                for a, f in filters.items()}                                # not per generation
 
+    def with_fixed(found: dict) -> dict:
+        attacks = found.get("attacks", {})
+        merged = {a: {**fixed.get(a, {}), **attacks.get(a, {})} for a in range(n)}
+        return {**found, "attacks": {a: c for a, c in merged.items() if c}}
+
     def run(thetas: np.ndarray) -> pd.DataFrame:
         out = simulate_many(
-            params, [{**scenario, **coordinated_scenario(family, th, n, duration),
+            params, [{**scenario, **with_fixed(coordinated_scenario(family, th, n, duration)),
                       "filters": filters} for th in thetas.T],
             duration=duration, relays=relays, jobs=jobs, control_period=control_period)
         out["severity"] = severity(out, relays)
