@@ -14,8 +14,10 @@ generation with :func:`lfc.simulate_many` (``vectorized=True`` in scipy's
   period, bounded by ``±amplitude``;
 * :func:`coordinated_search`: an interconnected grid (:mod:`lfc.multiarea`),
   one family's parameters chosen separately for every area at once (a
-  coordinated attack; families also on the ACE each area's AGC integrates, and
-  ``LOAD_FAMILIES``: a botnet's load, static or following the frequency),
+  coordinated attack; families also on the ACE each area's AGC integrates, on what
+  its sensors read (``SENSOR_FAMILIES``), and ``LOAD_FAMILIES``: a botnet's load,
+  static or following the frequency; attacks on other channels, such as a blinded
+  sensor, fixed in every run),
   severity the worst over the areas, with :func:`lfc.simulate_many`;
 * :func:`lfc.experiments.adaptive.adaptive_search`: an attacker in the loop that
   reads every area's interval from its filter each period and pushes at its
@@ -87,7 +89,8 @@ LOAD_FAMILIES = {
     "ramp on load": ("load", "ramp", [(-2.0, 2.0), (0.0, 0.3)]),
     "following load": ("following", "gain", [(0.0, 20.0), (0.01, 0.3)]),
 }
-_GRID = {**MULTI_FAMILIES, **LOAD_FAMILIES}   # what coordinated_search and its replay take
+# what coordinated_search and its replay take
+_GRID = {**MULTI_FAMILIES, **SENSOR_FAMILIES, **LOAD_FAMILIES}
 
 
 READ_BY = {"none": (), "paper": ("alpha", "Ts"), "certified": ("uncertainty", "declare_noise")}
@@ -372,8 +375,9 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
                        seed: int = 0, maxiter: int = 5, popsize: int = 5,
                        jobs: int = 2, control_period: float = 0.01,
                        scenario: dict | None = None) -> dict:
-    """Worst coordinated attack of one family (``MULTI_FAMILIES``, or
-    ``LOAD_FAMILIES``: a botnet's load) on an interconnected grid: differential
+    """Worst coordinated attack of one family (``MULTI_FAMILIES``, ``SENSOR_FAMILIES``:
+    what the sensors read, or ``LOAD_FAMILIES``: a botnet's load) on an interconnected
+    grid: differential
     evolution over the family's parameters in every area at once (an area may get
     amplitude 0: single-area attacks are included), maximizing the worst
     :func:`severity` over the areas.
