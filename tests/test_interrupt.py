@@ -261,3 +261,25 @@ def test_a_signal_another_thread_took_stops_the_wait_at_once(wait, woken_within)
         assert took < woken_within
     else:                           # as_completed: only when the future finished
         assert took >= 2.5
+
+
+def test_an_error_raised_as_ctrl_c_unwinds_is_the_interrupt(monkeypatch, tmp_path, capsys):
+    """A Ctrl-C that lands inside a ``with lock:`` can surface as ``RuntimeError:
+    release unlocked lock`` (its context the ``KeyboardInterrupt``; seen once in CI on
+    ``sweep``): it is the interrupt — exit 130, kernels stopped — not an error (2)."""
+    from lfc.repro import cli, runner
+
+    def unwinding(*args, **kwargs):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt:
+            raise RuntimeError("release unlocked lock")
+
+    monkeypatch.setattr(runner, "sweep", unwinding)
+    code = cli.main(["sweep", "notebooks/02_fig4_rocof_attack.ipynb", "-p", "alpha", "3",
+                     "--jobs", "1", "--out", str(tmp_path)])
+    assert code == 130 and "interrupted" in capsys.readouterr().err
+    monkeypatch.setattr(runner, "sweep", lambda *a, **k: (_ for _ in ()).throw(
+        RuntimeError("a real error")))
+    assert cli.main(["sweep", "notebooks/02_fig4_rocof_attack.ipynb", "-p", "alpha", "3",
+                     "--out", str(tmp_path)]) == 2

@@ -470,15 +470,33 @@ def main(argv: list[str] | None = None) -> int:
         print(table.to_string(index=False))
         return 0
     except (ValueError, RuntimeError, OSError) as err:
+        if _by_ctrl_c(err):
+            return _interrupted()
         print(f"error: {_one_line(err)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        started = sys.modules.get("lfc.repro.runner")     # no runner imported: no kernels
-        if started is not None:
-            started.stop_kernels()
-        print("interrupted: finished runs and chunks are kept; rerun the same command to "
-              "resume", file=sys.stderr)
-        return INTERRUPTED
+        return _interrupted()
+
+
+def _by_ctrl_c(err: BaseException) -> bool:
+    """Whether ``err`` was raised while a Ctrl-C unwound (a lock released twice as the
+    ``KeyboardInterrupt`` left a ``with`` block: "release unlocked lock")."""
+    seen = err.__context__
+    while seen is not None:
+        if isinstance(seen, KeyboardInterrupt):
+            return True
+        seen = seen.__context__
+    return False
+
+
+def _interrupted() -> int:
+    """Stop the kernels this process started; say what is kept; the exit code 130."""
+    started = sys.modules.get("lfc.repro.runner")     # no runner imported: no kernels
+    if started is not None:
+        started.stop_kernels()
+    print("interrupted: finished runs and chunks are kept; rerun the same command to "
+          "resume", file=sys.stderr)
+    return INTERRUPTED
 
 
 def _plot_sweep(args) -> int:
