@@ -377,7 +377,8 @@ def test_the_red_teams_coordinated_search_on_the_estimate_trips_nothing_and_flag
     the coupled filters on their grid Kalman estimate, with noise, at both held
     levels: its worst attack stays inside every relay (severity 0.29–0.66 when
     measured) and no filter flags ``outside`` at it."""
-    from lfc.experiments.redteam import coordinated_attacks, coordinated_search
+    from lfc.experiments.redteam import (MULTI_FAMILIES, coordinated_attacks,
+                                         coordinated_search)
     grid = MultiAreaParams.two_area()
     for level in ("sharp", "widened"):
         filt = CoupledFilter(grid, RELAYS, noise_std=NOISE, held_level=level)
@@ -393,8 +394,10 @@ def test_the_red_teams_coordinated_search_on_the_estimate_trips_nothing_and_flag
         worst = max(float(sev(m, RELAYS)) for m in replayed.metrics().values())
         assert worst == pytest.approx(found["severity"], rel=1e-6)
         assert sum(a.metrics()["outside"] for a in replayed.areas) == 0
-    with pytest.raises(ValueError, match="scenario must not set attacks"):
-        coordinated_search(grid, {0: filt, 1: filt}, family, scenario={"attacks": {}})
+    channel = MULTI_FAMILIES[family][0]           # fixed attacks only on other channels
+    with pytest.raises(ValueError, match=f"must not be on '{channel}'"):
+        coordinated_search(grid, {0: filt, 1: filt}, family,
+                           scenario={"attacks": {1: {channel: lfc.Step(0.1)}}})
 
 
 def test_it_refuses_what_its_error_bound_does_not_cover():
