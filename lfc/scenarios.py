@@ -15,11 +15,12 @@ from numbers import Integral
 import numpy as np
 
 from lfc._validate import ParameterTypeError, check_flag, check_seed
-from lfc.engine import (CHANNELS, LOAD, METRICS, N_CHANNELS, N_CTRL, N_KF, SENSOR_CHANNELS,
-                        Estimators, FilterTables, Outputs, Plants, RelayTables, Rows,
-                        SignalSamples, Timing, Work, check_area_keys, check_load_measured,
-                        check_noise, make_estimator, make_noise, run_kernel,
-                        scenario_signals)
+from lfc.engine import (CHANNELS, DW_MEAS, LOAD, METRICS, N_CHANNELS, N_CTRL, N_KF,
+                        ROCOF_MEAS, SENSOR_CHANNELS, Estimators, FilterTables, Outputs,
+                        Plants, RelayTables, Rows, SignalSamples, Timing, Work,
+                        check_area_keys, check_load_measured, check_noise, make_estimator,
+                        make_noise, run_kernel, scenario_signals)
+from lfc.sensor_attacks import FREEZE, REPLAY
 from lfc.filters import SafetyFilter
 from lfc.filters.coupled import CoupledFilter, check_coupled
 from lfc.filters.dispatch import GRID_WIDE, scratch_size
@@ -229,6 +230,9 @@ class Scenarios:
                       np.zeros((n_trace, n_s)),
                       np.full((self.n_ctrl if trace else 0, n_a, N_CTRL), np.nan),
                       np.zeros((n_trace, n_a), np.int64))
+        # what the sensors reported is kept only for a freeze or a replay to read back
+        reports = self.n_ctrl if np.isin(kinds[:, :, (DW_MEAS, ROCOF_MEAS)],
+                                         (FREEZE, REPLAY)).any() else 0
         rest = np.arange(n)
         if lanes and not trace and n_a == 1 and n_s == N_AREA_STATES:
             f_i = rows.index[:, 0, 2]
@@ -237,7 +241,7 @@ class Scenarios:
                    & ((f_i < 0) | ~np.isin(filters.methods[np.maximum(f_i, 0)], GRID_WIDE)))
             blocks, left = lane_blocks(rows.plant_of, np.flatnonzero(fit), LANE_MIN_FILL)
             run_lanes(timing, plants, rows, samples, estimators, filters, relays, out, blocks,
-                      LaneWork.sized(estimators.a.shape[1], self.n_ctrl))
+                      LaneWork.sized(estimators.a.shape[1], reports))
             rest = np.sort(np.concatenate([np.flatnonzero(~fit), left]))
         if len(rest):
             rest = slice(None) if len(rest) == n else rest   # all of them: views, no copies
@@ -245,7 +249,7 @@ class Scenarios:
             part = Outputs(out.metrics[rest], out.ends[rest], *out[2:])
             n_sums = max((scratch_size(f) for f in self._filters.items), default=0)
             run_kernel(timing, plants, mine, samples, estimators, filters, relays, part,
-                       Work.sized(n_s, n_a, estimators.a.shape[1], n_sums, self.n_ctrl))
+                       Work.sized(n_s, n_a, estimators.a.shape[1], n_sums, reports))
             out.metrics[rest], out.ends[rest] = part.metrics, part.ends
         metrics, ends = out.metrics, out.ends
         final = metrics[:, :, METRICS.index("final_abs_dw_meas")]
