@@ -284,3 +284,119 @@ def test_finding_on_grids_the_sensor_families_against_each_filter(grid, setting)
                                **coordinated_scenario(family, found["theta"],
                                                       params.n_areas, 20.0))
             assert run.warning_time > 0.5, family
+
+
+# -- the red team over the lies that read the sensor ------------------------------------------
+READING_FAMILIES = [f"{kind} on {channel}" for kind in ("scale", "freeze", "replay")
+                    for channel in ("dw_meas", "rocof_meas")]
+
+
+def test_finding_the_single_area_red_team_over_the_readings_under_an_honest_load_step():
+    """``family_search`` over the lies that read the sensor (a gain in [−1, 3], a stuck
+    meter for 0.1–30 s, a replay of 0.01–1 s earlier), every run with an honest 0.2 pu load
+    step at 2 s (``scenario``: at equilibrium a reading of 0 stays 0 whatever it is
+    scaled, frozen or replayed by), 3 generations × 4, 20 s.  Measured: nothing trips
+    within 20 s; a negative gain on the frequency reading turns the AGC's integral
+    feedback positive, and without a filter and through the paper's SCC the frequency
+    has passed F (severity above 1.5) and keeps growing; the certified filter keeps
+    every run below F."""
+    from lfc.experiments.redteam import SENSOR_FAMILIES, Defender, family_search
+    assert set(READING_FAMILIES) <= set(SENSOR_FAMILIES)
+    load = {"load": lfc.Step(0.2, start=2.0)}
+    for defender in (Defender("none", method="none"), Defender("paper α=20"),
+                     Defender("certified", method="certified")):
+        for family in READING_FAMILIES:
+            found = family_search(P, defender, family, duration=20.0, maxiter=3, popsize=4,
+                                  scenario=load)
+            assert not found["tripped"], (defender.name, family)
+            if defender.method == "certified":
+                assert found["severity"] < 1.0, family
+            elif family == "scale on dw_meas":
+                assert found["severity"] > 1.5 and found["theta"][0] < 0, defender.name
+
+
+def test_finding_a_blinded_rocof_meter_lets_the_single_area_red_team_trip_the_certified_filter():
+    """The single-area red team (square and sinusoid on P_c, 3 generations × 4, 20 s)
+    against the certified filter: unblinded it finds no trip; with the ROCOF meter
+    frozen, scaled by 0 or replaying 0.5 s earlier from 0.9 s, it finds attacks that trip
+    ROCOF with no ``outside`` flag; with the frequency meter frozen instead, none.  The
+    paper's SCC (α = 20) trips under the same search blinded or not, flagged.  A found
+    attack replays with ``replay`` and the same ``scenario``."""
+    from lfc.experiments.redteam import Defender, family_search, replay, severity
+    certified, paper = Defender("certified", method="certified"), Defender("paper α=20")
+    kw = dict(duration=20.0, maxiter=3, popsize=4)
+    blinded = [{"rocof_meas_attack": lie} for lie in (Freeze(start=0.9), Scale(0.0, start=0.9),
+                                                      Replay(0.5, start=0.9))]
+    for family in ("square on P_c", "sinusoid on P_c"):
+        honest = family_search(P, certified, family, **kw)
+        assert not honest["tripped"] and honest["severity"] < 1.0, family
+        for scenario in blinded:
+            found = family_search(P, certified, family, **kw, scenario=scenario)
+            assert found["tripped"] and found["first_trip"] == "ROCOF", (family, scenario)
+            assert found["outside"] == 0, (family, scenario)
+        frozen_w = family_search(P, certified, family, **kw,
+                                 scenario={"dw_meas_attack": Freeze(start=0.9)})
+        assert not frozen_w["tripped"], family
+        for scenario in (None, blinded[0]):
+            found = family_search(P, paper, family, **kw, scenario=scenario)
+            assert found["tripped"] and found["outside"] > 0, (family, scenario)
+    again = lfc.simulate(P, duration=20.0, scc=lfc.SafetyFilter(P, RELAYS, method="certified"),
+                         **blinded[0], **replay(found := family_search(
+                             P, certified, "square on P_c", **kw, scenario=blinded[0]), 20.0))
+    assert severity(again.metrics(), RELAYS) == pytest.approx(found["severity"], rel=1e-9)
+
+
+def test_a_search_fixes_only_the_channels_its_family_leaves_alone():
+    from lfc.experiments.redteam import Defender, family_search
+    kw = dict(duration=5.0, maxiter=1, popsize=1)
+    with pytest.raises(ValueError, match="'pc_attack'"):
+        family_search(P, Defender("x"), "square on P_c", **kw,
+                      scenario={"pc_attack": lfc.Step(1.0)})
+    with pytest.raises(ValueError, match="scc"):
+        family_search(P, Defender("x"), "square on P_c", **kw, scenario={"scc": None})
+    with pytest.raises(TypeError, match="scenario"):
+        family_search(P, Defender("x"), "square on P_c", **kw, scenario=[1])
+
+
+def test_finding_a_stuck_frequency_meter_and_an_honest_load_step_trip_through_the_coupled_filter():
+    """Two-area preset on the grid Kalman estimate (the chapters' noise), an honest load
+    step of ±0.1 pu at 2 s in area 0 and area 0's frequency meter frozen (or scaled by 0)
+    from 1 s, 30 s.  Without a filter and through the certified filters nothing trips
+    (the frequency stays within 0.009 pu).  Through the coupled filters area 0 trips
+    (UF2 for a load rise, OF2 for a drop) within 12–28 s, and no filter ever flags
+    ``outside``: the grid estimate explains the honest ROCOF and the frozen frequency
+    with a load that drifts past 4 times the true step, the certificate steers the
+    commands by it while the estimated frequency stays near 0.  Outside the certificate's
+    statement (its estimate's error is the noise's and the loads', never a lie's: module
+    docstring of :mod:`lfc.filters.coupled`), and a case where the filter makes the lie worse.  The
+    red team over the readings (a load step of 0.1 pu in every run) finds it too: a gain
+    near 0 on area 0's frequency reading trips with no ``outside``.  On the three-area
+    preset the same stuck meter and load step trip nothing (measured)."""
+    from lfc.experiments.redteam import coordinated_search
+    grid = MultiAreaParams.two_area()
+    for load in (0.1, -0.1):
+        for lie in (Freeze(start=1.0), Scale(0.0, start=1.0)):
+            scenario = dict(duration=30.0, loads={0: lfc.Step(load, start=2.0)},
+                            attacks={0: {"dw_meas": lie}}, **ESTIMATE)
+            for kind in ("none", "certified"):
+                filters = {} if kind == "none" else {0: kind, 1: kind}
+                m = lfc.simulate(grid, filters=filters, **scenario).table()
+                assert not m.tripped.any() and m.max_abs_dw_meas.max() < 0.009, (kind, load)
+            r = lfc.simulate(grid, filters={0: "coupled", 1: "coupled"}, **scenario)
+            m = r.table()
+            assert m.tripped.tolist() == [True, False] and m.outside.sum() == 0, (load, lie)
+            assert r.first_trip["relay"] == ("UF2" if load > 0 else "OF2")
+            assert 12.0 < r.first_trip["t"] < 28.0
+            c = r.areas[0].controls
+            before = c[c.t < r.first_trip["t"]]
+            assert before.p_load_hat.abs().max() > 4 * abs(load)
+            assert before.dw_hat.abs().max() < 1e-3
+    three = MultiAreaParams.three_area()        # measured: there the same runs trip nothing
+    r = lfc.simulate(three, filters={a: "coupled" for a in range(3)}, duration=30.0,
+                     loads={0: lfc.Step(0.1, start=2.0)},
+                     attacks={0: {"dw_meas": Freeze(start=1.0)}}, **ESTIMATE)
+    assert not r.tripped and r.first_outside is None
+    found = coordinated_search(grid, {0: "coupled", 1: "coupled"}, "scale on dw_meas",
+                               maxiter=3, popsize=4, duration=20.0,
+                               scenario={"loads": {0: lfc.Step(0.1, start=2.0)}, **ESTIMATE})
+    assert found["tripped"] and found["outside"] == 0 and abs(found["theta"][0]) < 0.2

@@ -33,7 +33,7 @@ anywhere in a box around the design model (M, D, τ_G, τ_T, R within
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 import pandas as pd
@@ -53,8 +53,9 @@ from lfc.model import LFCParams
 from lfc.multiarea import MultiAreaParams
 from lfc.relays import RelaySettings, relays_or_default
 from lfc.run import simulate_many
+from lfc.scenarios import Scenario
 from lfc.signals import Step
-from lfc.tables import scenario_signal
+from lfc.tables import scenario_signal, table_scenarios
 
 # family -> (channel, waveform, bounds of (amplitude, freq_hz)); one bound: freq unused
 FAMILIES = {
@@ -67,11 +68,17 @@ FAMILIES = {
 }
 # families of the coordinated search: the above, and a bias on the ACE an AGC integrates
 MULTI_FAMILIES = {**FAMILIES, "bias on ACE": ("ace", "step", [(-3.0, 3.0)])}
-# families on what the sensors read (outside every filter's threat model: searched apart)
+# families on what the sensors read (outside every filter's threat model: searched apart):
+# a lie added to the reading, or one that replaces it (lfc.sensor_attacks) — a meter's gain
+# changed (the factor), a stuck meter (how long it stays stuck, s), the reports of an
+# earlier moment played back (the lag, s, at most ATTACK_START: what was recorded)
 SENSOR_FAMILIES = {
     "bias on dw_meas": ("dw_meas", "step", [(-0.1, 0.1)]),
     "sinusoid on dw_meas": ("dw_meas", "sinusoid", [(0.0, 0.1), (0.05, 3.0)]),
     "bias on rocof_meas": ("rocof_meas", "step", [(-1.0, 1.0)]),
+    **{f"{kind} on {channel}": (channel, kind, bounds) for kind, bounds in (
+        ("scale", [(-1.0, 3.0)]), ("freeze", [(0.1, 30.0)]),
+        ("replay", [(0.01, ATTACK_START)])) for channel in ("dw_meas", "rocof_meas")},
 }
 _SINGLE = {**FAMILIES, **SENSOR_FAMILIES}   # what family_search and replay take
 # the scenario keywords each channel's attack is given as (the others: attacks)
@@ -219,12 +226,22 @@ def trip_verdict(tripped: dict, severities: dict, band: float = EDGE) -> str:
                                              for a, s in sorted(near.items()))
 
 
+def _waveform_columns(waveform: str, first, second) -> dict:
+    """The scenario-table columns of a family's waveform for its searched parameters
+    (arrays or numbers): ``amplitude`` and ``freq_hz``, from ``ATTACK_START`` — but a
+    ``"freeze"``'s one parameter is how long the meter stays stuck (its ``stop``)."""
+    if waveform == "freeze":
+        return {"amplitude": 0.0 * first, "freq_hz": 0.0 * first, "start": ATTACK_START,
+                "stop": ATTACK_START + first}
+    return {"amplitude": first, "freq_hz": second, "start": ATTACK_START}
+
+
 def _family_table(family: str, theta: np.ndarray, defender: Defender) -> pd.DataFrame:
     channel, waveform, bounds = _SINGLE[family]
     amp = theta[0]
     freq = theta[1] if len(bounds) > 1 else np.zeros_like(amp)
-    return pd.DataFrame({"waveform": waveform, "channel": channel, "amplitude": amp,
-                         "freq_hz": freq, "start": ATTACK_START, **defender.columns()})
+    return pd.DataFrame({"waveform": waveform, "channel": channel,
+                         **_waveform_columns(waveform, amp, freq), **defender.columns()})
 
 
 def check_search(*, duration: float, seed: int, maxiter: int, popsize: int,
@@ -246,10 +263,11 @@ def check_search(*, duration: float, seed: int, maxiter: int, popsize: int,
 
 
 def _search(table_of, n_attack, bounds, params, relays, duration, seed, maxiter, popsize,
-            search: Search, control_period: float = 0.01):
+            search: Search, control_period: float = 0.01, fixed: Scenario | None = None):
     """Differential evolution maximizing severity over the attack's ``n_attack``
-    variables and ``search``'s extra ones (runs at ``control_period``, s);
-    returns (best theta, severity, row)."""
+    variables and ``search``'s extra ones (runs at ``control_period``, s), every run
+    also with ``fixed``'s signals (:func:`_with_fixed`); returns (best theta, severity,
+    row)."""
     if not isinstance(params, LFCParams):
         raise ParameterTypeError(f"params must be an LFCParams (one area; a grid: "
                                  f"coordinated_search), got {type(params).__name__}")
@@ -264,36 +282,86 @@ def _search(table_of, n_attack, bounds, params, relays, duration, seed, maxiter,
         theta = np.asarray(theta, float)
         return table_of(theta[:n_attack]).assign(**search.columns(params, theta[n_attack:]))
 
+    def runs(theta: np.ndarray):
+        if fixed is None:
+            return table(theta)
+        return [_with_fixed(sc, fixed) for sc in table_scenarios(
+            table(theta), params, duration=duration, relays=relays,
+            control_period=control_period)]
+
     def objective(theta: np.ndarray) -> np.ndarray:
-        res = simulate_many(params, table(theta), duration=duration, relays=relays,
-                             chunk_size=max(1, -(-theta.shape[1] // 2)), progress=False,
-                             control_period=control_period)
+        chunks = {} if fixed else {"chunk_size": max(1, -(-theta.shape[1] // 2))}  # a table's
+        res = simulate_many(params, runs(theta), duration=duration, relays=relays,
+                             progress=False, control_period=control_period, **chunks)
         return -severity(res, relays)
 
     sol = differential_evolution(objective, list(bounds) + extra, seed=seed, maxiter=maxiter,
                                  popsize=popsize, vectorized=True, updating="deferred",
                                  polish=False, tol=0, integrality=integrality)
-    best = simulate_many(params, table(sol.x[:, None]), duration=duration, relays=relays,
+    best = simulate_many(params, runs(sol.x[:, None]), duration=duration, relays=relays,
                           progress=False, control_period=control_period)
     return sol.x, float(severity(best, relays)[0]), best.iloc[0]
+
+
+#: what a single-area search's ``scenario`` may fix in every run: signals on the channels
+#: the searched family leaves alone (the rest of a run is the table's: filter, noise, plant)
+FIXED_KEYS = {"pc": "pc_attack", "wref": "wref_attack", "load": "load",
+              "dw_meas": "dw_meas_attack", "rocof_meas": "rocof_meas_attack",
+              "following": "following_load"}
+
+
+def _fixed_scenario(scenario: dict | None, channel: str) -> Scenario | None:
+    """``scenario`` (:func:`lfc.simulate`'s keywords of an area, ``FIXED_KEYS``' values)
+    as a :class:`Scenario`, or None; ``ValueError`` for another key or the family's own
+    channel."""
+    if scenario is None:
+        return None
+    if not isinstance(scenario, dict):
+        raise ParameterTypeError(f"scenario must be a dict of lfc.simulate keywords or None, "
+                                 f"got {scenario!r:.80}")
+    allowed = set(FIXED_KEYS.values()) - {FIXED_KEYS[channel]}
+    wrong = sorted(set(scenario) - allowed)
+    if wrong:
+        raise ValueError(f"scenario may fix {sorted(allowed)} (the family searches "
+                         f"{FIXED_KEYS[channel]!r}; filter, noise and plant come from the "
+                         f"defender and the search), got {wrong}")
+    return Scenario.for_area(**scenario)
+
+
+def _with_fixed(scenario: Scenario, fixed: Scenario) -> Scenario:
+    """``scenario`` (one table row's) with ``fixed``'s signals added (on other channels)."""
+    attacks = {**fixed.attacks.get(0, {}), **scenario.attacks.get(0, {})}
+    return replace(scenario, attacks={0: attacks} if attacks else {},
+                   loads=scenario.loads or fixed.loads,
+                   following_loads=scenario.following_loads or fixed.following_loads)
 
 
 def family_search(params: LFCParams, defender: Defender, family: str, *,
                   relays: RelaySettings | None = None, duration: float = 10.0,
                   seed: int = 0, maxiter: int = 15, popsize: int = 10,
-                  search: Search = Search()) -> dict:
+                  search: Search = Search(), scenario: dict | None = None) -> dict:
     """Worst attack of one family (``FAMILIES``, or ``SENSOR_FAMILIES``: what a sensor
     reads) against ``defender`` (see module docstring), over the plants and noise
-    seeds ``search`` allows."""
+    seeds ``search`` allows.
+
+    ``scenario``: signals every run shares on the channels the family leaves alone, as
+    :func:`lfc.simulate`'s keywords of an area (``FIXED_KEYS``' values): a load step the
+    defender must ride through while its meter lies (``{"load": lfc.Step(0.2, start=2)}``
+    with ``"freeze on rocof_meas"``), or a blinded sensor under a searched command attack
+    (``{"rocof_meas_attack": Freeze(start=0.9)}`` with ``"square on P_c"``).  The result
+    has the samples the filter flagged ``outside`` besides the severity and the trip."""
     if not isinstance(defender, Defender):
         raise ParameterTypeError(f"defender must be a Defender, got {defender!r:.80}")
     check_choice("family", family, tuple(_SINGLE))
+    fixed = _fixed_scenario(scenario, _SINGLE[family][0])
     relays = relays_or_default(relays)
     bounds = _SINGLE[family][2]
     theta, sev, row = _search(lambda th: _family_table(family, th, defender), len(bounds),
-                              bounds, params, relays, duration, seed, maxiter, popsize, search)
+                              bounds, params, relays, duration, seed, maxiter, popsize, search,
+                              fixed=fixed)
     return {"defender": defender.name, "search": family, "severity": sev,
             "tripped": bool(row.tripped), "first_trip": row.first_trip_relay,
+            "outside": int(row.outside),
             "attack": ", ".join(f"{v:.4g}" for v in theta[:len(bounds)]),
             "theta": tuple(map(float, theta[:len(bounds)])),
             **search.describe(params, theta[len(bounds):])}
@@ -473,8 +541,8 @@ def coordinated_scenario(family: str, theta, n_areas: int, duration: float) -> d
             return {"waveform": "ramp", "amplitude": float(first) if held else 0.0,
                     "freq_hz": 0.0, "start": ATTACK_START,
                     "stop": ATTACK_START + second / abs(first) if held else math.inf}
-        return {"waveform": waveform, "amplitude": float(first), "freq_hz": float(second),
-                "start": ATTACK_START}
+        return {"waveform": waveform, **_waveform_columns(waveform, float(first),
+                                                           float(second))}
     signals = {a: scenario_signal(row(a), duration) for a in range(n_areas)}
     if channel == "load":
         return {"loads": signals}
