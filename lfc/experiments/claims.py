@@ -265,7 +265,7 @@ def detection_claims(detection: pd.DataFrame) -> dict[str, bool]:
 
 def loads_claims(growth: pd.DataFrame, gain_map: tuple, warnings: pd.DataFrame,
                  invariant: bool, lie: Runs, lie_pu: float, redundant: Runs,
-                 blinded: Runs) -> dict[str, bool]:
+                 blinded: Runs, stuck: Runs) -> dict[str, bool]:
     """Loads and sensors as weapons (chapter 12).  ``growth``: a row per area and
     ``factor`` of its smallest destabilizing gain with the ``simulated`` growth rate
     (1/s) — below the gain the response decays, above it grows.  ``gain_map``:
@@ -285,8 +285,13 @@ def loads_claims(growth: pd.DataFrame, gain_map: tuple, warnings: pd.DataFrame,
     filter ``"without sensor_bound"`` (it trips) and ``"with sensor_bound"`` (it does
     not).  ``blinded``: the certified filter under a square attack, its ROCOF sensor
     ``"honest"`` (no trip) and blinded in other ways (frozen, scaled, replayed: each
-    trips, never flagging ``outside``)."""
+    trips, never flagging ``outside``).  ``stuck``: a grid's frequency meter in area 0
+    stuck and an honest load step there, on the grid estimate, without a filter
+    (``"none"``) and through ``"certified"`` and ``"coupled"`` filters in every area —
+    nothing trips but through the coupled filters, which never flag ``outside``, and on
+    the two-area preset trip there."""
     axis, rates, critical = gain_map
+    coupled = stuck["coupled"]
     tripped = warnings[warnings["trip"].notna()]
     exact = tripped[~tripped["estimate"].astype(bool) & (tripped["filters"] != "none")]
     certified = lie["certified"].metrics()
@@ -314,4 +319,9 @@ def loads_claims(growth: pd.DataFrame, gain_map: tuple, warnings: pd.DataFrame,
             not blinded["honest"].tripped and all(
                 r.tripped and r.metrics()["outside"] == 0
                 for k, r in blinded.items() if k != "honest"),
+        "a stuck meter and an honest load step trip only through the coupled filters, "
+        "unflagged (on two areas)":
+            not stuck["none"].tripped and not stuck["certified"].tripped
+            and coupled.first_outside is None
+            and (coupled.tripped or len(coupled.areas) != 2),
     })
