@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 import lfc
 import tiers
 from lfc.filters import build
+from lfc.linear_grid import area_filter
 from lfc.multiarea import MultiAreaParams
 from lfc.sensor_attacks import Freeze, Replay, Scale
 from lfc.tables import scenario_row, table_scenarios
@@ -287,6 +288,8 @@ def test_finding_on_grids_the_sensor_families_against_each_filter(grid, setting)
 
 
 # -- the red team over the lies that read the sensor ------------------------------------------
+#: pu, s: the operator's load alarm that sees a load estimate drift (Result.load_alarms)
+STUCK_ALARM = (0.3, 10.0)
 READING_FAMILIES = [f"{kind} on {channel}" for kind in ("scale", "freeze", "replay")
                     for channel in ("dw_meas", "rocof_meas")]
 
@@ -359,34 +362,46 @@ def test_a_search_fixes_only_the_channels_its_family_leaves_alone():
 
 
 def test_finding_a_stuck_frequency_meter_and_an_honest_load_step_trip_through_the_coupled_filter():
-    """Two-area preset on the grid Kalman estimate (the chapters' noise), an honest load
-    step of ±0.1 pu at 2 s in area 0 and area 0's frequency meter frozen (or scaled by 0)
-    from 1 s, 30 s.  Without a filter and through the certified filters nothing trips
-    (the frequency stays within 0.009 pu).  Through the coupled filters area 0 trips
-    (UF2 for a load rise, OF2 for a drop) within 12–28 s, and no filter ever flags
-    ``outside``: the grid estimate explains the honest ROCOF and the frozen frequency
-    with a load that drifts past 4 times the true step, the certificate steers the
-    commands by it while the estimated frequency stays near 0.  Outside the certificate's
+    """Two-area preset on the grid Kalman estimate (the chapters' noise), area 0's
+    frequency meter frozen (or scaled by 0) from 1 s and an honest load step in area 0 at
+    2 s, 40 s.  Without a filter and through the certified filters nothing trips (the
+    frequency stays within 0.009 pu).  Through the coupled filters, for steps of ±0.05 pu
+    (within their ``load_bound``, 0.06 pu) and ±0.1 pu, area 0 trips (UF2 for a load rise,
+    OF2 for a drop) within 12–28 s, and no filter ever flags ``outside``: the grid estimate
+    explains the honest ROCOF and the frozen frequency with a load that drifts past 4
+    times the true step, and the certificate steers the commands by it while the
+    estimated frequency stays near 0.  Steps of ±0.03 pu trip nothing and the estimate
+    does not drift (nor at 0.04 pu over 120 s, measured).  Outside the certificate's
     statement (its estimate's error is the noise's and the loads', never a lie's: module
-    docstring of :mod:`lfc.filters.coupled`), and a case where the filter makes the lie worse.  The
-    red team over the readings (a load step of 0.1 pu in every run) finds it too: a gain
-    near 0 on area 0's frequency reading trips with no ``outside``.  On the three-area
-    preset the same stuck meter and load step trip nothing (measured)."""
+    docstring of :mod:`lfc.filters.coupled`), and a case where the filter makes the lie
+    worse.  The operator's load alarm at 0.3 pu within 10 s (``Result.load_alarms``) comes
+    1.5 s or more before every trip and never without the lie.  The red team over the
+    readings (a 0.1 pu step in every run) finds it too: a gain near 0 on area 0's
+    frequency reading trips with no ``outside``.  On the three-area preset the same stuck
+    meter and load step trip nothing (measured)."""
     from lfc.experiments.redteam import coordinated_search
-    grid = MultiAreaParams.two_area()
-    for load in (0.1, -0.1):
+    grid, coupled = MultiAreaParams.two_area(), {0: "coupled", 1: "coupled"}
+    assert area_filter(grid, 0, "coupled", RELAYS, 0.01).options.load_bound == 0.06
+    for load in (0.05, -0.05, 0.1, -0.1, 0.03, -0.03):
+        honest = lfc.simulate(grid, filters=coupled, duration=40.0,
+                              loads={0: lfc.Step(load, start=2.0)}, **ESTIMATE)
+        assert not honest.tripped and honest.load_alarms(*STUCK_ALARM).empty, load
         for lie in (Freeze(start=1.0), Scale(0.0, start=1.0)):
-            scenario = dict(duration=30.0, loads={0: lfc.Step(load, start=2.0)},
+            scenario = dict(duration=40.0, loads={0: lfc.Step(load, start=2.0)},
                             attacks={0: {"dw_meas": lie}}, **ESTIMATE)
             for kind in ("none", "certified"):
                 filters = {} if kind == "none" else {0: kind, 1: kind}
                 m = lfc.simulate(grid, filters=filters, **scenario).table()
                 assert not m.tripped.any() and m.max_abs_dw_meas.max() < 0.009, (kind, load)
-            r = lfc.simulate(grid, filters={0: "coupled", 1: "coupled"}, **scenario)
+            r = lfc.simulate(grid, filters=coupled, **scenario)
+            if abs(load) < 0.05:
+                assert not r.tripped and r.areas[0].controls.p_load_hat.abs().max() < 0.05
+                continue
             m = r.table()
             assert m.tripped.tolist() == [True, False] and m.outside.sum() == 0, (load, lie)
             assert r.first_trip["relay"] == ("UF2" if load > 0 else "OF2")
             assert 12.0 < r.first_trip["t"] < 28.0
+            assert r.load_alarms(*STUCK_ALARM).t.iloc[0] < r.first_trip["t"] - 1.5
             c = r.areas[0].controls
             before = c[c.t < r.first_trip["t"]]
             assert before.p_load_hat.abs().max() > 4 * abs(load)
@@ -396,7 +411,7 @@ def test_finding_a_stuck_frequency_meter_and_an_honest_load_step_trip_through_th
                      loads={0: lfc.Step(0.1, start=2.0)},
                      attacks={0: {"dw_meas": Freeze(start=1.0)}}, **ESTIMATE)
     assert not r.tripped and r.first_outside is None
-    found = coordinated_search(grid, {0: "coupled", 1: "coupled"}, "scale on dw_meas",
+    found = coordinated_search(grid, coupled, "scale on dw_meas",
                                maxiter=3, popsize=4, duration=20.0,
                                scenario={"loads": {0: lfc.Step(0.1, start=2.0)}, **ESTIMATE})
     assert found["tripped"] and found["outside"] == 0 and abs(found["theta"][0]) < 0.2

@@ -91,8 +91,8 @@ over the fit's records.
 
 **Not covered.**  Other estimators (refused), plants other
 than the design grid, an area without this filter, a sensor that lies (measured: a
-frequency meter stuck from 1 s and an honest 0.1 pu load step trip through these filters
-on the estimate, unflagged, where the certified ones trip nothing:
+frequency meter stuck from 1 s and an honest load step within ``load_bound`` trip through
+these filters on the estimate, unflagged, where the certified ones trip nothing:
 ``tests/test_sensor_attacks.py::test_finding_a_stuck_frequency_meter_and_an_honest_load_step_trip_through_the_coupled_filter``).  On ANDES (``lfc.simulate``
 of a ``GridCase``) the filters read each area's metered states and tie-line
 export (:meth:`CoupledFilter.grid_state`), or on the estimate the grid Kalman
