@@ -85,19 +85,20 @@ def dnp3():
     loop.close()
 
 
-def operate(station, points: list[tuple[int, float]], source: int = 2) -> list[int] | None:
-    """DIRECT_OPERATE of g41v4 ``points`` (index, value) in one request from link
-    address ``source``: the statuses the outstation answered, one per point (None:
-    no answer)."""
-    from dnp3.application.builder import build_direct_operate_request
+def operate(station, points: list[tuple[int, float]], source: int = 2,
+            function: str = "direct_operate", seq: int = 1) -> list[int] | None:
+    """DIRECT_OPERATE (or ``function`` ``"select"``, ``"operate"``) of g41v4 ``points``
+    (index, value) in one request from link address ``source``: the statuses the
+    outstation answered, one per point (None: no answer)."""
+    from dnp3.application import builder
     from dnp3.application.fragment import ObjectBlock
     from dnp3.application.qualifiers import ObjectHeader
     from dnp3.outstation.peer import PeerId
     data = bytes([len(points)]) + b"".join(bytes([i]) + struct.pack("<d", v) + b"\x00"
                                              for i, v in points)
-    request = build_direct_operate_request(
+    request = getattr(builder, f"build_{function}_request")(
         objects=(ObjectBlock(header=ObjectHeader(group=41, variation=4, qualifier=0x17),
-                             data=data),), seq=1)
+                             data=data),), seq=seq)
     responses = station.runner.outstation.process_request(
         request.to_bytes(), peer=PeerId(source=source, connection=1))
     if not responses:
@@ -332,3 +333,53 @@ def test_modbus_closes_a_connection_idle_for_its_timeout_and_logs_it():
         centre.close()
         loop.run(station.stop())
         loop.close()
+
+
+@pytest.fixture
+def sbo():
+    """A DNP3 outstation that takes select before operate only (select timeout 0.2 s)."""
+    pytest.importorskip("dnp3")
+    from lfc.wire import dnp3 as dn
+    loop = dn.EventLoop()
+    station = dn.Outstation(select_before_operate=True, select_timeout=0.2)
+    loop.run(station.start())
+    yield station
+    loop.run(station.stop())
+    loop.close()
+
+
+def test_dnp3_select_before_operate_applies_only_an_operate_matching_its_select(sbo):
+    """IEEE 1815's select before operate (``select_before_operate=True``): a SELECT
+    applies nothing; the OPERATE of the same values applies the command whole.  Refused
+    and logged, nothing applied: a DIRECT_OPERATE (NOT_SUPPORTED, 4); an OPERATE with no
+    SELECT (NO_SELECT, 2: an outsider's lone OPERATE); an OPERATE whose values differ
+    from its SELECT's (a man in the middle who rewrites only the OPERATE); an OPERATE
+    later than the select timeout."""
+    import time
+    station = sbo
+    assert operate(station, WHOLE)[0] == 4 and station.take() is None
+    assert "select before operate only" in station.rejected[-1][2]
+    assert operate(station, WHOLE, function="select") == [0] * 4
+    assert station.take() is None                                      # selected only
+    assert operate(station, WHOLE, function="operate", seq=2) == [0] * 4
+    assert station.take() == (COMMAND, 7)
+    assert operate(station, WHOLE, function="operate", seq=3) == [2] * 4   # used up
+    assert station.rejected[-1][1:] == ("OPERATE of pc, wref, ace, seq",
+                                        "no matching SELECT (NO_SELECT)")
+    assert operate(station, WHOLE, function="select", seq=4) == [0] * 4
+    rewritten = [(0, 0.5)] + WHOLE[1:]
+    assert operate(station, rewritten, function="operate", seq=5)[0] == 2
+    assert station.take() is None and "NO_SELECT" in station.rejected[-1][2]
+    assert operate(station, WHOLE, function="select", seq=6) == [0] * 4
+    time.sleep(0.3)
+    assert operate(station, WHOLE, function="operate", seq=7) == [2] * 4
+    assert station.take() is None
+
+
+def test_an_outstation_checks_its_select_options():
+    pytest.importorskip("dnp3")
+    from lfc.wire import dnp3 as dn
+    with pytest.raises(ValueError, match="select_timeout"):
+        dn.Outstation(select_timeout=0.0)
+    with pytest.raises(TypeError, match="select_before_operate"):
+        dn.Outstation(select_before_operate="yes")

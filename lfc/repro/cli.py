@@ -171,6 +171,9 @@ def _parser() -> argparse.ArgumentParser:
     wr.add_argument("--loss", type=float, default=0.0,
                     help="the share of frames lost once and sent again after TCP's 200 ms "
                          "retransmission timeout (%%)")
+    wr.add_argument("--select-before-operate", action="store_true",
+                    help="DNP3: every command a SELECT, then an OPERATE of the same values; "
+                         "the outstation takes nothing else")
     wr.add_argument("--pcap", type=Path,
                     help="write the last run's traffic here, made from the relay's log")
     wr.add_argument("--capture", type=Path,
@@ -279,7 +282,8 @@ def _wire(args) -> int:
         run = run_wire(params, duration=args.duration, attack=attack, scc=scc,
                        protocol=args.protocol, agc=args.agc,
                        mode="realtime" if args.realtime else "lockstep",
-                       capture=args.capture if last else None, impairment=impairment)
+                       capture=args.capture if last else None, impairment=impairment,
+                       select_before_operate=args.select_before_operate)
         rows.append(run.table())
     print(pd.concat(rows, ignore_index=True).to_string(index=False))
     if args.pcap:

@@ -54,6 +54,7 @@ import struct
 import threading
 import time
 
+from lfc._validate import check_flag, check_positive
 from lfc.wire.registers import seq_problem, value_problem
 from lfc.wire.relay import EventLoop, Relay  # noqa: F401  (this protocol's transport)
 
@@ -63,7 +64,8 @@ COMMAND_POINTS = ("pc", "wref", "ace", "seq")
 REPORT_POINTS = (("dw_meas", 3e-11), ("rocof_meas", 1e-9), ("pc_received", 1e-8), ("u_ref", 1e-8),
                  ("u", 1e-8),
                  ("flags", 1.0), ("trips", 1.0), ("link", 1.0), ("seq", 1.0))
-DIRECT_OPERATE, RESPONSE = 5, 0x81
+SELECT, OPERATE, DIRECT_OPERATE, RESPONSE = 3, 4, 5, 0x81
+NO_SELECT = 2                       # a control status (IEEE 1815 table 11-9)
 INT32 = 2 ** 31 - 1
 
 
@@ -120,9 +122,15 @@ class Codec:
 
     @staticmethod
     def command(frame: bytes) -> tuple[dict[str, float], int] | None:
+        """The command of a DIRECT_OPERATE or a SELECT (the first half of a select
+        before operate: its OPERATE is :meth:`downstream`'s)."""
+        return Codec._block(frame, (DIRECT_OPERATE, SELECT))
+
+    @staticmethod
+    def _block(frame: bytes, functions: tuple[int, ...]) -> tuple[dict[str, float], int] | None:
         data = _user_data(frame)
         # transport byte, application control, function, then g41v4 with 4 points
-        if len(data) < 7 or data[2] != DIRECT_OPERATE or tuple(data[3:6]) != (41, 4, 0x17):
+        if len(data) < 7 or data[2] not in functions or tuple(data[3:6]) != (41, 4, 0x17):
             return None
         if len(data) < 7 + 10 * data[6]:                # cut short: not a command
             return None
@@ -143,9 +151,20 @@ class Codec:
         return _with_user_data(frame, data[:3] + _ao_block(values, seq))
 
     @staticmethod
+    def downstream(frame: bytes, session: dict) -> bytes | None:
+        """A frame of the centre's that is not a command as the outstation then gets it:
+        an OPERATE carries what the man in the middle made of its SELECT
+        (``session["command"]``), so that the two match; None (answer it, do not
+        forward) when the SELECT was dropped."""
+        if Codec._block(frame, (OPERATE,)) is None or "command" not in session:
+            return frame
+        command = session["command"]
+        return None if command is None else Codec.with_command(frame, *command)
+
+    @staticmethod
     def ack(frame: bytes, session: dict) -> bytes:
-        """The outstation's RESPONSE echoing a dropped DIRECT_OPERATE with status
-        SUCCESS, as the session's own would be: its internal indications (the last
+        """The outstation's RESPONSE echoing a dropped DIRECT_OPERATE, SELECT or OPERATE
+        with status SUCCESS, as the session's own would be: its internal indications (the last
         response's) and the next transport sequence number; the outstation's later
         frames are renumbered after it (:meth:`upstream`)."""
         from dnp3.datalink.builder import build_unconfirmed_user_data
@@ -208,8 +227,25 @@ class Codec:
         return _with_user_data(frame, bytes(data))
 
 
+def _statuses(response) -> list[tuple[int, int]]:
+    """``(index, status)`` of each analog output a control response echoes."""
+    out = []
+    for block in getattr(response, "objects", ()):
+        if (block.header.group, block.header.variation) == (41, 4) and block.data:
+            out += [(block.data[1 + 10 * k], block.data[10 + 10 * k])
+                    for k in range(block.data[0]) if len(block.data) >= 11 + 10 * k]
+    return out
+
+
 class Outstation:
     """The generator's DNP3 outstation (address 1): the point list above.
+
+    With ``select_before_operate`` it takes a command only as a SELECT of the four
+    outputs followed, within ``select_timeout`` s, by an OPERATE of the same values
+    (IEEE 1815 4.4.3; dnp3py matches them, answering NO_SELECT otherwise) and refuses a
+    DIRECT_OPERATE with NOT_SUPPORTED; without it (default) it takes both.  The checks
+    below apply to the SELECT and again to the OPERATE; an OPERATE that matches no
+    SELECT is logged in ``rejected`` too.
 
     It answers only the control centre's address (2): a request from another source
     is logged and left unanswered.  A command is applied whole or not at all: one DIRECT_OPERATE
@@ -223,7 +259,11 @@ class Outstation:
     refused, reason).  Each TCP connection is served on its own (:func:`_runner`):
     an outsider's connection does not close the control centre's."""
 
-    def __init__(self) -> None:
+    def __init__(self, select_before_operate: bool = False,
+                 select_timeout: float = 10.0) -> None:
+        check_flag("select_before_operate", select_before_operate)
+        check_positive("select_timeout", select_timeout)
+        self.select_before_operate, self.select_timeout = select_before_operate, select_timeout
         self.inbox: tuple[dict, int, float] | None = None
         self.lock = threading.Lock()
         self.runner, self.task, self.loop, self.database = None, None, None, None
@@ -236,29 +276,42 @@ class Outstation:
         self._staged = None
         return result
 
+    def _stage(self, index: int, value: float):
+        """One point of the request under way checked and staged, or refused (logged)."""
+        from dnp3.outstation.handler import CommandResult
+        staged = self._staged
+        if staged is None:            # a point after a refused one: not operated
+            return CommandResult.format_error()
+        if index >= len(COMMAND_POINTS):
+            return self._refuse(f"index {index}", value, "no such point",
+                                CommandResult.not_supported())
+        point = COMMAND_POINTS[index]
+        if list(staged) != list(COMMAND_POINTS[:index]):
+            return self._refuse(point, value, f"out of order (after "
+                                f"{list(staged) or 'nothing'})", CommandResult.format_error())
+        problem = seq_problem(value) if point == "seq" else value_problem(point, value)
+        if problem is not None:
+            return self._refuse(point, value, problem, CommandResult.out_of_range())
+        staged[point] = value
+        return CommandResult.success()
+
     def _handler(self):
         from dnp3.outstation.handler import CommandResult, DefaultCommandHandler
         station = self
 
         class Handler(DefaultCommandHandler):
             def direct_operate_analog_output(self, index: int, value: float):
-                staged = station._staged
-                if staged is None:            # a point after a refused one: not operated
-                    return CommandResult.format_error()
-                if index >= len(COMMAND_POINTS):
-                    return station._refuse(f"index {index}", value, "no such point",
+                if station.select_before_operate:
+                    return station._refuse(f"index {index}", value, "DIRECT_OPERATE: this "
+                                           "outstation takes select before operate only",
                                            CommandResult.not_supported())
-                point = COMMAND_POINTS[index]
-                if list(staged) != list(COMMAND_POINTS[:index]):
-                    return station._refuse(point, value, f"out of order (after "
-                                           f"{list(staged) or 'nothing'})",
-                                           CommandResult.format_error())
-                problem = seq_problem(value) if point == "seq" else value_problem(point, value)
-                if problem is not None:
-                    return station._refuse(point, value, problem,
-                                           CommandResult.out_of_range())
-                staged[point] = value
-                return CommandResult.success()
+                return station._stage(index, value)
+
+            def select_analog_output(self, index: int, value: float):
+                return station._stage(index, value)
+
+            def operate_analog_output(self, index: int, value: float, select_sequence: int):
+                return station._stage(index, value)
         return Handler()
 
     def _station(self, database, handler):
@@ -282,19 +335,45 @@ class Outstation:
             # dnp3py calls its command handler point by point; a request is the
             # unit of a command here (dnp3py is pinned in environment.txt)
             def _handle_direct_operate(self, request, **kwargs):
+                return self._applying(super()._handle_direct_operate, request, kwargs)
+
+            def _handle_operate(self, request, **kwargs):
+                return self._applying(super()._handle_operate, request, kwargs)
+
+            def _handle_select(self, request, **kwargs):
                 owner._staged = {}
                 try:
-                    return super()._handle_direct_operate(request, **kwargs)
+                    return super()._handle_select(request, **kwargs)
                 finally:
-                    if owner._staged is not None and list(owner._staged) == list(COMMAND_POINTS):
-                        values = dict(owner._staged)
-                        seq = int(values.pop("seq"))
-                        with owner.lock:
-                            owner.inbox = (values, seq, time.perf_counter())
                     owner._staged = {}
 
+            def _applying(self, handle, request, kwargs):
+                """``handle(request)``: a DIRECT_OPERATE or an OPERATE, applied whole
+                or not at all; an OPERATE's points dnp3py answered NO_SELECT (no
+                SELECT, another one's values, or one older than ``select_timeout``) are
+                logged."""
+                owner._staged = {}
+                try:
+                    response = handle(request, **kwargs)
+                finally:
+                    staged, owner._staged = owner._staged, {}
+                if staged is not None and list(staged) == list(COMMAND_POINTS):
+                    values = dict(staged)
+                    seq = int(values.pop("seq"))
+                    with owner.lock:
+                        owner.inbox = (values, seq, time.perf_counter())
+                refused = [COMMAND_POINTS[i] if i < len(COMMAND_POINTS) else f"index {i}"
+                           for i, status in _statuses(response) if status == NO_SELECT]
+                if refused:
+                    with owner.lock:
+                        owner.rejected.append((time.perf_counter(),
+                                               f"OPERATE of {', '.join(refused)}",
+                                               "no matching SELECT (NO_SELECT)"))
+                return response
+
         return Bounded(database=database, handler=handler,
-                       config=OutstationConfig(address=OUTSTATION, master_address=MASTER))
+                       config=OutstationConfig(address=OUTSTATION, master_address=MASTER,
+                                               select_timeout=self.select_timeout))
 
     async def start(self, host: str = "127.0.0.1") -> int:
         """Listen on ``host`` (a port the kernel chooses); return the port."""
@@ -422,11 +501,14 @@ class Centre:
     then, as the outstation's internal indications ask, a time synchronization
     (a WRITE of g50v1, the wall clock) and the clearing of DEVICE_RESTART (a WRITE
     of g80v1 index 7).  ``startup_iin`` holds the indications it found, ``iin`` the
-    latest response's."""
+    latest response's.  With ``select_before_operate`` a command is a SELECT, then an
+    OPERATE of the same block."""
 
     def __init__(self, port: int, loop: EventLoop, timeout: float = 10.0,
-                 host: str = "127.0.0.1") -> None:
+                 host: str = "127.0.0.1", select_before_operate: bool = False) -> None:
         from dnp3.master import DefaultSOEHandler, Master, MasterConfig, MasterTcpRunner
+        check_flag("select_before_operate", select_before_operate)
+        self.select_before_operate = select_before_operate
         self.loop, self.handler = loop, DefaultSOEHandler()
         self.master = Master(handler=self.handler,
                              config=MasterConfig(address=MASTER, outstation_address=OUTSTATION))
@@ -460,16 +542,17 @@ class Centre:
                                               seq=self.master.next_request_sequence()))
 
     def send(self, values: dict[str, float], seq: int) -> None:
-        """DIRECT_OPERATE the four analog outputs (g41v4)."""
-        from dnp3.application.builder import build_direct_operate_request
+        """DIRECT_OPERATE the four analog outputs (g41v4), or SELECT and OPERATE them."""
+        from dnp3.application.builder import (build_direct_operate_request,
+                                              build_operate_request, build_select_request)
         from dnp3.application.fragment import ObjectBlock
         from dnp3.application.qualifiers import ObjectHeader
-        block = _ao_block(values, seq)
-        request = build_direct_operate_request(
-            objects=(ObjectBlock(header=ObjectHeader(group=41, variation=4, qualifier=0x17),
-                                 data=block[3:]),),
-            seq=self.master.next_request_sequence())
-        self._request(request)
+        objects = (ObjectBlock(header=ObjectHeader(group=41, variation=4, qualifier=0x17),
+                               data=_ao_block(values, seq)[3:]),)
+        builders = ((build_select_request, build_operate_request) if self.select_before_operate
+                    else (build_direct_operate_request,))
+        for build in builders:
+            self._request(build(objects=objects, seq=self.master.next_request_sequence()))
 
     def poll(self) -> dict:
         """Read the report (a range poll of g30v1, points 0-8)."""

@@ -51,12 +51,16 @@ class Link:
         The centre's AGC does not integrate while the filter holds against it.
     impairment : Impairment, optional
         The network's delay, jitter and loss (:class:`lfc.wire.relay.Impairment`).
+    select_before_operate : bool
+        DNP3: the centre selects, then operates; the outstations take nothing else.
     """
 
     def __init__(self, n_areas: int, transport, policies: list, times: np.ndarray,
                  period: float, agc_gain: float | None = None,
-                 anti_windup: bool = False, impairment: Impairment | None = None) -> None:
+                 anti_windup: bool = False, impairment: Impairment | None = None,
+                 select_before_operate: bool = False) -> None:
         self.n_areas, self.transport, self.policies = n_areas, transport, policies
+        self.device = {"select_before_operate": True} if select_before_operate else {}
         self.times, self.period = times, period
         self.agc_gain, self.anti_windup = agc_gain, anti_windup
         self.impairment = impairment
@@ -91,7 +95,7 @@ class Link:
         self.loop = tr.EventLoop()
         self.stations, self.relays, self.centres = [], [], []
         for a in range(self.n_areas):
-            station = tr.Outstation()
+            station = tr.Outstation(**self.device)
             port = self.loop.run(station.start(generator_address(a)))
             relay = tr.Relay(port, tr.Codec, *self._hooks(a), host=relay_address(a),
                              upstream_host=generator_address(a), impairment=self.impairment,
@@ -100,7 +104,7 @@ class Link:
             self.relays.append(relay)
             self.ports.append((self.loop.run(relay.start()), port))
             self.centres.append(tr.Centre(self.ports[-1][0], self.loop,
-                                          host=relay_address(a)))
+                                          host=relay_address(a), **self.device))
 
     def close(self) -> None:
         """Hang up, stop the relays and outstations, stop the event loop."""

@@ -246,6 +246,10 @@ class Codec:
         return frame
 
     @staticmethod
+    def downstream(frame: bytes, session: dict) -> bytes:
+        return frame
+
+    @staticmethod
     def command(frame: bytes) -> tuple[dict[str, float], int] | None:
         values = write_values(frame)
         return None if values is None else read_command(values)

@@ -15,6 +15,10 @@ A protocol module (:mod:`lfc.wire.modbus`, :mod:`lfc.wire.dnp3`) provides a
 * ``upstream(frame, session) -> bytes``: a frame from the outstation as the centre
   then gets it (the session: a dict per connection the codec keeps what it needs in,
   e.g. DNP3's internal indications and transport sequence);
+* ``downstream(frame, session) -> bytes or None``: a frame from the centre that is not a
+  command as the outstation then gets it, or None to answer it (``ack``) instead — a
+  DNP3 OPERATE made to match what the relay made of its SELECT, the period's command
+  as forwarded (None: dropped), which the relay keeps in ``session["command"]``;
 * ``report(frame) -> dict or None`` and ``with_report(frame, report) -> bytes``:
   the same for the report going back.
 
@@ -239,12 +243,14 @@ class Relay:
                 self._note("centre>relay", frame)
                 command = codec.command(frame)
                 if command is not None:
-                    forwarded = self.on_command(*command)
-                    if forwarded is None:
-                        await self._send(c_writer, "relay>centre", codec.ack(frame, session))
-                        continue
-                    frame = codec.with_command(frame, *forwarded)
-                await self._send(g_writer, "relay>generator", frame)
+                    forwarded = session["command"] = self.on_command(*command)
+                    sent = None if forwarded is None else codec.with_command(frame, *forwarded)
+                else:
+                    sent = codec.downstream(frame, session)
+                if sent is None:
+                    await self._send(c_writer, "relay>centre", codec.ack(frame, session))
+                    continue
+                await self._send(g_writer, "relay>generator", sent)
         if isinstance(g_writer, _Impaired):    # the centre hung up: so does the relay,
             await g_writer.close()            # upstream, once what it holds has left
             g_writer = g_writer.writer

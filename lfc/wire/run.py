@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lfc._validate import check_seed
+from lfc._validate import check_flag, check_seed
 from lfc.engine import check_area_keys
 from lfc.filters import SafetyFilter
 from lfc.filters.coupled import CoupledFilter
@@ -154,7 +154,8 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
              dt: float = 0.001, control_period: float = 0.01, relays=None,
              anti_windup: bool = False, agc: str = "generator", mode: str = "lockstep",
              feedforward: bool | None = None, capture: str | Path | None = None,
-             impairment: Impairment | None = None) -> WireResult:
+             impairment: Impairment | None = None,
+             select_before_operate: bool = False) -> WireResult:
     """Run one area, or every area of a grid, over the wire (module docstring).
 
     Parameters
@@ -201,6 +202,10 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
         made in the relay (:class:`lfc.wire.relay.Impairment`).  In lockstep it
         slows the run and changes nothing else; in real time a command that arrives
         after its tick is not waited for.
+    select_before_operate : bool
+        DNP3 only: every command is a SELECT and then an OPERATE of the same values,
+        and the outstations refuse a DIRECT_OPERATE (:class:`lfc.wire.dnp3.Outstation`);
+        the man in the middle rewrites (or drops and answers) both alike.
 
     Returns
     -------
@@ -226,12 +231,16 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
         raise ValueError(f"impairment must be an lfc.wire.relay.Impairment or None, got "
                          f"{impairment!r}")
     check_seed("seed", seed)
+    check_flag("select_before_operate", select_before_operate)
+    if select_before_operate and protocol != "dnp3":
+        raise ValueError(f"select_before_operate is DNP3's (SELECT, then OPERATE); "
+                         f"protocol {protocol!r} has no such function: use protocol='dnp3'")
     if testbed is not None:
         return _on_andes(params, testbed, duration=duration, attack=attack, scc=scc,
                          protocol=protocol, load=load, noise_std=noise_std, seed=seed,
                          control_period=control_period, relays=relays,
                          anti_windup=anti_windup, agc=agc, mode=mode, capture=capture,
-                         impairment=impairment)
+                         impairment=impairment, select_before_operate=select_before_operate)
     single = isinstance(params, LFCParams)
     grid = as_grid(params)
     n_a = grid.n_areas
@@ -275,7 +284,8 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
     plant = LinearGrid(grid, loads, n_steps, ratio, dt, relays)
 
     link = Link(n_a, transport(protocol), policies, np.arange(n_ctrl) * ratio * dt, period,
-                None if local else k_freq[0] * period, anti_windup, impairment)
+                None if local else k_freq[0] * period, anti_windup, impairment,
+                select_before_operate)
 
     def generate(j: int, lateness: float) -> None:
         """Every generator at control sample j: take the command, filter, then the
@@ -310,14 +320,16 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
                 "scc": repr(filters), "load": repr(loads), "anti_windup": anti_windup,
                 "agc": agc, "mode": mode, "feedforward": feedforward,
                 "capture": None if capture is None else str(capture), "ports": link.ports,
-                "impairment": repr(impairment)}
+                "impairment": repr(impairment),
+                "select_before_operate": select_before_operate}
     sim = plant.result(single, tc, [gen.ctrl for gen in gens], filters, settings)
     return WireResult(sim, *link.outcome(n_ctrl), settings)
 
 
 def _on_andes(case, kind: str, *, duration: float, attack, scc, protocol: str, load,
               noise_std, seed: int, control_period: float, relays, anti_windup: bool,
-              agc: str, mode: str, capture, impairment) -> WireResult:
+              agc: str, mode: str, capture, impairment,
+              select_before_operate: bool) -> WireResult:
     """:func:`run_wire` on an ANDES case: the microgrid (one area) or a grid (one
     link per area), in lockstep, the integrator at the generators; the
     generator sides and their attacks are :func:`lfc.simulate`'s on the case."""
@@ -337,7 +349,8 @@ def _on_andes(case, kind: str, *, duration: float, attack, scc, protocol: str, l
     policies = [WireAttack(attacks.get(a, [])) for a in range(n_a)]
     n_ctrl = int(np.ceil(duration / control_period - 1e-9))
     link = Link(n_a, transport(protocol), policies, np.arange(n_ctrl) * control_period,
-                control_period, impairment=impairment)
+                control_period, impairment=impairment,
+                select_before_operate=select_before_operate)
     common = dict(duration=duration, relays=relays, noise_std=noise_std, seed=seed,
                   control_period=control_period, anti_windup=anti_windup, case=case,
                   network=link)
@@ -354,7 +367,8 @@ def _on_andes(case, kind: str, *, duration: float, attack, scc, protocol: str, l
                 "filter": repr(scc), "load": repr(load), "anti_windup": anti_windup,
                 "agc": agc, "mode": mode,
                 "capture": None if capture is None else str(capture), "ports": link.ports,
-                "impairment": repr(impairment)}
+                "impairment": repr(impairment),
+                "select_before_operate": select_before_operate}
     return WireResult(sim, *link.outcome(n_ctrl), settings)
 
 
