@@ -28,7 +28,9 @@ The cache.  numba keys a cached function on its own source file only, but these
 functions inline each other across modules (the engine inlines the filters), so
 an edit of one file would leave its callers' machine code stale.  Importing this
 module registers a cache locator for this package's functions whose stamp is a
-hash of every source file that compiles code: any edit recompiles them all
+hash of every source file that names this module: the ones that compile code, and
+``lfc.filters``, whose order of registration gives the compiled dispatcher's codes
+(:func:`lfc.filters.dispatch.assign`).  Any edit recompiles them all
 (:mod:`lfc.warmup` compiles the loops once).  It applies to functions in this package
 only; so does the guard it installs against a damaged cache file (:mod:`lfc._numba_cache`).
 """
@@ -51,7 +53,8 @@ _PACKAGE = Path(__file__).resolve().parent
 
 @functools.lru_cache(maxsize=1)
 def _compiled_sources_digest() -> bytes:
-    """Hash of every source file of this package that compiles functions."""
+    """Hash of every source file of this package that names this module (module
+    docstring)."""
     digest = hashlib.sha256(nb.__version__.encode())
     for path in sorted(_PACKAGE.rglob("*.py")):
         text = path.read_bytes()

@@ -34,7 +34,7 @@ from lfc._validate import ParameterTypeError, check_index
 from lfc.estimation import (KalmanFilter, check_noise_std, kf_correct, kf_predict,
                             measurement_std)
 from lfc.filters.base import ACTIVE, ALARM_BITS, MAX_ABS_INPUT, MEMORY, OUTSIDE
-from lfc.filters.dispatch import GRID_WIDE, decide, decide_grid, grid_wide
+from lfc.filters.dispatch import decide, decide_grid, grid_wide, is_grid_wide
 from lfc.model import LFCParams
 from lfc.multiarea import N_AREA_STATES
 from lfc.relays import relay_sample
@@ -783,7 +783,7 @@ def check_load_measured(filters: dict, estimator, feedforward: bool) -> None:
     if feedforward or estimator is not None:
         return
     for a, scc in filters.items():
-        if getattr(scc, "method_id", None) in GRID_WIDE:
+        if is_grid_wide(scc):
             continue
         bound = getattr(getattr(scc, "options", None), "recheck_bound", 0.0)
         if bound > 0:

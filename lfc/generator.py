@@ -16,7 +16,7 @@ from lfc.engine import (ACE, DW_MEAS, N_CTRL, N_KF, PC, ROCOF_MEAS, SENSOR_CHANN
                         sensor_reading, signal_value)
 from lfc.filters import SafetyFilter
 from lfc.filters.base import MEMORY
-from lfc.filters.dispatch import GRID_WIDE, scratch_size
+from lfc.filters.dispatch import grid_wide_methods, is_grid_wide, scratch_size
 from lfc.model import LFCParams
 
 #: what a generator side without sensor attacks keeps of its reports: nothing
@@ -83,7 +83,7 @@ class GeneratorSide:
             scc.check_period(period)
         self.tc, self.scc = tc, scc
         self.noise = make_noise(noise_std, len(tc), seed)
-        if scc is not None and scc.method_id in GRID_WIDE:   # its grid Kalman filter, if
+        if is_grid_wide(scc):   # its grid Kalman filter, if
             scc.check_estimator(estimator, noise_std)        # any, is shared: its state and
             kf = scc.kalman                   # measurements come with step's grid (area 0's)
         else:
@@ -149,8 +149,8 @@ class GeneratorSide:
         (:mod:`lfc.filters.coupled`) also reads ``grid`` (:class:`GridReading`;
         its estimator's fields exactly when it runs on its grid Kalman estimate)."""
         estimates = self.est >= 0
-        if self.method in GRID_WIDE and (grid is None
-                                       or (grid.measurements is not None) != estimates):
+        if self.method in grid_wide_methods() and (
+                grid is None or (grid.measurements is not None) != estimates):
             raise ValueError("the coupled filter needs grid=GridReading(area, state, commands, "
                              "loads), and on its estimate also (measurements, estimate, "
                              "estimator); without it, none of them")

@@ -23,7 +23,7 @@ from lfc.engine import (CHANNELS, DW_MEAS, LOAD, METRICS, N_CHANNELS, N_CTRL, N_
 from lfc.sensor_attacks import FREEZE, REPLAY
 from lfc.filters import SafetyFilter
 from lfc.filters.coupled import CoupledFilter, check_coupled
-from lfc.filters.dispatch import GRID_WIDE, scratch_size
+from lfc.filters.dispatch import grid_wide_methods, scratch_size
 from lfc.lanes import LANE_MIN_FILL, LaneWork, lane_blocks, run_lanes
 from lfc.load_attacks import NO_FOLLOWING, FollowingLoad
 from lfc.model import LFCParams
@@ -238,7 +238,8 @@ class Scenarios:
             f_i = rows.index[:, 0, 2]
             fit = ((rows.relay_noise[:, 0, 0] == 0.0) & (rows.relay_noise[:, 0, 1] == 0.0)
                    & np.isin(kinds[:, 0, LOAD], (STEP, NONE)) & (rows.following[:, 0, 0] == 0.0)
-                   & ((f_i < 0) | ~np.isin(filters.methods[np.maximum(f_i, 0)], GRID_WIDE)))
+                   & ((f_i < 0)
+                      | ~np.isin(filters.methods[np.maximum(f_i, 0)], grid_wide_methods())))
             blocks, left = lane_blocks(rows.plant_of, np.flatnonzero(fit), LANE_MIN_FILL)
             run_lanes(timing, plants, rows, samples, estimators, filters, relays, out, blocks,
                       LaneWork.sized(estimators.a.shape[1], reports))

@@ -246,7 +246,7 @@ def test_the_cvxpy_reference_in_the_compiled_loop_applies_the_closed_forms_comma
 
 # -- grid-wide filters (the coupled certificate): the same checks, on a grid ---------------
 TWO, RELAYS = lfc.MultiAreaParams.two_area(), lfc.RelaySettings()
-GRID_KINDS = ("coupled",)       # built by name through lfc.filters.build
+GRID_KINDS = tuple(lfc.filters.GRID_REGISTRY)   # built by name through lfc.filters.build
 
 
 def grid_filter(kind: str):
@@ -254,10 +254,11 @@ def grid_filter(kind: str):
 
 
 def test_every_grid_wide_method_is_in_this_suite():
-    """A method the engine dispatches with the whole grid (``GRID_WIDE``) is one of
-    ``GRID_KINDS``: registering one adds it here or fails."""
-    from lfc.filters.dispatch import GRID_WIDE
-    assert {grid_filter(kind).method_id for kind in GRID_KINDS} == set(GRID_WIDE)
+    """A method the engine dispatches with the whole grid
+    (:func:`lfc.filters.dispatch.grid_wide_methods`) is one of ``GRID_KINDS``:
+    registering one adds it here."""
+    from lfc.filters.dispatch import grid_wide_methods
+    assert {grid_filter(kind).method_id for kind in GRID_KINDS} == set(grid_wide_methods())
 
 
 @pytest.mark.parametrize("kind", GRID_KINDS)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import lfc
-from lfc.filters import base, certified, contract, coupled, coupled_kernel, paper
+from lfc.filters import base, certified, contract, coupled_kernel, paper
 from lfc.filters.base import Layout
 from lfc.linear_grid import area_filter
 
@@ -98,20 +98,66 @@ def test_every_compiled_method_declares_its_layout():
         assert isinstance(module.LAYOUT, base.Layout), module.__name__
 
 
-def test_method_ids_come_from_one_table():
-    """The compiled dispatchers' codes are ``METHOD_IDS``, distinct; no module writes
-    a method's code as a number."""
-    from lfc.filters import REGISTRY
-    codes = {name: backend.method_id for name, backend in REGISTRY.items()}
-    assert codes == {name: base.METHOD_IDS[name] for name in codes}
-    assert coupled.METHOD_ID == coupled.CoupledFilter.method_id == base.METHOD_IDS["coupled"]
-    assert len(set(base.METHOD_IDS.values())) == len(base.METHOD_IDS)
+def test_method_ids_are_given_by_registration_and_dispatch_to_their_modules_decision():
+    """The compiled dispatchers' codes are given by ``register`` / ``register_grid``
+    (``lfc.filters.dispatch.assign``), distinct; no module writes a code as a number; the
+    dispatcher sends each code to its module's compiled decision, and a grid-wide code
+    only to ``decide_grid``."""
+    from lfc.filters import GRID_REGISTRY, REGISTRY, dispatch
+    compiled = {n: b for n, b in REGISTRY.items() if b.jit} | GRID_REGISTRY
+    codes = [b.method_id for b in compiled.values()]
+    assert sorted(codes + [dispatch.PYTHON]) == list(range(len(compiled) + 1))
+    assert dispatch.grid_wide_methods() == tuple(b.method_id for b in GRID_REGISTRY.values())
     for path in sorted(Path(lfc.__file__).parent.rglob("*.py")):
         for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, ast.Assign) and isinstance(node.value, ast.Constant) \
-                    and type(node.value.value) is int:
-                names = [t.id for t in node.targets if isinstance(t, ast.Name)]
-                assert not {"method_id", "METHOD_ID"} & set(names), f"{path}:{node.lineno}"
+            if isinstance(node, ast.Assign) and isinstance(node.value, (ast.Constant, ast.Dict)):
+                names = {t.id for t in node.targets if isinstance(t, ast.Name)}
+                assert not {"method_id", "METHOD_ID", "METHOD_IDS"} & names, \
+                    f"{path}:{node.lineno}"
+    x, mem = np.array([0.0, 0.0, 0.0, 0.01, 0.02]), np.zeros(base.MEMORY)
+    for name, backend in REGISTRY.items():
+        f = lfc.SafetyFilter(P, RELAYS, method=name)
+        module = __import__(backend.__module__, fromlist=["decide"])
+        mem[:] = 0.0
+        got = dispatch.decide(f.method_id, f.data, x, 0.5, 0.0, mem)
+        mem[:] = 0.0
+        assert got == module.decide(f.data, x, 0.5, 0.0, mem), name
+
+
+def test_a_compiled_method_is_registered_with_the_package_or_refused():
+    """Codes are closed once ``lfc.filters`` is imported (the compiled dispatchers are
+    written from them): a compiled method registered later, or one outside the package
+    (its dispatch would not be cached with it), is refused saying what to do."""
+    from lfc.filters import dispatch, register
+    from lfc.filters.paper import PaperFilter
+
+    class Late(PaperFilter):
+        name = "late"
+    Late.__module__ = "lfc.filters.paper"
+    with pytest.raises(RuntimeError, match="given when lfc.filters is imported"):
+        register(Late)
+    Late.__module__ = "elsewhere"
+    with pytest.raises(ValueError, match="must be a module of lfc, got Late of elsewhere"):
+        dispatch.assign(Late)
+    assert "late" not in lfc.filters.available()
+
+
+def test_the_order_of_registration_is_part_of_the_compiled_codes_cache_stamp():
+    """The codes compiled into the dispatcher follow the order of registration, so the
+    one file that registers (``lfc.filters``; no other module of the package calls
+    ``register``, ``register_grid`` or ``assign``) is in the cache stamp of the compiled
+    code (``lfc._jit``: the files that name it): a reordering recompiles instead of
+    running a cached dispatch to the wrong method."""
+    root = Path(lfc.__file__).parent
+    registering = {root / "filters" / "__init__.py"}
+    for path in sorted(root.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if (isinstance(node, ast.ImportFrom) and node.module in {"lfc.filters",
+                                                                     "lfc.filters.dispatch"}
+                    and {"register", "register_grid", "assign"} & {a.name for a in node.names}):
+                registering.add(path)
+    assert registering == {root / "filters" / "__init__.py"}
+    assert "lfc._jit" in (root / "filters" / "__init__.py").read_text()
 
 
 def test_build_is_the_one_way_to_build_a_filter_by_name():
@@ -183,7 +229,7 @@ def test_no_private_name_is_imported_from_another_module():
 def test_the_engine_imports_no_particular_filter():
     """The compiled loop and the generator side reach every filter, an area's or a
     grid-wide one, through ``lfc.filters.dispatch`` (``decide``, ``decide_grid``,
-    ``GRID_WIDE``): a new filter is its module and its registration, not an edit of
+    ``grid_wide``): a new filter is its module and its registration, not an edit of
     the engine."""
     allowed = {"lfc.filters", "lfc.filters.base", "lfc.filters.dispatch"}
     for name in ("lfc/engine.py", "lfc/lanes.py", "lfc/generator.py"):

@@ -10,14 +10,17 @@ many (:meth:`SafetyFilter.filter_batch`).  A filter never raises for numeric
 trouble and always returns a finite command; ``FilterInfo`` says what it did.
 
 Adding a method: write its module (options, backend, a compiled ``decide`` or
-a Python ``decide_python`` with ``jit = False``), then :func:`register` it; a
-compiled one also gets its line in :func:`lfc.filters.dispatch.decide`
-(numba dispatches on codes known when it compiles).  ``tests/test_conformance.py``
-checks every registered method.
+a Python ``decide_python`` with ``jit = False``), then :func:`register` it here;
+registering gives a compiled one its code in the compiled dispatcher
+(:func:`lfc.filters.dispatch.assign`), in the order of the calls below; this file is
+therefore part of the compiled code's cache stamp (:mod:`lfc._jit`).
+``tests/test_conformance.py`` checks every registered method.
 
-A grid's coupled certificate (:mod:`lfc.filters.coupled`) is not a method here:
-it reads the whole grid's state, not one area's, and is shared by the areas
-(``filters={i: "coupled"}`` in :func:`lfc.simulate`).
+A grid-wide filter (the coupled certificate, :mod:`lfc.filters.coupled`) is not a
+method of :class:`SafetyFilter`: it reads the whole grid's state, not one area's, and
+is shared by the areas (``filters={i: "coupled"}`` in :func:`lfc.simulate`).  Its
+class is built as ``cls(grid, relays, control_period=..., noise_std=...)``, its module
+defines its compiled ``decide_grid``, and :func:`register_grid` registers it.
 """
 
 from __future__ import annotations
@@ -34,7 +37,7 @@ from lfc.filters.base import (ALARM_BITS, ALARM_FLAGS, MEMORY, Backend, FilterIn
 from lfc.filters.certified import CertifiedFilter, CertifiedOptions
 from lfc.filters.contract import ContractFilter, ContractOptions
 from lfc.filters.coupled import CoupledFilter
-from lfc.filters.dispatch import PYTHON, decide, decide_many, register_python
+from lfc.filters.dispatch import PYTHON, assign, close, decide, decide_many, register_python
 from lfc.filters.paper import (CONFLICT_RULES, DEFAULT_READING, OUTSIDE_RULES, PREDICTIONS,
                                PaperFilter, PaperOptions)
 from lfc.model import STATES, LFCParams
@@ -44,9 +47,11 @@ from lfc.relays import RelaySettings, relays_or_default
 __all__ = ["ALARM_BITS", "ALARM_FLAGS", "CONFLICT_RULES", "DEFAULT_READING", "METHODS",
            "OUTSIDE_RULES", "PREDICTIONS", "CertifiedOptions", "ContractOptions", "FilterInfo",
            "PaperOptions", "SafetyFilter", "alarm_mask", "available", "binding_names", "build",
-           "option_table", "options_of", "register"]
+           "option_table", "options_of", "register", "register_grid"]
 
 REGISTRY: dict[str, type[Backend]] = {}
+#: the grid-wide filters, by name (:func:`register_grid`)
+GRID_REGISTRY: dict[str, type] = {}
 
 
 def register(backend: type[Backend]) -> type[Backend]:
@@ -57,13 +62,29 @@ def register(backend: type[Backend]) -> type[Backend]:
         raise ValueError(f"a filter method needs a new name, got {backend.name!r}")
     if not (isinstance(backend.Options, type) and issubclass(backend.Options, Options)):
         raise ValueError(f"{backend.__name__}.Options must be an Options dataclass")
+    if backend.jit:
+        assign(backend)
     REGISTRY[backend.name] = backend
     return backend
+
+
+def register_grid(cls: type) -> type:
+    """Make ``cls`` (a compiled filter of the whole grid, ``grid_wide = True``; module
+    docstring) buildable by its ``name`` in :func:`build` and give it its code."""
+    if not (isinstance(cls, type) and getattr(cls, "grid_wide", False)):
+        raise ParameterTypeError(f"cls must be a class with grid_wide = True, got {cls!r:.80}")
+    if not getattr(cls, "name", "") or cls.name in REGISTRY or cls.name in GRID_REGISTRY:
+        raise ValueError(f"a grid-wide filter needs a new name, got {getattr(cls, 'name', '')!r}")
+    assign(cls)
+    GRID_REGISTRY[cls.name] = cls
+    return cls
 
 
 register(PaperFilter)
 register(CertifiedFilter)
 register(ContractFilter)
+register_grid(CoupledFilter)
+close()   # the compiled dispatchers' codes are given: a method registered later is Python
 METHODS = tuple(REGISTRY)   # the methods of this release (available() includes later ones)
 
 
@@ -90,10 +111,11 @@ def build(kind: str, plant: LFCParams | MultiAreaParams, area: int = 0,
     (``Backend.grid_options``: the certified filter's tie-line ``load_bound`` and
     the grid's command range, the contract filter's share of the grid's contract;
     the defaults on a single area) and ``control_period`` where the method has
-    one; ``"coupled"`` is the grid's coupled certificate
-    (:class:`lfc.filters.coupled.CoupledFilter`, its defaults; the same object for
-    every area, which must all have it; ``noise_std``: the noise of its grid
-    Kalman estimate), built once per grid, relays, period and noise.
+    one; a grid-wide kind (:data:`GRID_REGISTRY`: ``"coupled"``, the grid's coupled
+    certificate :class:`lfc.filters.coupled.CoupledFilter`) is its class with its
+    defaults, the same object for every area, which must all have it
+    (``noise_std``: the noise of its grid Kalman estimate), built once per grid,
+    relays, period and noise.
 
     Raises
     ------
@@ -106,13 +128,13 @@ def build(kind: str, plant: LFCParams | MultiAreaParams, area: int = 0,
     if grid is None and not isinstance(plant, LFCParams):
         raise ParameterTypeError(f"plant must be an LFCParams or a MultiAreaParams, got "
                                  f"{type(plant).__name__}")
-    if kind == "coupled":
+    if isinstance(kind, str) and kind in GRID_REGISTRY:
         if grid is None:
-            raise ValueError("'coupled' is a grid's certificate: give a MultiAreaParams")
-        return _coupled(grid, relays, control_period, noise_std, area)
+            raise ValueError(f"{kind!r} is a grid's certificate: give a MultiAreaParams")
+        return _grid_wide(GRID_REGISTRY[kind], grid, relays, control_period, noise_std, area)
     if not isinstance(kind, str) or kind not in REGISTRY:
         error = ValueError if isinstance(kind, str) else ParameterTypeError
-        raise error(f"filters[{area}] must be one of {(*available(), 'coupled')}, a "
+        raise error(f"filters[{area}] must be one of {(*available(), *GRID_REGISTRY)}, a "
                     f"SafetyFilter or None, got {kind!r:.80}")
     backend = REGISTRY[kind]
     options = {**backend.Options.for_period(control_period),
@@ -128,16 +150,16 @@ def build(kind: str, plant: LFCParams | MultiAreaParams, area: int = 0,
                          f"yourself") from err
 
 
-def _coupled(grid: MultiAreaParams, relays: RelaySettings, control_period: float,
-             noise_std: tuple[float, float] | None, area: int) -> CoupledFilter:
+def _grid_wide(cls: type, grid: MultiAreaParams, relays: RelaySettings,
+               control_period: float, noise_std: tuple[float, float] | None, area: int):
     noise = None if noise_std is None else tuple(noise_std)
     try:
-        return built_once(lambda: CoupledFilter(grid, relays, control_period=control_period,
-                                                noise_std=noise),
-                          "coupled_filter", grid, relays, control_period, noise)
+        return built_once(lambda: cls(grid, relays, control_period=control_period,
+                                      noise_std=noise),
+                          f"{cls.name}_filter", grid, relays, control_period, noise)
     except ValueError as err:
-        raise ValueError(f"filters[{area}]='coupled' (the default options) cannot be "
-                         f"built: {err}; build a CoupledFilter with other options and give "
+        raise ValueError(f"filters[{area}]={cls.name!r} (the default options) cannot be "
+                         f"built: {err}; build a {cls.__name__} with other options and give "
                          f"it to every area (with horizon='auto' its horizon also follows a "
                          f"legitimate load step: held_after_step)") from err
 

@@ -40,10 +40,6 @@ _FLAG_BITS = dict(zip(ALARM_FLAGS, (ACTIVE, INFEASIBLE, OUTSIDE, INVALID, SOLVER
 _BINDING = (("frequency", BIND_FREQ), ("rocof", BIND_ROCOF), ("certified", BIND_CERT),
             ("u_min", BIND_UMIN), ("u_max", BIND_UMAX))
 MEMORY = 3  # floats of memory per scenario, for every method
-#: every method's code in the compiled dispatchers (:func:`lfc.filters.dispatch.decide`,
-#: the engine's grid-wide branch for ``"coupled"``), the one table of them; ``"python"``:
-#: a filter that is not compiled, called back from compiled code
-METHOD_IDS = {"paper": 0, "certified": 1, "coupled": 2, "contract": 3, "python": 99}
 CONSTRAINTS = ("frequency", "rocof")   # the barrier constraints, in the order of the outputs
 MAX_ABS_INPUT = 1e6  # pu, pu/s: a state, command or load beyond is a corrupted message
 
@@ -276,12 +272,13 @@ class Layout:
 class Backend:
     """A filter method: options, compiled data, memory, and how to explain a call.
 
-    Subclasses set ``name``, ``Options`` (their :class:`Options` dataclass) and
-    ``method_id`` (the compiled dispatcher's code, ``METHOD_IDS[name]``;
-    a backend with ``jit = False`` is called back from compiled code instead and
-    needs none), build ``data`` (float64, read by their compiled ``decide``) in
-    ``__init__``, and implement :meth:`reason` and :meth:`details`.  The
-    options read through as attributes (``backend.alpha``).
+    Subclasses set ``name`` and ``Options`` (their :class:`Options` dataclass),
+    define their compiled ``decide(fd, x, u_ref, p, mem)`` in their module (its code,
+    ``method_id``, is given when they are registered: :func:`lfc.filters.dispatch.assign`;
+    a backend with ``jit = False`` is called back from compiled code instead and needs
+    none), build ``data`` (float64, read by ``decide``) in ``__init__``, and implement
+    :meth:`reason` and :meth:`details`.  The options read through as attributes
+    (``backend.alpha``).
     """
 
     name: str = ""

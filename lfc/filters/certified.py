@@ -139,7 +139,7 @@ from scipy.linalg import expm, solve_continuous_lyapunov
 from lfc._jit import inline, maxnum, minnum
 from lfc._validate import check_nonnegative, check_pair, check_positive, check_range
 from lfc.estimation import KalmanFilter, check_noise_std, measurement_std
-from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, OUTSIDE, Backend, Layout, METHOD_IDS,
+from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, OUTSIDE, Backend, Layout,
                               Options, applied_flags, built_once, check_limits, given,
                               hold_invalid, option, valid_input)
 from lfc.filters.bounds import (band_moves_terminal, curvature_gains, expm_at, intersample,
@@ -724,7 +724,7 @@ class CertifiedFilter(Backend):
     :class:`CertifiedOptions`: clip to the certified interval of
     :class:`CertifiedSet`, or hold the last certified command."""
 
-    name, method_id, Options = "certified", METHOD_IDS["certified"], CertifiedOptions
+    name, Options = "certified", CertifiedOptions
 
     @classmethod
     def grid_options(cls, grid, area: int, relays: RelaySettings,

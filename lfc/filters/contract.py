@@ -77,7 +77,7 @@ from lfc._jit import inline
 from lfc._validate import (ParameterTypeError, check_flag, check_nonnegative, check_number,
                            check_positive)
 from lfc.filters.base import (ACTIVE, BIND_CERT, INVALID, MAX_ABS_INPUT, Backend, Layout,
-                              METHOD_IDS, Options, built_once, given, hold_invalid, option,
+                              Options, built_once, given, hold_invalid, option,
                               valid_input)
 from lfc.filters.certified import NUMERIC_MARGIN
 from lfc.filters.coupled_set import held_grid, output_rows
@@ -367,7 +367,7 @@ class ContractFilter(Backend):
     :class:`ContractOptions`): clip the command to ``[-a, a]`` and to within
     ``r T`` of the last one."""
 
-    name, method_id, Options = "contract", METHOD_IDS["contract"], ContractOptions
+    name, Options = "contract", ContractOptions
 
     @classmethod
     def grid_options(cls, grid, area: int, relays: RelaySettings,

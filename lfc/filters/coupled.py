@@ -111,15 +111,16 @@ import math
 
 import numpy as np
 
+from lfc._jit import inline
 from lfc._validate import (ParameterTypeError, as_float, check_array, check_index,
                            check_number, check_range)
-from lfc.filters.base import ACTIVE, BIND_CERT, INVALID, METHOD_IDS, OUTSIDE, built_once
-from lfc.filters.coupled_kernel import decide_once
+from lfc.filters.base import ACTIVE, BIND_CERT, INVALID, OUTSIDE, built_once
+from lfc.filters.coupled_kernel import N_R, decide_once, grid_estimate, rows_scratch
+from lfc.filters.coupled_kernel import decide as decide_rows
 from lfc.filters.coupled_set import CoupledOptions, CoupledSet
-from lfc.multiarea import MultiAreaParams, discretize_grid
+from lfc.multiarea import N_AREA_STATES, MultiAreaParams, discretize_grid
 from lfc.relays import RelaySettings
 
-METHOD_ID = METHOD_IDS["coupled"]   # the engine's code for it (lfc.engine.generator_period)
 AUTO_HORIZONS = (8.0, 12.0, 16.0, 20.0)   # s: horizon="auto"'s candidates, shortest first
 AUTO_HELD_MAX = 1.0   # s: how long "auto" lets a legitimate step leave AGC waiting (it restores
                       # in about 20 s on the grids of docs/coupled-certificate.md)
@@ -201,8 +202,9 @@ class CoupledFilter:
         with ``horizon="auto"``, if no candidate builds (each one's reason).
     """
 
-    method_id = METHOD_ID
-    name = "coupled"
+    #: a grid-wide method: its decision is :func:`decide_grid`, its ``method_id`` the code
+    #: :func:`lfc.filters.dispatch.assign` gives it
+    name, grid_wide = "coupled", True
 
     def __init__(self, params: MultiAreaParams, relays: RelaySettings, **options) -> None:
         if not isinstance(params, MultiAreaParams):
@@ -236,6 +238,10 @@ class CoupledFilter:
         opts = ", ".join(f"{k}={v!r}" for k, v in vars(self.options).items())
         return (f"CoupledFilter({self.params.n_areas} areas, {opts}; load budget "
                 f"{self.options.load_bound:g} + fit mismatch {self.mismatch:.4g} pu)")
+
+    def scratch_size(self) -> int:
+        """The scratch entries :func:`decide_grid` needs inside a simulation."""
+        return rows_scratch(self.data)
 
     def grid_state(self, areas: np.ndarray, exports: np.ndarray) -> np.ndarray:
         """The state :meth:`filter` reads, from what a plant meters: each area's five
@@ -390,3 +396,29 @@ def check_coupled(filters: dict, grid: MultiAreaParams, estimator,
         raise ValueError(f"the coupled filter was built for {built!r}, not for this grid's "
                          f"{grid.n_areas} areas and tie-lines {grid.tie}")
     coupled[0].check_estimator(estimator, noise_std)
+
+
+@inline
+def decide_grid(fd: np.ndarray, grid: tuple, estimate: tuple, first: bool, u_ref: float,
+                mem: np.ndarray, x_hat: np.ndarray) -> tuple:
+    """The coupled certificate's call at one area of the grid ``grid``
+    (:class:`lfc.engine.GridView`), as :func:`lfc.filters.dispatch.decide_grid` makes
+    it.  On the filter's grid Kalman estimate (``estimate``'s index >= 0, its matrices
+    :class:`lfc.engine.Estimate`'s) area 0's call steps the estimator (predicting from
+    the last sample unless ``first``) and every area reads it; the state the filter
+    sees is written to ``x_hat`` (5,).  Returns the ten values of
+    :func:`lfc.filters.coupled_kernel.decide` and the load it assumed for the area (pu)."""
+    area, grid_x, grid_u, grid_p, ym, xe, ks, sums = grid
+    est, ka, kb, kc, kg, _ = estimate
+    if est >= 0:       # the grid's Kalman filter (state ks, area 0's), stepped by area 0
+        if area == 0:
+            grid_p = grid_estimate(fd, ka, kb, kc, kg, ks, ym[:kc.shape[0]],
+                                   ym[kc.shape[0]:], grid_u, not first, xe)
+        else:
+            grid_p = ks[1, int(fd[N_R]):int(fd[N_R]) + len(grid_u)]
+        grid_x = xe
+        for r in range(N_AREA_STATES):
+            x_hat[r] = xe[N_AREA_STATES * area + r]
+    u, flags, h0, h1, m0, m1, q0, q1, d0, d1 = decide_rows(fd, grid_x, grid_u, grid_p,
+                                                           area, u_ref, mem, sums)
+    return u, flags, h0, h1, m0, m1, q0, q1, d0, d1, grid_p[area]

@@ -1,38 +1,39 @@
 """One compiled entry point for every filter method: :func:`decide` and :func:`decide_many`,
-and :func:`decide_grid` for the methods that read the whole grid (``GRID_WIDE``).
+and :func:`decide_grid` for the methods that read the whole grid (:func:`grid_wide`).
 
 The engine and :class:`lfc.SafetyFilter` both call these, so a filter runs the
 same compiled code whether it is called once, on a batch of states or inside a
 simulation; the engine imports no particular filter, only this module.
-A method is a code (``lfc.filters.base.METHOD_IDS``); a filter that is not
-compiled (``solver="cvxpy"``) is registered here and called back through
-``numba.objmode``.
+
+A method's code is given by :func:`assign` (``lfc.filters.register`` calls it), in the
+order of registration; nothing writes a code by hand.  A compiled method's module
+defines its decision: ``decide(fd, x, u_ref, p, mem)`` for one area or, for a class
+with ``grid_wide = True``, ``decide_grid(fd, grid, estimate, first, u_ref, mem,
+x_hat)`` (:func:`decide_grid`).  numba dispatches on codes it knows when it compiles,
+so the dispatchers' bodies are written from the table of codes when numba types them
+(:func:`_chain`), and the table is closed (:func:`close`) once ``lfc.filters`` has
+registered its methods.  The compiled code is cached with the package's sources
+(:mod:`lfc._jit`), which is why a compiled method must be a module of this package.
+A filter that is not compiled (``jit = False``, ``solver="cvxpy"``) is registered
+here with :func:`register_python` and called back through ``numba.objmode`` under the
+code :data:`PYTHON`.
 """
 
 from __future__ import annotations
 
+import sys
 import weakref
 
 import numba as nb
 import numpy as np
+from numba.extending import overload
 
 from lfc._jit import inline, jit
-from lfc.filters.base import METHOD_IDS
-from lfc.filters.certified import CertifiedFilter
-from lfc.filters.certified import decide as decide_certified
-from lfc.filters.contract import ContractFilter
-from lfc.filters.contract import decide as decide_contract
-from lfc.filters.coupled import CoupledFilter
-from lfc.filters.coupled_kernel import N_R as N_R_COUPLED
-from lfc.filters.coupled_kernel import decide as decide_coupled
-from lfc.filters.coupled_kernel import grid_estimate, rows_scratch
-from lfc.filters.paper import PaperFilter
-from lfc.filters.paper import decide as decide_paper
-from lfc.multiarea import N_AREA_STATES
 
-PAPER, CERTIFIED, CONTRACT, PYTHON = (PaperFilter.method_id, CertifiedFilter.method_id,
-                                     ContractFilter.method_id, METHOD_IDS["python"])
 _PYTHON: weakref.WeakValueDictionary = weakref.WeakValueDictionary()  # id -> backend
+#: by code: each method's compiled decision and whether it reads the whole grid
+_KERNELS: list[tuple[object, bool]] = []
+_open = [True]           # codes can be given (until close())
 
 
 def register_python(backend) -> np.ndarray:
@@ -68,6 +69,119 @@ def _decide_python(fd: np.ndarray, x: np.ndarray, u_ref: float, p: float,
     return u, flags, h0, h1, g0, g1, y0, y1, d0, d1
 
 
+def _add(kernel, grid: bool) -> int:
+    if not _open[0]:
+        raise RuntimeError("the compiled dispatchers' codes are given when lfc.filters is "
+                           "imported: register a compiled method there (a method registered "
+                           "later needs jit = False)")
+    _KERNELS.append((kernel, grid))
+    return len(_KERNELS) - 1
+
+
+def close() -> None:
+    """Close the table of codes (``lfc.filters`` calls it after registering its methods;
+    the compiled dispatchers are written from it)."""
+    _open[0] = False
+
+
+#: the code of a filter that is not compiled (:func:`register_python`)
+PYTHON = _add(_decide_python, False)
+
+
+def assign(backend: type) -> int:
+    """Give the compiled method ``backend`` (a class) its code, set as its ``method_id``
+    and returned; its decision is its module's ``decide`` or, with ``grid_wide = True``,
+    ``decide_grid`` (module docstring).
+
+    Raises
+    ------
+    ValueError
+        If the class is not of this package (its compiled dispatch could not be
+        cached with it) or its module has no such decision.
+    RuntimeError
+        Once the table is closed (:func:`close`).
+    """
+    grid = bool(getattr(backend, "grid_wide", False))
+    module, name = backend.__module__, "decide_grid" if grid else "decide"
+    if module.split(".")[0] != "lfc":
+        raise ValueError(f"a compiled method must be a module of lfc, got {backend.__name__} "
+                         f"of {module}: give it jit = False and a decide_python")
+    kernel = getattr(sys.modules.get(module), name, None)
+    if not isinstance(kernel, nb.core.registry.CPUDispatcher):
+        raise ValueError(f"{module} must define a numba-compiled {name} for "
+                         f"{backend.__name__}")
+    backend.method_id = _add(kernel, grid)
+    return backend.method_id
+
+
+def grid_wide_methods() -> tuple[int, ...]:
+    """The codes of the methods whose decision reads the whole grid (the engine hands
+    them every area's state, command and load: :func:`decide_grid`); the lanes, one
+    area at a time, do not run them."""
+    return tuple(code for code, (_, grid) in enumerate(_KERNELS) if grid)
+
+
+def is_grid_wide(filt) -> bool:
+    """Whether the filter ``filt`` (anything with a ``method_id``) reads the whole grid."""
+    return getattr(filt, "method_id", None) in grid_wide_methods()
+
+
+def _by_method(method, fd, x, u_ref, p, mem):
+    """Stub that numba replaces with the table's dispatch (:func:`_chain`)."""
+    raise NotImplementedError("compiled code only")
+
+
+def _grid_by_method(method, fd, grid, estimate, first, u_ref, mem, x_hat):
+    """Stub that numba replaces with the table's dispatch (:func:`_chain`)."""
+    raise NotImplementedError("compiled code only")
+
+
+def _is_grid_wide(method):
+    """Stub that numba replaces with the table's test (:func:`_is_grid_wide_impl`)."""
+    raise NotImplementedError("compiled code only")
+
+
+def _chain(name: str, grid: bool, args: str):
+    """A Python function ``impl(method, <args>)`` returning the decision of method
+    ``method`` of the kind ``grid``: an ``if`` per code, the last code of the kind
+    (for one area: :data:`PYTHON`, every other code) unconditional; written from the
+    table of codes."""
+    if _open[0]:
+        raise RuntimeError(f"{name} compiled before lfc.filters registered its methods")
+    codes = [code for code, (_, is_grid) in enumerate(_KERNELS) if is_grid == grid]
+    if not codes:
+        raise TypeError(f"{name}: no {'grid-wide ' if grid else ''}method is registered")
+    last = PYTHON if not grid else codes[-1]
+    namespace = {f"k{code}": _KERNELS[code][0] for code in codes}
+    lines = [f"def impl(method, {args}):"]
+    lines += [f"    if method == {code}:\n        return k{code}({args})"
+              for code in codes if code != last]
+    lines.append(f"    return k{last}({args})")
+    exec("\n".join(lines), namespace)   # the table's own functions, nothing else
+    return namespace["impl"]
+
+
+@overload(_by_method, inline="always")
+def _by_method_impl(method, fd, x, u_ref, p, mem):
+    return _chain("decide", False, "fd, x, u_ref, p, mem")
+
+
+@overload(_grid_by_method, inline="always")
+def _grid_by_method_impl(method, fd, grid, estimate, first, u_ref, mem, x_hat):
+    return _chain("decide_grid", True, "fd, grid, estimate, first, u_ref, mem, x_hat")
+
+
+@overload(_is_grid_wide, inline="always")
+def _is_grid_wide_impl(method):
+    if _open[0]:
+        raise RuntimeError("grid_wide compiled before lfc.filters registered its methods")
+    codes = grid_wide_methods()
+    namespace = {}
+    exec("def impl(method):\n    return " + (" or ".join(f"method == {c}" for c in codes)
+                                              or "False"), namespace)
+    return namespace["impl"]
+
+
 @jit
 def decide(method: int, fd: np.ndarray, x: np.ndarray, u_ref: float, p: float,
            mem: np.ndarray) -> tuple:
@@ -79,13 +193,7 @@ def decide(method: int, fd: np.ndarray, x: np.ndarray, u_ref: float, p: float,
     Compiled as a function of its own, not inlined: the engine's two loops call
     it once per control period, and link its machine code instead of compiling
     every filter into each of them (``lfc._jit``)."""
-    if method == PAPER:
-        return decide_paper(fd, x, u_ref, p, mem)
-    if method == CERTIFIED:
-        return decide_certified(fd, x, u_ref, p, mem)
-    if method == CONTRACT:
-        return decide_contract(fd, x, u_ref, p, mem)
-    return _decide_python(fd, x, u_ref, p, mem)
+    return _by_method(method, fd, x, u_ref, p, mem)
 
 
 @jit
@@ -104,47 +212,27 @@ def decide_many(method: int, fd: np.ndarray, x: np.ndarray, u_ref: np.ndarray, p
     return u
 
 
-#: the methods whose decision reads the whole grid (the engine hands them every area's
-#: state, command and load: :func:`decide_grid`); the lanes, one area at a time, do not
-#: run them
-COUPLED = CoupledFilter.method_id
-GRID_WIDE = (COUPLED,)
-
-
 @inline
 def grid_wide(method: int) -> bool:
-    """Whether ``method`` is one of ``GRID_WIDE`` (:func:`decide_grid` runs it)."""
-    return method == COUPLED
+    """Whether ``method`` reads the whole grid (:func:`grid_wide_methods`)."""
+    return _is_grid_wide(method)
 
 
 @inline
 def decide_grid(method: int, fd: np.ndarray, grid: tuple, estimate: tuple, first: bool,
                 u_ref: float, mem: np.ndarray, x_hat: np.ndarray) -> tuple:
-    """One call of the grid-wide filter ``method`` (``GRID_WIDE``: the coupled
-    certificate, :mod:`lfc.filters.coupled`) with data ``fd`` at one area of the grid
-    ``grid`` (:class:`lfc.engine.GridView`) and incoming command ``u_ref`` (pu); ``mem``
-    is the area's memory.  On the filter's grid Kalman estimate (``estimate``'s index
-    >= 0, its matrices :class:`lfc.engine.Estimate`'s) area 0's call steps the estimator
-    (predicting from the last sample unless ``first``) and every area reads it; the
-    state the filter sees is written to ``x_hat`` (5,).  Returns :func:`decide`'s ten
-    values and the load the filter assumed for this area (pu)."""
-    area, grid_x, grid_u, grid_p, ym, xe, ks, sums = grid
-    est, ka, kb, kc, kg, _ = estimate
-    if est >= 0:       # the grid's Kalman filter (state ks, area 0's), stepped by area 0
-        if area == 0:
-            grid_p = grid_estimate(fd, ka, kb, kc, kg, ks, ym[:kc.shape[0]],
-                                   ym[kc.shape[0]:], grid_u, not first, xe)
-        else:
-            grid_p = ks[1, int(fd[N_R_COUPLED]):int(fd[N_R_COUPLED]) + len(grid_u)]
-        grid_x = xe
-        for r in range(5):
-            x_hat[r] = xe[N_AREA_STATES * area + r]
-    u, flags, h0, h1, m0, m1, q0, q1, d0, d1 = decide_coupled(fd, grid_x, grid_u, grid_p,
-                                                              area, u_ref, mem, sums)
-    return u, flags, h0, h1, m0, m1, q0, q1, d0, d1, grid_p[area]
+    """One call of the grid-wide filter ``method`` (:func:`grid_wide`) with data ``fd``
+    at one area of the grid ``grid`` (:class:`lfc.engine.GridView`) and incoming command
+    ``u_ref`` (pu); ``mem`` is the area's memory, ``estimate`` the grid's Kalman filter
+    (:class:`lfc.engine.Estimate`; its index >= 0: on the estimate, which the method
+    steps, predicting from the last sample unless ``first``).  The state the filter
+    sees is written to ``x_hat`` (5,).  Returns :func:`decide`'s ten values and the
+    load the filter assumed for this area (pu)."""
+    return _grid_by_method(method, fd, grid, estimate, first, u_ref, mem, x_hat)
 
 
 def scratch_size(filt) -> int:
     """The scratch entries ``filt``'s compiled decision needs inside a simulation
-    (:class:`lfc.engine.Work`'s ``sums``): 0 but for a grid-wide method."""
-    return rows_scratch(filt.data) if filt.method_id in GRID_WIDE else 0
+    (:class:`lfc.engine.Work`'s ``sums``): its ``scratch_size()`` for a grid-wide
+    method, else 0."""
+    return filt.scratch_size() if is_grid_wide(filt) else 0

@@ -72,7 +72,7 @@ from lfc._validate import check_positive
 from lfc.filters.base import (ACTIVE, BIND_FREQ, BIND_ROCOF, BIND_UMAX, BIND_UMIN, INFEASIBLE,
                               INVALID, KIND_FREQ_HI, KIND_FREQ_LO, KIND_ROCOF_HI,
                               KIND_ROCOF_LO, OUTSIDE, SOLVER_ERROR, Backend, Layout,
-                              METHOD_IDS, Options, check_choice, check_limits, given, option,
+                              Options, check_choice, check_limits, given, option,
                               valid_input)
 from lfc.model import LFCParams, discretize, lfc_matrices, output_matrix
 from lfc.relays import RelaySettings
@@ -156,7 +156,7 @@ class PaperFilter(Backend):
     options : PaperOptions
     """
 
-    name, method_id, Options = "paper", METHOD_IDS["paper"], PaperOptions
+    name, Options = "paper", PaperOptions
 
     def __init__(self, params: LFCParams, relays: RelaySettings, options: PaperOptions) -> None:
         super().__init__(params, relays, options)
@@ -285,6 +285,10 @@ def decide(fd: np.ndarray, x: np.ndarray, u_ref: float, p: float, mem: np.ndarra
     u_min, u_max = fd[U_MIN], fd[U_MAX]
     nan = math.nan
     valid = valid_input(x, u_ref, p)
+    # defined on every path (numba inlines this function into the dispatcher's
+    # generated body, which cannot type a variable defined on one branch only)
+    y0 = h0 = g0 = c0 = b0 = y1 = h1 = g1 = c1 = b1 = nan
+    k0 = k1 = 0
     if valid:
         u_pred = mem[0] if fd[APPLIED] == 1.0 else u_ref
         y0, h0, g0, c0, k0, b0 = _row(fd, 0, x, u_pred, p)
