@@ -143,8 +143,9 @@ def _parser() -> argparse.ArgumentParser:
     bk.add_argument("--pdf", action="store_true",
                     help="also print the book to build/book/lfc-scc-book.pdf (needs Chromium)")
     wr = sub.add_parser(
-        "wire", help="runs over Modbus/TCP or DNP3 on loopback: control centre, man in "
-        "the middle, generator", formatter_class=argparse.RawDescriptionHelpFormatter,
+        "wire", help="runs over Modbus/TCP or DNP3 on loopback or network namespaces: "
+        "control centre, man in the middle, generator",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="example: Fig. 4's attack injected in the frames, with and without the\n"
                "paper's filter, and the traffic as a capture Wireshark decodes\n"
                "  python -m lfc wire --attack fig4 --filter none paper --pcap build/fig4.pcap\n"
@@ -176,10 +177,14 @@ def _parser() -> argparse.ArgumentParser:
                          "the outstation takes nothing else")
     wr.add_argument("--pcap", type=Path,
                     help="write the last run's traffic here, made from the relay's log")
+    wr.add_argument("--network", choices=("loopback", "namespaces"), default="loopback",
+                    help="where the parties sit: each at its own loopback address (default) "
+                         "or in network namespaces of their own joined by veth links, made "
+                         "for the run and removed after it (root; lfc.wire.network)")
     wr.add_argument("--capture", type=Path,
-                    help="capture the last run's traffic from the loopback interface here "
-                         "(root or CAP_NET_RAW): handshakes, ports, IP ids and times are the "
-                         "kernel's")
+                    help="capture the last run's traffic from the network here (root or "
+                         "CAP_NET_RAW): handshakes, addresses, ports, IP ids and times are "
+                         "the kernel's")
     dt = sub.add_parser(
         "detect", help="the network detector (lfc.wire.detect) over a capture written by "
         "lfc wire --pcap: its alerts per area, tap and rule",
@@ -283,7 +288,8 @@ def _wire(args) -> int:
                        protocol=args.protocol, agc=args.agc,
                        mode="realtime" if args.realtime else "lockstep",
                        capture=args.capture if last else None, impairment=impairment,
-                       select_before_operate=args.select_before_operate)
+                       select_before_operate=args.select_before_operate,
+                       network=args.network)
         rows.append(run.table())
     print(pd.concat(rows, ignore_index=True).to_string(index=False))
     if args.pcap:
@@ -294,7 +300,7 @@ def _wire(args) -> int:
         dissector = "mbtcp" if args.protocol == "modbus" else "dnp3"
         ports = ",".join(str(p) for pair in run.settings["ports"] for p in pair)
         ports = f"-o {dissector}.tcp.port:{ports}"
-        print(f"the last run captured from the loopback interface: {args.capture}\n"
+        print(f"the last run captured from the {args.network} network: {args.capture}\n"
               f"decode it with: tshark -r {args.capture} {ports}")
     return 0
 

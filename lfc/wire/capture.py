@@ -31,7 +31,7 @@ from __future__ import annotations
 import struct
 from pathlib import Path
 
-from lfc.wire.relay import CENTRE as LOOPBACK_CENTRE
+from lfc.wire.network import LOOPBACK, VETH
 
 CENTRE, RELAY = "10.0.0.1", "10.0.0.2"
 #: what a synthesized capture says of itself (pcapng comments)
@@ -138,8 +138,8 @@ def read_frames(path: str | Path, protocol: str = "modbus") -> list[tuple[float,
 
 def _leg(src: str, dst: str, sport: int, dport: int) -> tuple[str, int] | None:
     """The leg and area of a packet from ``src:sport`` to ``dst:dport``: the synthesized
-    capture's addresses (module docstring) or the loopback plan's
-    (:mod:`lfc.wire.relay`: centre 127.0.0.1, relays 127.0.1.x, generators 127.0.2.x)."""
+    capture's addresses (module docstring), or a real network's
+    (:mod:`lfc.wire.network`: the loopback plan or the namespaces')."""
     def last(address: str, prefix: str, first: int) -> int | None:
         head, _, tail = address.rpartition(".")
         return int(tail) - first if head == prefix and tail.isdigit() \
@@ -153,16 +153,7 @@ def _leg(src: str, dst: str, sport: int, dport: int) -> tuple[str, int] | None:
         return "relay>generator", last(dst, "10.0.0", 3)
     if dst == RELAY and last(src, "10.0.0", 3) is not None:
         return "generator>relay", last(src, "10.0.0", 3)
-    relay_of = {"src": last(src, "127.0.1", 1), "dst": last(dst, "127.0.1", 1)}
-    if src == LOOPBACK_CENTRE and relay_of["dst"] is not None:          # the loopback plan
-        return "centre>relay", relay_of["dst"]
-    if dst == LOOPBACK_CENTRE and relay_of["src"] is not None:
-        return "relay>centre", relay_of["src"]
-    if relay_of["src"] is not None and last(dst, "127.0.2", 1) == relay_of["src"]:
-        return "relay>generator", relay_of["src"]
-    if relay_of["dst"] is not None and last(src, "127.0.2", 1) == relay_of["dst"]:
-        return "generator>relay", relay_of["dst"]
-    return None
+    return LOOPBACK.leg(src, dst) or VETH.leg(src, dst)
 
 
 def read_commands(path: str | Path, protocol: str = "modbus",

@@ -21,7 +21,8 @@ import pandas as pd
 
 from lfc.engine import CTRL_COLUMNS, agc_step
 from lfc.filters.base import ACTIVE, ALARM_BITS, binding_names
-from lfc.wire.relay import Impairment, generator_address, relay_address
+from lfc.wire.network import NETWORKS, Loopback, Namespaces
+from lfc.wire.relay import Impairment
 
 U_COL, FLAG_COL = CTRL_COLUMNS.index("u_ref"), CTRL_COLUMNS.index("flags")
 
@@ -53,12 +54,19 @@ class Link:
         The network's delay, jitter and loss (:class:`lfc.wire.relay.Impairment`).
     select_before_operate : bool
         DNP3: the centre selects, then operates; the outstations take nothing else.
+    network : str
+        Where the parties sit (:mod:`lfc.wire.network`): ``"loopback"`` (default) or
+        ``"namespaces"``; ``network`` holds it, entered by whoever opens the link
+        before :meth:`open` and left after :meth:`close`.
     """
 
     def __init__(self, n_areas: int, transport, policies: list, times: np.ndarray,
                  period: float, agc_gain: float | None = None,
                  anti_windup: bool = False, impairment: Impairment | None = None,
-                 select_before_operate: bool = False) -> None:
+                 select_before_operate: bool = False, network: str = "loopback") -> None:
+        if network not in NETWORKS:
+            raise ValueError(f"network must be one of {NETWORKS}, got {network!r}")
+        self.network = Loopback() if network == "loopback" else Namespaces(n_areas)
         self.n_areas, self.transport, self.policies = n_areas, transport, policies
         self.device = {"select_before_operate": True} if select_before_operate else {}
         self.times, self.period = times, period
@@ -88,23 +96,28 @@ class Link:
         return on_command, on_report
 
     def open(self) -> None:
-        """Start every outstation, relay and connection (on loopback, each party at its
-        own address: :mod:`lfc.wire.relay`; kernel-chosen ports, kept in ``ports`` as
-        ``(relay's, outstation's)`` per area)."""
-        tr = self.transport
+        """Start every outstation, relay and connection (each party at its own address
+        of ``network``'s plan, :mod:`lfc.wire.network`; kernel-chosen ports, kept in
+        ``ports`` as ``(relay's, outstation's)`` per area)."""
+        tr, net, plan = self.transport, self.network, self.network.plan
         self.loop = tr.EventLoop()
         self.stations, self.relays, self.centres = [], [], []
         for a in range(self.n_areas):
             station = tr.Outstation(**self.device)
-            port = self.loop.run(station.start(generator_address(a)))
-            relay = tr.Relay(port, tr.Codec, *self._hooks(a), host=relay_address(a),
-                             upstream_host=generator_address(a), impairment=self.impairment,
-                             area=a)
+            with net.inside("generators", self.loop):
+                port = self.loop.run(station.start(plan.generator(a)))
+            relay = tr.Relay(port, tr.Codec, *self._hooks(a), host=plan.relay(a),
+                             upstream_host=plan.generator(a),
+                             upstream_from=plan.relay_upstream(a),
+                             impairment=self.impairment, area=a,
+                             inside=lambda: net.inside("substation"))
             self.stations.append(station)
             self.relays.append(relay)
-            self.ports.append((self.loop.run(relay.start()), port))
-            self.centres.append(tr.Centre(self.ports[-1][0], self.loop,
-                                          host=relay_address(a), **self.device))
+            with net.inside("substation", self.loop):
+                self.ports.append((self.loop.run(relay.start()), port))
+            with net.inside("centre", self.loop):
+                self.centres.append(tr.Centre(self.ports[-1][0], self.loop,
+                                              host=plan.relay(a), **self.device))
 
     def close(self) -> None:
         """Hang up, stop the relays and outstations, stop the event loop."""

@@ -1,8 +1,7 @@
-"""What every protocol shares: the event loop the servers run on, the parties'
-loopback addresses, the man in the middle — a TCP relay that cuts the byte stream
-into the protocol's frames and lets a policy rewrite the commands and reports it
-finds in them — and the network's delay, jitter and loss it can add
-(:class:`Impairment`).
+"""What every protocol shares: the event loop the servers run on, the man in the
+middle — a TCP relay that cuts the byte stream into the protocol's frames and lets a
+policy rewrite the commands and reports it finds in them — and the network's delay,
+jitter and loss it can add (:class:`Impairment`).
 
 A protocol module (:mod:`lfc.wire.modbus`, :mod:`lfc.wire.dnp3`) provides a
 ``Codec`` with one signature:
@@ -30,28 +29,15 @@ from __future__ import annotations
 
 import asyncio
 import random
+import socket
 import threading
 import time
 from dataclasses import dataclass
+from contextlib import nullcontext
 from typing import Callable
 
 from lfc._validate import check_number, check_range, check_seed
-
-
-#: where each party listens or connects from on loopback (all of 127.0.0.0/8 is this
-#: machine's): the control centre, then each area's relay and generator, so that a
-#: capture of the loopback interface tells the parties and areas apart by address
-CENTRE = "127.0.0.1"
-
-
-def relay_address(area: int) -> str:
-    """The address area ``area``'s relay listens on and connects upstream from."""
-    return f"127.0.1.{area + 1}"
-
-
-def generator_address(area: int) -> str:
-    """The address area ``area``'s outstation listens on."""
-    return f"127.0.2.{area + 1}"
+from lfc.wire.network import LOOPBACK
 
 
 class EventLoop:
@@ -162,12 +148,18 @@ class Relay:
     on_report : callable
         ``report -> report``: a report (dict of its fields) as returned.
     host, upstream_host : str
-        The address the relay listens on and connects upstream from, and the
-        outstation's (default: 127.0.0.1 both).
+        The address the relay listens on, and the outstation's (default: 127.0.0.1
+        both).
+    upstream_from : str, optional
+        The address the relay connects to the outstation from (default: ``host``).
     impairment : Impairment, optional
         The network's delay, jitter and loss on what the relay sends on.
     area : int
         The area whose link this is (the impairment's draws).
+    inside : callable, optional
+        ``() -> context manager``: the block in which the relay opens its connection
+        to the outstation (its namespace: :meth:`lfc.wire.network.Namespaces.inside`);
+        default: where it runs.
 
     Attributes
     ----------
@@ -178,10 +170,13 @@ class Relay:
     """
 
     def __init__(self, upstream: int, codec, on_command: Callable,
-                 on_report: Callable, host: str = CENTRE, upstream_host: str = CENTRE,
-                 impairment: Impairment | None = None, area: int = 0) -> None:
+                 on_report: Callable, host: str = LOOPBACK.centre,
+                 upstream_host: str = LOOPBACK.centre, upstream_from: str | None = None,
+                 impairment: Impairment | None = None, area: int = 0,
+                 inside: Callable = nullcontext) -> None:
         self.upstream, self.codec = upstream, codec
         self.host, self.upstream_host = host, upstream_host
+        self.upstream_from, self.inside = upstream_from or host, inside
         self.impairment, self.area = impairment or None, area
         self.on_command, self.on_report = on_command, on_report
         self.log: list[tuple[float, str, bytes]] = []
@@ -204,8 +199,12 @@ class Relay:
 
     async def _serve(self, c_reader, c_writer) -> None:
         self.tasks.add(asyncio.current_task())
-        g_reader, g_writer = await asyncio.open_connection(self.upstream_host, self.upstream,
-                                                           local_addr=(self.host, 0))
+        with self.inside():      # the socket is its creator's namespace's
+            sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        sock.setblocking(False)
+        sock.bind((self.upstream_from, 0))
+        await asyncio.get_running_loop().sock_connect(sock, (self.upstream_host, self.upstream))
+        g_reader, g_writer = await asyncio.open_connection(sock=sock)
         session: dict = {}
         c_out, g_out = c_writer, g_writer
         if self.impairment:

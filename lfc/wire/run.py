@@ -1,6 +1,6 @@
 """One run over the wire, in lockstep: control centre, man in the middle and
-generator exchanging Modbus/TCP or DNP3 frames on loopback, one command per
-control period.
+generator exchanging Modbus/TCP or DNP3 frames on loopback or a network of
+namespaces (:mod:`lfc.wire.network`), one command per control period.
 
 Who does what (the paper, section II: the control centre sets the frequency
 reference and runs the AGC; the signals travel over an insecure network; the
@@ -58,6 +58,7 @@ from lfc.result import Result
 from lfc.run import runner_of
 from lfc.wire.attacks import WireAttack
 from lfc.wire.link import Link
+from lfc.wire.network import NETWORKS
 from lfc.wire.relay import Impairment
 
 PROTOCOLS = ("modbus", "dnp3")
@@ -155,7 +156,7 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
              anti_windup: bool = False, agc: str = "generator", mode: str = "lockstep",
              feedforward: bool | None = None, capture: str | Path | None = None,
              impairment: Impairment | None = None,
-             select_before_operate: bool = False) -> WireResult:
+             select_before_operate: bool = False, network: str = "loopback") -> WireResult:
     """Run one area, or every area of a grid, over the wire (module docstring).
 
     Parameters
@@ -193,8 +194,8 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
         export), as :func:`lfc.simulate` does by default for a grid (True) and not
         for one area (False): the default follows it.
     capture : str or Path, optional
-        Write the run's traffic as the loopback interface carried it to this pcap
-        (:class:`lfc.wire.sniff.LoopbackCapture`: root or ``CAP_NET_RAW``, else a
+        Write the run's traffic as the network carried it to this pcap
+        (:class:`lfc.wire.sniff.Capture`: root or ``CAP_NET_RAW``, else a
         ``PermissionError``); the ports it needs to be decoded are in
         ``settings["ports"]``.
     impairment : Impairment, optional
@@ -206,6 +207,12 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
         DNP3 only: every command is a SELECT and then an OPERATE of the same values,
         and the outstations refuse a DIRECT_OPERATE (:class:`lfc.wire.dnp3.Outstation`);
         the man in the middle rewrites (or drops and answers) both alike.
+    network : str
+        Where the parties sit (:mod:`lfc.wire.network`): ``"loopback"`` (default:
+        each at its own address of this machine's loopback) or ``"namespaces"`` (the
+        centre, the substation's relays and the generators in network namespaces of
+        their own joined by veth links, made for the run and removed after it: root,
+        else a ``PermissionError`` naming ``"loopback"``).
 
     Returns
     -------
@@ -225,6 +232,8 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
         raise ValueError(f"agc must be one of {AGC}, got {agc!r}")
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+    if network not in NETWORKS:
+        raise ValueError(f"network must be one of {NETWORKS}, got {network!r}")
     if capture is not None and not isinstance(capture, str | Path):
         raise ValueError(f"capture must be a path (str or Path) or None, got {capture!r}")
     if impairment is not None and not isinstance(impairment, Impairment):
@@ -240,7 +249,8 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
                          protocol=protocol, load=load, noise_std=noise_std, seed=seed,
                          control_period=control_period, relays=relays,
                          anti_windup=anti_windup, agc=agc, mode=mode, capture=capture,
-                         impairment=impairment, select_before_operate=select_before_operate)
+                         impairment=impairment, select_before_operate=select_before_operate,
+                         network=network)
     single = isinstance(params, LFCParams)
     grid = as_grid(params)
     n_a = grid.n_areas
@@ -285,7 +295,7 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
 
     link = Link(n_a, transport(protocol), policies, np.arange(n_ctrl) * ratio * dt, period,
                 None if local else k_freq[0] * period, anti_windup, impairment,
-                select_before_operate)
+                select_before_operate, network)
 
     def generate(j: int, lateness: float) -> None:
         """Every generator at control sample j: take the command, filter, then the
@@ -321,7 +331,7 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
                 "agc": agc, "mode": mode, "feedforward": feedforward,
                 "capture": None if capture is None else str(capture), "ports": link.ports,
                 "impairment": repr(impairment),
-                "select_before_operate": select_before_operate}
+                "select_before_operate": select_before_operate, "network": network}
     sim = plant.result(single, tc, [gen.ctrl for gen in gens], filters, settings)
     return WireResult(sim, *link.outcome(n_ctrl), settings)
 
@@ -329,7 +339,7 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
 def _on_andes(case, kind: str, *, duration: float, attack, scc, protocol: str, load,
               noise_std, seed: int, control_period: float, relays, anti_windup: bool,
               agc: str, mode: str, capture, impairment,
-              select_before_operate: bool) -> WireResult:
+              select_before_operate: bool, network: str) -> WireResult:
     """:func:`run_wire` on an ANDES case: the microgrid (one area) or a grid (one
     link per area), in lockstep, the integrator at the generators; the
     generator sides and their attacks are :func:`lfc.simulate`'s on the case."""
@@ -350,7 +360,7 @@ def _on_andes(case, kind: str, *, duration: float, attack, scc, protocol: str, l
     n_ctrl = int(np.ceil(duration / control_period - 1e-9))
     link = Link(n_a, transport(protocol), policies, np.arange(n_ctrl) * control_period,
                 control_period, impairment=impairment,
-                select_before_operate=select_before_operate)
+                select_before_operate=select_before_operate, network=network)
     common = dict(duration=duration, relays=relays, noise_std=noise_std, seed=seed,
                   control_period=control_period, anti_windup=anti_windup, case=case,
                   network=link)
@@ -368,19 +378,21 @@ def _on_andes(case, kind: str, *, duration: float, attack, scc, protocol: str, l
                 "agc": agc, "mode": mode,
                 "capture": None if capture is None else str(capture), "ports": link.ports,
                 "impairment": repr(impairment),
-                "select_before_operate": select_before_operate}
+                "select_before_operate": select_before_operate, "network": network}
     return WireResult(sim, *link.outcome(n_ctrl), settings)
 
 
 @contextmanager
 def _captured(link: Link, capture: str | Path | None):
-    """``link`` opened for the block and closed after it, its traffic captured from the
-    loopback interface into ``capture`` (a pcap) if given: the capture stops after the
-    link has closed (its FINs in it), then is written, whatever the block raised."""
-    with ExitStack() as stack:                   # exits in reverse: close, stop, write
+    """``link`` opened on its network for the block and closed after it, its traffic
+    captured into ``capture`` (a pcap) if given: the capture stops after the link has
+    closed (its FINs in it), then is written, and the network is removed last,
+    whatever the block raised."""
+    with ExitStack() as stack:          # exits in reverse: close, stop, write, network
+        stack.enter_context(link.network)
         if capture is not None:
-            from lfc.wire.sniff import LoopbackCapture
-            sniffer = LoopbackCapture()
+            from lfc.wire.sniff import Capture
+            sniffer = Capture(link.network)
             stack.callback(lambda: sniffer.write(capture, {p for pair in link.ports
                                                           for p in pair}))
             stack.enter_context(sniffer)

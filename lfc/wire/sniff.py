@@ -1,13 +1,15 @@
-"""A run's traffic as the loopback interface carried it.
+"""A run's traffic as the network carried it.
 
-:class:`LoopbackCapture` reads every packet of the interface ``lo`` with a raw
-packet socket (``AF_PACKET``: root or ``CAP_NET_RAW``) while a run talks, each
-stamped by the kernel when it crossed the interface (``SO_TIMESTAMPNS``), and
-writes those of the run's connections as a pcap (nanosecond timestamps, Ethernet
-framing as Linux gives ``lo``'s): the handshakes, the ports the kernel chose, the IP
-ids, the segments as TCP cut them and the closing FINs are the network's own.  The
-parties listen at their own addresses (:mod:`lfc.wire.relay`: centre 127.0.0.1,
-area ``a``'s relay 127.0.1.(a+1) and generator 127.0.2.(a+1)); the ports are random,
+:class:`Capture` reads every packet of the run's network with a raw packet socket
+(``AF_PACKET``: root or ``CAP_NET_RAW``) while a run talks, each stamped by the
+kernel when it crossed the interface (``SO_TIMESTAMPNS``), and writes those of the
+run's connections as a pcap (nanosecond timestamps, Ethernet framing): the
+handshakes, the ports the kernel chose, the IP ids, the segments as TCP cut them
+and the closing FINs are the network's own.  On loopback (``lo``, which shows each
+packet twice, going out and coming in: kept once) or, with the parties in
+namespaces of their own (:class:`lfc.wire.network.Namespaces`), on the
+substation's two links (each packet crosses one of them once).  The parties'
+addresses are the network's plan (:mod:`lfc.wire.network`); the ports are random,
 so Wireshark and tshark decode the protocol when told the ports
 (``-o mbtcp.tcp.port:P1,P2`` or ``-o dnp3.tcp.port:P1,P2``, the ports in
 :attr:`lfc.wire.WireResult.settings` ``["ports"]``; Modbus/TCP tells a query from a
@@ -32,8 +34,13 @@ PACKET_OUTGOING = 4                  # lo shows each packet twice: outgoing, the
 PCAP_NS_MAGIC, LINKTYPE_ETHERNET = 0xA1B23C4D, 1
 
 
-class LoopbackCapture:
-    """Capture ``lo`` while the ``with`` block runs (module docstring).
+class Capture:
+    """Capture the run's network while the ``with`` block runs (module docstring).
+
+    Parameters
+    ----------
+    network : Loopback or Namespaces, optional
+        The run's network (:mod:`lfc.wire.network`), entered; default: loopback.
 
     Raises
     ------
@@ -41,22 +48,27 @@ class LoopbackCapture:
         Without root or ``CAP_NET_RAW``, naming the alternative.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, network=None) -> None:
+        from lfc.wire.network import Loopback
+        self.network = network or Loopback()
         self.packets: list[tuple[int, bytes]] = []      # (ns since the epoch, frame)
         self.dropped = 0                 # packets the kernel dropped: the reader was late
         self._stop = threading.Event()
         self._sock: socket.socket | None = None
         self._thread: threading.Thread | None = None
 
-    def __enter__(self) -> LoopbackCapture:
+    def __enter__(self) -> Capture:
         try:
-            sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(ETH_P_ALL))
+            with self.network.inside("substation"):
+                sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW,
+                                     socket.htons(ETH_P_ALL))
         except PermissionError as err:
             raise PermissionError(
-                "capture: reading the loopback interface needs root or CAP_NET_RAW; without "
-                "them, lfc.wire.capture.write_pcap(result.frames, path) writes a capture "
-                "made from the relay's log") from err
-        sock.bind(("lo", 0))
+                "capture: reading the network's interfaces needs root or CAP_NET_RAW; "
+                "without them, lfc.wire.capture.write_pcap(result.frames, path) writes a "
+                "capture made from the relay's log") from err
+        if self.network.interfaces == ("lo",):
+            sock.bind(("lo", 0))
         try:
             sock.setsockopt(socket.SOL_SOCKET, SO_RCVBUFFORCE, BUFFER)
         except OSError:
@@ -85,7 +97,8 @@ class LoopbackCapture:
                 continue
             except OSError:
                 return
-            if address[2] == PACKET_OUTGOING:
+            if address[0] not in self.network.interfaces \
+                    or (address[0] == "lo" and address[2] == PACKET_OUTGOING):
                 continue
             stamp = time.time_ns()
             for level, kind, value in ancillary:
@@ -97,11 +110,11 @@ class LoopbackCapture:
     def write(self, path: str | Path, ports: set[int]) -> Path:
         """Write the captured TCP packets from or to any of ``ports`` to ``path``
         (pcap, nanosecond timestamps); return the path.  If the kernel dropped
-        packets of ``lo`` while the capture ran (its reader fell ``BUFFER`` bytes
+        packets while the capture ran (its reader fell ``BUFFER`` bytes
         behind), the capture may miss some of the run's: a ``RuntimeWarning`` says
         how many were dropped."""
         if self.dropped:
-            warnings.warn(f"the capture of lo dropped {self.dropped} packets (the reader fell "
+            warnings.warn(f"the capture dropped {self.dropped} packets (the reader fell "
                           f"behind): {path} may miss some of the run's", RuntimeWarning,
                           stacklevel=2)
         path = Path(path)

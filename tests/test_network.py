@@ -1,0 +1,128 @@
+"""Issue "Field", item 1: a run over the wire with the parties in network namespaces
+of their own (``run_wire(network="namespaces")``, :mod:`lfc.wire.network`) — the same
+outcome as on loopback, a capture that is the network's (handshakes, the plan's
+addresses, the kernel's ports, IP ids and clock), decoded by tshark, and the namespaces
+removed whatever happens."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import time
+
+import numpy as np
+import pytest
+from scapy.layers.inet import IP, TCP
+from scapy.utils import rdpcap
+
+import lfc
+from lfc.wire import run_wire
+from lfc.wire.capture import read_frames
+from lfc.wire.network import PARTIES, VETH, Namespaces
+
+pytest.importorskip("pymodbus")
+
+PARAMS = lfc.LFCParams()
+LOAD = lfc.Step(0.1, start=0.5)
+
+
+def _can_make_namespaces() -> bool:
+    try:
+        with Namespaces():
+            return True
+    except PermissionError:
+        return False
+
+
+needs_netns = pytest.mark.skipif(not _can_make_namespaces(),
+                                 reason="network namespaces need root (or CAP_SYS_ADMIN and "
+                                        "CAP_NET_ADMIN) and iproute2")
+
+
+def _namespaces() -> set[str]:
+    out = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout
+    return {line.split()[0] for line in out.splitlines() if line.strip()}
+
+
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    return a.shape == b.shape and bool(np.all((a == b) | (np.isnan(a) & np.isnan(b))))
+
+
+@needs_netns
+@pytest.mark.parametrize("protocol, dissector", [("modbus", "mbtcp"), ("dnp3", "dnp3")])
+def test_a_run_on_namespaces_is_the_loopback_run_and_its_capture_is_the_networks(
+        protocol, dissector, tmp_path):
+    """Lockstep on namespaces gives the loopback run's outcome bit for bit (the network
+    changes the path, not the exchange); the capture, taken on the substation's two
+    links, holds every frame the relay logged, leg by leg, each TCP session opened by
+    a handshake between the plan's addresses, stamped by today's clock, with the
+    kernel's IP ids; tshark finds nothing malformed.  The namespaces are gone after."""
+    before = _namespaces()
+    path = tmp_path / "run.pcap"
+    there = run_wire(PARAMS, duration=1.5, attack="drop", protocol=protocol, agc="centre",
+                     load=LOAD, network="namespaces", capture=path)
+    here = run_wire(PARAMS, duration=1.5, attack="drop", protocol=protocol, agc="centre",
+                    load=LOAD)
+    assert _namespaces() == before
+    assert there.settings["network"] == "namespaces"
+    assert _same(there.sim.trace.to_numpy(float), here.sim.trace.to_numpy(float))
+    assert there.exchanges.received.equals(here.exchanges.received)
+    assert there.exchanges.link.equals(here.exchanges.link)
+
+    frames = read_frames(path, protocol)
+    legs = sorted({f[1] for f in there.frames})
+    assert len(legs) == 4
+    for leg in legs:
+        assert [f[2] for f in frames if f[1] == leg] == [f[2] for f in there.frames
+                                                       if f[1] == leg], leg
+    packets = rdpcap(str(path))
+    syn = [p for p in packets if p[TCP].flags == "S"]
+    assert {(p[IP].src, p[IP].dst) for p in syn} == {(VETH.centre, VETH.relay(0)),
+                                                     (VETH.relay_upstream(0),
+                                                      VETH.generator(0))}
+    assert packets[0][TCP].flags == "S"
+    assert sorted(p[TCP].dport for p in syn) == sorted(there.settings["ports"][0])
+    assert abs(float(packets[0].time) - time.time()) < 600
+    assert len({p[IP].id for p in packets}) > len(packets) // 2
+    if shutil.which("tshark") is not None:
+        decode = ["-o", f"{dissector}.tcp.port:" + ",".join(map(str, there.settings["ports"][0]))]
+        out = subprocess.run(["tshark", "-r", str(path), *decode, "-Y",
+                              "_ws.malformed || _ws.expert.severity >= error"],
+                             capture_output=True, text=True, check=True).stdout
+        assert out == ""
+
+
+@needs_netns
+def test_a_grid_on_namespaces_gives_each_area_its_addresses():
+    """Two areas: one relay and one outstation per area at their own addresses in the
+    substation's and the generators' namespaces; the run equals the loopback run."""
+    grid = lfc.MultiAreaParams.two_area()
+    attack = {1: [{"op": "add", "field": "pc", "signal": {"kind": "step", "value": 0.2,
+                                                            "start": 0.3}}]}
+    there = run_wire(grid, duration=1.0, attack=attack, network="namespaces")
+    here = run_wire(grid, duration=1.0, attack=attack)
+    for a, b in zip(there.sim.areas, here.sim.areas):
+        assert _same(a.trace.to_numpy(float), b.trace.to_numpy(float))
+    assert there.exchanges.received.equals(here.exchanges.received)
+
+
+@needs_netns
+def test_the_namespaces_are_removed_when_the_block_raises():
+    before = _namespaces()
+    with pytest.raises(RuntimeError, match="inside"):
+        with Namespaces(n_areas=3) as net:
+            assert {net.names[p] for p in PARTIES} <= _namespaces()
+            raise RuntimeError("inside")
+    assert _namespaces() == before
+
+
+def test_a_network_is_checked_and_its_absence_named(monkeypatch):
+    """A bad name is refused naming the choices; where namespaces cannot be made (here:
+    no ``ip``), a PermissionError names the fallback."""
+    with pytest.raises(ValueError, match=r"network must be one of \('loopback', 'namespaces'\)"):
+        run_wire(PARAMS, duration=0.1, network="vlan")
+    with pytest.raises(ValueError, match=r"n_areas must be in \[1, 250\]"):
+        Namespaces(n_areas=0)
+    monkeypatch.setattr(shutil, "which", lambda name: None)
+    with pytest.raises(PermissionError, match="network='loopback' runs without it"):
+        run_wire(PARAMS, duration=0.1, network="namespaces")
