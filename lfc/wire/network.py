@@ -18,7 +18,8 @@ the generators', and two veth pairs, centre–substation (10.200.0.0/16) and
 substation–generators (10.201.0.0/16); the man in the middle is then the one path
 between the centre and the generators, and a capture on the substation's two links
 holds each frame as it crossed the link it crossed (:class:`lfc.wire.sniff.Capture`).
-They are removed when the run ends, whatever it raised.
+They are removed when the run ends, whatever it raised, and those of a run killed
+before it could remove them when the next run makes its own.
 
 A socket belongs to the namespace of the thread that created it (Linux's
 ``setns``, per thread); :meth:`Namespaces.inside` moves the creating threads there for
@@ -142,6 +143,7 @@ class Namespaces:
         if shutil.which("ip") is None:
             raise PermissionError("network='namespaces' needs iproute2's ip (Debian's "
                                   "iproute2); network='loopback' runs without it")
+        _remove_orphans()
         try:
             self._make()
         except BaseException:
@@ -199,6 +201,27 @@ class Namespaces:
                 yield
             finally:
                 loop.run(_in_loop(_leave, saved))
+
+
+def _remove_orphans() -> None:
+    """Remove the namespaces of runs whose process is gone (killed before it could
+    remove its own): named ``lfc<pid>-<run>-<party>``."""
+    if not os.path.isdir(NETNS_DIR):
+        return
+    for name in os.listdir(NETNS_DIR):
+        pid = name[3:].split("-", 1)[0]
+        if name.startswith("lfc") and pid.isdigit() and not _alive(int(pid)):
+            subprocess.run(["ip", "netns", "delete", name], capture_output=True)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:      # alive, another user's
+        pass
+    return True
 
 
 @contextmanager
