@@ -93,17 +93,27 @@ def test_a_run_on_namespaces_is_the_loopback_run_and_its_capture_is_the_networks
 
 
 @needs_netns
-def test_a_grid_on_namespaces_gives_each_area_its_addresses():
+def test_a_grid_on_namespaces_gives_each_area_its_addresses(tmp_path):
     """Two areas: one relay and one outstation per area at their own addresses in the
-    substation's and the generators' namespaces; the run equals the loopback run."""
+    substation's and the generators' namespaces; the run equals the loopback run, and
+    the capture, read back, gives each area's frames, leg by leg."""
     grid = lfc.MultiAreaParams.two_area()
     attack = {1: [{"op": "add", "field": "pc", "signal": {"kind": "step", "value": 0.2,
                                                             "start": 0.3}}]}
-    there = run_wire(grid, duration=1.0, attack=attack, network="namespaces")
+    path = tmp_path / "grid.pcap"
+    there = run_wire(grid, duration=1.0, attack=attack, network="namespaces", capture=path)
     here = run_wire(grid, duration=1.0, attack=attack)
     for a, b in zip(there.sim.areas, here.sim.areas):
         assert _same(a.trace.to_numpy(float), b.trace.to_numpy(float))
     assert there.exchanges.received.equals(here.exchanges.received)
+    frames = read_frames(path, "modbus")
+    for area in (0, 1):
+        for leg in ("centre>relay", "relay>centre", "relay>generator", "generator>relay"):
+            assert [f[2] for f in frames if f[1] == leg and f[3] == area] == \
+                [f[2] for f in there.frames if f[1] == leg and f[3] == area], (area, leg)
+    syn = {(p[IP].src, p[IP].dst) for p in rdpcap(str(path)) if p[TCP].flags == "S"}
+    assert syn == {(VETH.centre, VETH.relay(a)) for a in (0, 1)} | \
+        {(VETH.relay_upstream(a), VETH.generator(a)) for a in (0, 1)}
 
 
 @needs_netns
