@@ -83,9 +83,9 @@ class GeneratorSide:
             scc.check_period(period)
         self.tc, self.scc = tc, scc
         self.noise = make_noise(noise_std, len(tc), seed)
-        if is_grid_wide(scc):   # its grid Kalman filter, if
-            scc.check_estimator(estimator, noise_std)        # any, is shared: its state and
-            kf = scc.kalman                   # measurements come with step's grid (area 0's)
+        if is_grid_wide(scc):   # its grid Kalman filter, if any, is shared: its state
+            scc.check_estimator(estimator, noise_std)   # and measurements come with
+            kf = scc.kalman                             # step's grid (area 0's)
         else:
             kf = make_estimator(estimator, design, period, noise_std)
         self.est = -1 if kf is None else 0
