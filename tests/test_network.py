@@ -44,6 +44,12 @@ def _namespaces() -> set[str]:
     return {line.split()[0] for line in out.splitlines() if line.strip()}
 
 
+def _ours() -> set[str]:
+    """This process's namespaces (the suite's other workers make theirs meanwhile)."""
+    import os
+    return {name for name in _namespaces() if name.startswith(f"lfc{os.getpid()}-")}
+
+
 def _same(a: np.ndarray, b: np.ndarray) -> bool:
     return a.shape == b.shape and bool(np.all((a == b) | (np.isnan(a) & np.isnan(b))))
 
@@ -57,13 +63,13 @@ def test_a_run_on_namespaces_is_the_loopback_run_and_its_capture_is_the_networks
     links, holds every frame the relay logged, leg by leg, each TCP session opened by
     a handshake between the plan's addresses, stamped by today's clock, with the
     kernel's IP ids; tshark finds nothing malformed.  The namespaces are gone after."""
-    before = _namespaces()
+    assert _ours() == set()
     path = tmp_path / "run.pcap"
     there = run_wire(PARAMS, duration=1.5, attack="drop", protocol=protocol, agc="centre",
                      load=LOAD, network="namespaces", capture=path)
     here = run_wire(PARAMS, duration=1.5, attack="drop", protocol=protocol, agc="centre",
                     load=LOAD)
-    assert _namespaces() == before
+    assert _ours() == set()
     assert there.settings["network"] == "namespaces"
     assert _same(there.sim.trace.to_numpy(float), here.sim.trace.to_numpy(float))
     assert there.exchanges.received.equals(here.exchanges.received)
@@ -118,12 +124,12 @@ def test_a_grid_on_namespaces_gives_each_area_its_addresses(tmp_path):
 
 @needs_netns
 def test_the_namespaces_are_removed_when_the_block_raises():
-    before = _namespaces()
+    assert _ours() == set()
     with pytest.raises(RuntimeError, match="inside"):
         with Namespaces(n_areas=3) as net:
-            assert {net.names[p] for p in PARTIES} <= _namespaces()
+            assert {net.names[p] for p in PARTIES} == _ours()
             raise RuntimeError("inside")
-    assert _namespaces() == before
+    assert _ours() == set()
 
 
 def test_a_network_is_checked_and_its_absence_named(monkeypatch):
@@ -152,10 +158,10 @@ def test_the_namespaces_of_a_killed_run_are_removed_by_the_next():
                               "print(n.names['centre'], flush=True)\n"
                               "time.sleep(60)"], stdout=subprocess.PIPE, text=True)
     left = child.stdout.readline().strip()
+    assert left in _namespaces()             # while it lives, nobody removes them
     os.kill(child.pid, signal.SIGKILL)
     child.wait()
-    assert left in _namespaces()
-    with Namespaces():
+    with Namespaces():                       # (or another worker's run, the same way)
         assert left not in _namespaces()
 
 
