@@ -16,7 +16,7 @@ from lfc.engine import (ACE, DW_MEAS, N_CTRL, N_KF, PC, ROCOF_MEAS, SENSOR_CHANN
                         sensor_reading, signal_value)
 from lfc.filters import SafetyFilter
 from lfc.filters.base import MEMORY
-from lfc.filters.dispatch import grid_wide_methods, is_grid_wide, scratch_size
+from lfc.filters.dispatch import is_grid_wide, scratch_size
 from lfc.model import LFCParams
 
 #: what a generator side without sensor attacks keeps of its reports: nothing
@@ -83,7 +83,8 @@ class GeneratorSide:
             scc.check_period(period)
         self.tc, self.scc = tc, scc
         self.noise = make_noise(noise_std, len(tc), seed)
-        if is_grid_wide(scc):   # its grid Kalman filter, if any, is shared: its state
+        self.grid_wide = is_grid_wide(scc)
+        if self.grid_wide:   # its grid Kalman filter, if any, is shared: its state
             scc.check_estimator(estimator, noise_std)   # and measurements come with
             kf = scc.kalman                             # step's grid (area 0's)
         else:
@@ -149,7 +150,7 @@ class GeneratorSide:
         (:mod:`lfc.filters.coupled`) also reads ``grid`` (:class:`GridReading`;
         its estimator's fields exactly when it runs on its grid Kalman estimate)."""
         estimates = self.est >= 0
-        if self.method in grid_wide_methods() and (
+        if self.grid_wide and (
                 grid is None or (grid.measurements is not None) != estimates):
             raise ValueError("the coupled filter needs grid=GridReading(area, state, commands, "
                              "loads), and on its estimate also (measurements, estimate, "

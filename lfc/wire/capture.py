@@ -31,7 +31,7 @@ from __future__ import annotations
 import struct
 from pathlib import Path
 
-from lfc.wire.network import LOOPBACK, VETH
+from lfc.wire.network import LOOPBACK, VETH, host_index
 
 CENTRE, RELAY = "10.0.0.1", "10.0.0.2"
 #: what a synthesized capture says of itself (pcapng comments)
@@ -140,19 +140,14 @@ def _leg(src: str, dst: str, sport: int, dport: int) -> tuple[str, int] | None:
     """The leg and area of a packet from ``src:sport`` to ``dst:dport``: the synthesized
     capture's addresses (module docstring), or a real network's
     (:mod:`lfc.wire.network`: the loopback plan or the namespaces')."""
-    def last(address: str, prefix: str, first: int) -> int | None:
-        head, _, tail = address.rpartition(".")
-        return int(tail) - first if head == prefix and tail.isdigit() \
-            and int(tail) >= first else None
-
     if src == CENTRE and dst == RELAY:                     # synthesized
         return "centre>relay", (sport - 40001) // 2
     if src == RELAY and dst == CENTRE:
         return "relay>centre", (dport - 40001) // 2
-    if src == RELAY and last(dst, "10.0.0", 3) is not None:
-        return "relay>generator", last(dst, "10.0.0", 3)
-    if dst == RELAY and last(src, "10.0.0", 3) is not None:
-        return "generator>relay", last(src, "10.0.0", 3)
+    if src == RELAY and host_index(dst, "10.0.0", 3) is not None:
+        return "relay>generator", host_index(dst, "10.0.0", 3)
+    if dst == RELAY and host_index(src, "10.0.0", 3) is not None:
+        return "generator>relay", host_index(src, "10.0.0", 3)
     return LOOPBACK.leg(src, dst) or VETH.leg(src, dst)
 
 

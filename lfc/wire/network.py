@@ -69,22 +69,25 @@ class Plan:
     def leg(self, src: str, dst: str) -> tuple[str, int] | None:
         """The leg and area of a packet from ``src`` to ``dst`` under this plan, else
         None."""
-        def area(address: str, prefix: str) -> int | None:
-            head, _, tail = address.rpartition(".")
-            return int(tail) - 1 if head == prefix and tail.isdigit() and int(tail) >= 1 \
-                else None
-
-        if src == self.centre and area(dst, self.relays) is not None:
-            return "centre>relay", area(dst, self.relays)
-        if dst == self.centre and area(src, self.relays) is not None:
-            return "relay>centre", area(src, self.relays)
-        up, gen = area(src, self.relays_upstream), area(dst, self.generators)
+        to_relay, from_relay = host_index(dst, self.relays, 1), host_index(src, self.relays, 1)
+        if src == self.centre and to_relay is not None:
+            return "centre>relay", to_relay
+        if dst == self.centre and from_relay is not None:
+            return "relay>centre", from_relay
+        up, gen = host_index(src, self.relays_upstream, 1), host_index(dst, self.generators, 1)
         if up is not None and up == gen:
             return "relay>generator", up
-        gen, up = area(src, self.generators), area(dst, self.relays_upstream)
+        gen, up = host_index(src, self.generators, 1), host_index(dst, self.relays_upstream, 1)
         if up is not None and up == gen:
             return "generator>relay", up
         return None
+
+
+def host_index(address: str, prefix: str, first: int) -> int | None:
+    """``n - first`` for the address ``prefix.n`` with ``n >= first``, else None."""
+    head, _, tail = address.rpartition(".")
+    return int(tail) - first if head == prefix and tail.isdigit() and int(tail) >= first \
+        else None
 
 
 #: every party on loopback (all of 127.0.0.0/8 is this machine's)

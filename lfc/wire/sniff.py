@@ -25,6 +25,8 @@ import time
 import warnings
 from pathlib import Path
 
+from lfc.wire.network import Loopback
+
 ETH_P_ALL, ETH_P_IP = 0x0003, 0x0800
 SOL_PACKET, PACKET_STATISTICS = 263, 6        # Linux: packets seen and dropped by the socket
 SO_RCVBUFFORCE = 33                          # Linux: a receive buffer beyond rmem_max (root)
@@ -49,7 +51,6 @@ class Capture:
     """
 
     def __init__(self, network=None) -> None:
-        from lfc.wire.network import Loopback
         self.network = network or Loopback()
         self.packets: list[tuple[int, bytes]] = []      # (ns since the epoch, frame)
         self.dropped = 0                 # packets the kernel dropped: the reader was late
