@@ -24,6 +24,7 @@ from lfc.model import STATES, LFCParams
 from lfc.relays import RELAY_NAMES, RelaySettings, relays_or_default
 from lfc.result import Result, area_result
 from lfc.scenarios import Scenarios
+from lfc.sensors import Redundant
 from lfc.signals import Signal
 
 __all__ = ["check_timing", "simulate_area"]
@@ -69,7 +70,8 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
              load_feedforward: bool = False, relay_noise: bool = False,
              anti_windup: bool = False, dw_meas_attack: Signal | None = None,
              rocof_meas_attack: Signal | None = None,
-             following_load: FollowingLoad | None = None) -> Result:
+             following_load: FollowingLoad | None = None,
+             sensors: Redundant | None = None) -> Result:
     """Simulate the closed loop from equilibrium.
 
     Parameters
@@ -127,6 +129,13 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
         A dynamic load-altering attack (:class:`lfc.load_attacks.FollowingLoad`): a
         botnet's load that follows the frequency meter, added to ``load`` (the
         trace's ``p_load`` holds both).
+    sensors : Redundant, optional
+        Redundant frequency and ROCOF sensors, some of which may lie
+        (:class:`lfc.sensors.Redundant`): the local integrator, the Kalman filter and
+        the filter read their median; the alarm log names each reading found a lie
+        (``reason`` ``"spoofed: ..."``) and each sample beyond the array's statement
+        (``"beyond: ..."``).  Not with ``dw_meas_attack``, ``rocof_meas_attack`` or
+        ``noise_std``.
 
     Returns
     -------
@@ -147,7 +156,7 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
                         "rocof_meas": rocof_meas_attack}}, loads={0: load},
            filters={0: scc}, estimator=estimator, noise_std=noise_std, seed=seed,
            feedforward=load_feedforward, relay_noise=relay_noise, anti_windup=anti_windup,
-           following_loads={0: following_load})
+           following_loads={0: following_load}, sensors={0: sensors})
     run = sc.run(trace=True, stop_on_trip=stop_on_trip)
     end = int(run.ends[0])
     t = sc.t[:end + 1]
@@ -168,6 +177,8 @@ def simulate_area(params: LFCParams, *, duration: float, pc_attack: Signal | Non
                 "load_feedforward": load_feedforward, "anti_windup": anti_windup,
                 **{name: repr(v) for name, v in (("dw_meas_attack", dw_meas_attack),
                                                  ("rocof_meas_attack", rocof_meas_attack),
-                                                 ("following_load", following_load))
+                                                 ("following_load", following_load),
+                                                 ("sensors", sensors))
                    if v is not None}}
-    return area_result(trace, sc.tc, run.ctrl[:, 0], trips, scc, settings)
+    return area_result(trace, sc.tc, run.ctrl[:, 0], trips, scc,
+                       settings).with_alarms(sc.sensor_alarms[0])

@@ -115,7 +115,8 @@ def simulate_grid_linear(params: MultiAreaParams, *, duration: float,
                        seed: int = 0, dt: float = 1e-3, control_period: float = 0.01,
                        stop_on_trip: bool = False, feedforward: bool = True,
                        relay_noise: bool = False, anti_windup: bool = False,
-                       following_loads: dict | None = None) -> Result:
+                       following_loads: dict | None = None,
+                       sensors: dict | None = None) -> Result:
     """Simulate an interconnected grid from equilibrium.
 
     Parameters
@@ -155,6 +156,10 @@ def simulate_grid_linear(params: MultiAreaParams, *, duration: float,
         ``{area: FollowingLoad}``: a dynamic load-altering attack in the area
         (:class:`lfc.load_attacks.FollowingLoad`), added to its load (the trace's
         ``p_load`` holds both).
+    sensors : dict, optional
+        ``{area: Redundant}``: the area's redundant frequency and ROCOF sensors, some
+        of which may lie (:class:`lfc.sensors.Redundant`; as in :func:`lfc.simulate`;
+        the alarm log names each reading found a lie).
 
     Returns
     -------
@@ -174,7 +179,7 @@ def simulate_grid_linear(params: MultiAreaParams, *, duration: float,
     following_loads = check_area_keys(following_loads, params.n_areas, "following_loads")
     sc.add(attacks=attacks, loads=loads, filters=built, estimator=estimator,
            noise_std=noise_std, seed=seed, feedforward=feedforward, relay_noise=relay_noise,
-           anti_windup=anti_windup, following_loads=following_loads)
+           anti_windup=anti_windup, following_loads=following_loads, sensors=sensors)
     run = sc.run(trace=True, stop_on_trip=stop_on_trip)
     end = int(run.ends[0])
     t = sc.t[:end + 1]
@@ -197,14 +202,16 @@ def simulate_grid_linear(params: MultiAreaParams, *, duration: float,
                 "stop_on_trip": stop_on_trip, "feedforward": feedforward,
                 "anti_windup": anti_windup,
                 "relay_noise": relay_noise,
-                **({"following_loads": repr(following_loads)} if following_loads else {})}
+                **({"following_loads": repr(following_loads)} if following_loads else {}),
+                **({"sensors": repr(sensors)} if sensors else {})}
     return grid_result(params, t, states, p_load, tie, trips, sc.tc,
-                       [run.ctrl[:, a] for a in range(n_a)], built, settings)
+                       [run.ctrl[:, a] for a in range(n_a)], built,
+                       settings).with_alarms(sc.sensor_alarms[0])
 
 
 #: the keys of a grid scenario (the keywords of :func:`simulate_grid_linear` it sets)
 SCENARIO_KEYS = ("attacks", "loads", "filters", "estimator", "noise_std", "seed", "feedforward",
-                 "relay_noise", "anti_windup", "following_loads")
+                 "relay_noise", "anti_windup", "following_loads", "sensors")
 
 
 def check_grid_scenarios(scenarios: object) -> None:
@@ -260,7 +267,7 @@ def simulate_grid_table(params: MultiAreaParams, scenarios: list[dict], *,
     scenarios : list of dict
         Each with any of the keyword arguments ``attacks``, ``loads``,
         ``filters``, ``estimator``, ``noise_std``, ``seed``, ``feedforward``,
-        ``relay_noise``, ``anti_windup``, ``following_loads`` of
+        ``relay_noise``, ``anti_windup``, ``following_loads``, ``sensors`` of
         :func:`simulate_grid_linear` (filters named by kind are built once).
     duration, relays, dt, control_period
         As in :func:`simulate_grid_linear`.

@@ -11,7 +11,7 @@ are defined once (``METRIC_KEYS``): :meth:`Result.table` is the result's
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -140,6 +140,25 @@ class Result:
             "final_abs_dw_meas": float(abs(self.trace["dw_meas"].iat[-1])),
             "outside": int(self.alarms["outside"].sum()),
         }
+
+    def with_alarms(self, rows: dict[int, pd.DataFrame]) -> Result:
+        """This result with ``rows[area]`` (``ALARM_COLUMNS``, in time order: e.g.
+        :func:`lfc.sensors.alarm_rows`) added to each area's alarm log, those at or
+        before its trace's end, in time order (the filter's first at a tie)."""
+        if not rows:
+            return self
+        end = float(self.trace["t"].iat[-1]) + 1e-9
+        areas = []
+        for a, r in enumerate(self.areas):
+            extra = rows.get(a)
+            if extra is not None and len(extra := extra[extra.t <= end]):
+                log = pd.concat([r.alarms, extra], ignore_index=True) if len(r.alarms) \
+                    else extra.reset_index(drop=True)
+                r = replace(r, alarms=log.sort_values("t", kind="stable")
+                            .reset_index(drop=True))
+            areas.append(r)
+        return Result.of_grid(tuple(areas), self.trace, self.settings) if self.grid \
+            else areas[0]
 
     def table(self) -> pd.DataFrame:
         """The metrics as :func:`lfc.simulate_many` rows (:func:`metrics_table`), one per

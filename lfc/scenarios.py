@@ -29,6 +29,7 @@ from lfc.load_attacks import NO_FOLLOWING, FollowingLoad
 from lfc.model import LFCParams
 from lfc.multiarea import N_AREA_STATES, MultiAreaParams, as_grid, discretize_grid
 from lfc.relays import RelaySettings
+from lfc.sensors import Redundant, with_sensors
 from lfc.signals import N_PARAMS, NONE, STEP
 
 
@@ -100,6 +101,8 @@ class Scenarios:
         self._noise: list[np.ndarray] = []
         self._relay_noise: list[list[tuple]] = []
         self._following: list[list[tuple]] = []
+        #: each scenario's alarm-log rows of its areas' redundant sensors, {area: rows}
+        self.sensor_alarms: list[dict] = []
         self._sig: list[tuple] = []
         self._st: list[np.ndarray] = []
         self._sv: list[np.ndarray] = []
@@ -125,6 +128,7 @@ class Scenarios:
         check_area_keys(fields.get("loads"), n, "loads")
         check_area_keys(fields.get("filters"), n, "filters")
         check_area_keys(fields.get("following_loads"), n, "following_loads")
+        check_area_keys(fields.get("sensors"), n, "sensors")
         scenario = Scenario(**keywords) if scenario is None else scenario
         attacks, loads, filters = scenario.attacks, scenario.loads, scenario.filters
         estimator, noise_std, seed = scenario.estimator, scenario.noise_std, scenario.seed
@@ -141,6 +145,7 @@ class Scenarios:
         f_is = [-1 if filters.get(a) is None else self._filters.index(
             id(filters[a]), lambda: self._checked(a, filters[a])) for a in range(n)]
         row, noise, sig, n_samples = [], [], [], self._n_samples   # kept once all areas pass
+        attacks, logs = with_sensors(scenario.sensors, attacks, self.tc, seed)
         for a, area in enumerate(grid.areas):
             channels = attacks.get(a, {})
             scc = filters.get(a)
@@ -171,6 +176,7 @@ class Scenarios:
         self._n_samples = n_samples
         self._rows.append(row)
         self._plant_of.append(p_i)
+        self.sensor_alarms.append(logs)
         self._relay_noise.append([(*(noise_std if relay_noise else (0.0, 0.0)), seed)] * n)
         self._following.append([scenario.following_loads[a].row()
                                 if a in scenario.following_loads else NO_FOLLOWING
@@ -253,6 +259,10 @@ class Scenarios:
                        Work.sized(n_s, n_a, estimators.a.shape[1], n_sums, reports))
             out.metrics[rest], out.ends[rest] = part.metrics, part.ends
         metrics, ends = out.metrics, out.ends
+        alarms = METRICS.index("alarms")
+        for i, logs in enumerate(self.sensor_alarms):     # rows up to the run's end
+            for a, log in logs.items():
+                metrics[i, a, alarms] += np.count_nonzero(log.t <= self.t[ends[i]] + 1e-9)
         final = metrics[:, :, METRICS.index("final_abs_dw_meas")]
         bad = np.flatnonzero(~np.all(np.isfinite(final), axis=1))
         if len(bad):
@@ -323,10 +333,10 @@ def check_sensed(attacks: dict, filters: dict, estimator) -> None:
 #: the keywords of a scenario in an area's form (lfc.simulate of an LFCParams or a microgrid)
 AREA_KEYS = ("pc_attack", "wref_attack", "load", "scc", "estimator", "noise_std", "seed",
              "load_feedforward", "relay_noise", "anti_windup", "dw_meas_attack",
-             "rocof_meas_attack", "following_load")
+             "rocof_meas_attack", "following_load", "sensors")
 #: the keywords of a scenario in a grid's form (lfc.simulate of a MultiAreaParams or a grid)
 GRID_KEYS = ("attacks", "loads", "filters", "estimator", "noise_std", "seed", "feedforward",
-             "relay_noise", "anti_windup", "following_loads")
+             "relay_noise", "anti_windup", "following_loads", "sensors")
 
 
 
@@ -376,6 +386,13 @@ class Scenario:
         botnet's load that follows the area's frequency meter
         (:class:`lfc.load_attacks.FollowingLoad`), added to its load; linear plants
         only.
+    sensors : dict, optional
+        ``{area: Redundant}``: the area's frequency and ROCOF readings come from
+        redundant sensors, some of which may lie (:class:`lfc.sensors.Redundant`:
+        the median is what its AGC, Kalman filter and filter read; the alarm log names
+        each reading found a lie).  Not with an attack on the area's sensor channels
+        (the liars are the sensors' attackers) nor with ``noise_std`` (the array's
+        noise is the sensors' noise).
     plant : LFCParams or MultiAreaParams, optional
         The plant this scenario runs on when not the one given (a scenario table's
         ``M``, ``D``, ... columns; the filters and the AGC keep the given one as their
@@ -397,6 +414,7 @@ class Scenario:
     relay_noise: bool = False
     anti_windup: bool = False
     following_loads: dict = field(default_factory=dict)
+    sensors: dict = field(default_factory=dict)
     plant: LFCParams | MultiAreaParams | None = None
 
     def __post_init__(self) -> None:
@@ -416,7 +434,21 @@ class Scenario:
                 raise ParameterTypeError(f"following_loads[{a}] must be a FollowingLoad "
                                          f"(lfc.load_attacks), got {load!r:.80}")
         object.__setattr__(self, "following_loads", following)
+        sensors = _areas("sensors", self.sensors)
+        for a, red in sensors.items():
+            if not isinstance(red, Redundant):
+                raise ParameterTypeError(f"sensors[{a}] must be a Redundant (lfc.sensors), "
+                                         f"got {red!r:.80}")
+            taken = [c for c in SENSOR_CHANNELS if attacks.get(a, {}).get(c) is not None]
+            if taken:
+                raise ValueError(f"attacks[{a}] on {taken} and sensors[{a}]: the redundant "
+                                 f"sensors' lies are their attacks (Redundant(lies={{sensor: "
+                                 f"{{channel: signal}}}}))")
+        object.__setattr__(self, "sensors", sensors)
         noisy = check_noise(self.noise_std)
+        if sensors and noisy:
+            raise ValueError("noise_std > 0 with sensors: the redundant sensors' noise is "
+                             "their array's (Redundant.noise, drawn within its bound)")
         object.__setattr__(self, "noise_std", tuple(float(s) for s in self.noise_std))
         object.__setattr__(self, "seed", check_seed("seed", self.seed))
         if self.feedforward is not None:
@@ -435,7 +467,7 @@ class Scenario:
                  estimator=None, noise_std: tuple[float, float] = (0.0, 0.0), seed: int = 0,
                  load_feedforward: bool = False, relay_noise: bool = False,
                  anti_windup: bool = False, dw_meas_attack=None,
-                 rocof_meas_attack=None, following_load=None) -> Scenario:
+                 rocof_meas_attack=None, following_load=None, sensors=None) -> Scenario:
         """The scenario of one area from :func:`lfc.simulate`'s keywords of an area."""
         channels = {k: v for k, v in zip(("pc", "wref", *SENSOR_CHANNELS),
                                          (pc_attack, wref_attack, dw_meas_attack,
@@ -445,7 +477,8 @@ class Scenario:
                    filters={} if scc is None else {0: scc}, estimator=estimator,
                    noise_std=noise_std, seed=seed, feedforward=load_feedforward,
                    relay_noise=relay_noise, anti_windup=anti_windup,
-                   following_loads={} if following_load is None else {0: following_load})
+                   following_loads={} if following_load is None else {0: following_load},
+                   sensors={} if sensors is None else {0: sensors})
 
     def keywords(self, form: str) -> dict:
         """The scenario as :func:`lfc.simulate`'s keywords of a plant of ``form``:
@@ -458,10 +491,10 @@ class Scenario:
             kw = {k: getattr(self, k) for k in GRID_KEYS}
             return {k: v for k, v in kw.items()
                     if not (k == "feedforward" and v is None or k == "relay_noise" and not v
-                            or k == "following_loads" and not v)}
+                            or k in ("following_loads", "sensors") and not v)}
         if form != "area":
             raise ValueError(f"form must be 'area' or 'grid', got {form!r:.40}")
-        for name in ("attacks", "loads", "filters", "following_loads"):
+        for name in ("attacks", "loads", "filters", "following_loads", "sensors"):
             if set(getattr(self, name)) - {0}:
                 raise ValueError(f"{name}: a single area is area 0, got areas "
                                  f"{sorted(getattr(self, name))}")
@@ -480,6 +513,8 @@ class Scenario:
         kw.update({f"{c}_attack": channels[c] for c in SENSOR_CHANNELS if c in channels})
         if 0 in self.following_loads:
             kw["following_load"] = self.following_loads[0]
+        if 0 in self.sensors:
+            kw["sensors"] = self.sensors[0]
         return {**kw, "relay_noise": True} if self.relay_noise else kw
 
 

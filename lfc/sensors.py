@@ -18,24 +18,29 @@ is a lie (an honest one is within ``bound`` of the truth, the median too): it is
 (``spoofed``).  Fewer than ``count - tolerate`` readings within ``2 bound`` of the
 median means more than ``tolerate`` lie (``beyond``): nothing is proven then.
 
-Every sensor reads the same state, so the median's error, the spoofed and the beyond
-flags depend only on the sensors' noise and lies, not on the state:
-:func:`simulate_sensors` computes them at the control samples and runs the plant with
-the fused error as the generator side's sensor attack (``dw_meas_attack``,
-``rocof_meas_attack`` of :func:`lfc.simulate`: what the AGC and the filter read; the
-relays read the plant).  The generator's own signals (``dPg``, ``dPm``, ``dw``) are
-exact, as in every exact-state run.
+An area's sensors in a scenario are a :class:`Redundant`: the array, its honest
+sensors' noise and what the liars add (``lfc.simulate(params, sensors=Redundant(...))``,
+a :class:`lfc.Scenario`'s ``sensors={area: Redundant(...)}``, so also
+:func:`lfc.simulate_many`, grids and the red team's fixed ``scenario``).  Every sensor
+reads the same state, so the median's error, the spoofed and the beyond flags depend
+only on the sensors' noise and lies, not on the state: the engine's scenario tables
+(:class:`lfc.scenarios.Scenarios`) compute them at the control samples and give the
+fused error as the area's sensor attack (what its AGC, its Kalman filter and, with the
+exact state, its filter read; the relays read the plant) — exact, not an
+approximation.  The run's alarm log has a row for each reading named a lie and each
+sample beyond the statement (:func:`alarm_rows`).  The generator's own signals
+(``dPg``, ``dPm``, ``dw``) are exact, as in every exact-state run.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
 
-from lfc._validate import check_count, check_pair, check_positive
-from lfc.result import Result
+from lfc._validate import ParameterTypeError, check_count, check_pair
+from lfc.result import ALARM_COLUMNS
 from lfc.sensor_attacks import Reading
 from lfc.signals import Samples, Signal
 
@@ -137,59 +142,123 @@ def fuse(array: SensorArray, t: np.ndarray, errors: np.ndarray) -> Fused:
 
 
 @dataclass(frozen=True)
-class SensorRun:
-    """A run on redundant sensors: the plant's :class:`~lfc.Result` and :class:`Fused`."""
+class Redundant:
+    """An area's redundant sensors in a scenario: the ``array``, what its honest
+    sensors' noise is and what its liars add.
 
-    result: Result
-    fused: Fused
-
-    @property
-    def alarms(self) -> pd.DataFrame:
-        """The run's alarm log: the filter's (``result.alarms``, ``ALARM_COLUMNS``) with
-        a row for each reading named a lie (``reason`` ``"spoofed: sensor k
-        (channel)"``) and each sample beyond the statement (``"beyond: more than
-        tolerate lie (channel)"``), in time order (the filter's first at a tie)."""
-        named = [pd.DataFrame({"t": f.t, "reason": reason})
-                 for f, reason in ((self.fused.spoofed, "spoofed: sensor "
-                                    + self.fused.spoofed.sensor.astype(str) + " ("
-                                    + self.fused.spoofed.channel + ")"),
-                                   (self.fused.beyond, "beyond: more than tolerate lie ("
-                                    + self.fused.beyond.channel + ")"))
-                 if len(f)]
-        log = self.result.alarms
-        if not named:
-            return log
-        return (pd.concat([log, *named], ignore_index=True)[log.columns]
-                .sort_values("t", kind="stable").reset_index(drop=True))
-
-
-def simulate_sensors(params, array: SensorArray, *, duration: float,
-                     attacks: dict[int, dict[str, Signal]] | None = None, seed: int = 0,
-                     honest: np.ndarray | None = None, control_period: float = 0.01,
-                     **scenario) -> SensorRun:
-    """One area's run (:func:`lfc.simulate` of ``params``, exact state) whose AGC and
-    filter read the median of ``array``'s sensors, each with its noise (``seed`` or
-    ``honest``) and ``attacks[sensor][channel]`` (:meth:`SensorArray.readings`).
-
-    ``scenario``: :func:`lfc.simulate`'s other keywords (``scc``, ``pc_attack``,
-    ``load``, ...); not ``estimator``, ``dw_meas_attack`` or ``rocof_meas_attack``
-    (the sensors set them).  Give the certified filter ``sensor_bound=array.bound``
-    for the proven statement (module docstring).
+    Parameters
+    ----------
+    array : SensorArray
+        The sensors, their noise bound and how many may lie.
+    lies : dict, optional
+        ``{sensor: {"dw_meas" | "rocof_meas": signal}}``: added to that sensor's
+        reading (pu, pu/s; any :class:`~lfc.signals.Signal` or callable of time, not a
+        reading transform: these errors are computed without the state, and the
+        proof covers any lie).  More than ``array.tolerate`` liars is allowed: the run
+        shows what happens beyond the statement.
+    noise : dict, optional
+        ``{sensor: {channel: signal}}``: an honest sensor's noise as a waveform
+        (within ``±array.bound`` at every control sample, checked when the run samples
+        it: its corners, a sign flipping every sample, ...); channels not given draw
+        uniformly within the bound from the scenario's ``seed`` (area ``a > 0``:
+        ``(seed, a)``).
 
     Raises
     ------
     ValueError
-        A keyword the sensors set, or what :meth:`SensorArray.readings` refuses.
+        Naming the entry: a sensor outside ``[0, array.count)``, a channel not among
+        ``CHANNELS``, or a reading transform.
     """
-    from lfc.run import simulate
-    taken = {"estimator", "dw_meas_attack", "rocof_meas_attack"} & set(scenario)
-    if taken:
-        raise ValueError(f"simulate_sensors sets {sorted(taken)} itself (the fused readings); "
-                         f"do not give them")
-    check_positive("duration", duration)
-    t = np.arange(int(round(duration / control_period)) + 1) * control_period
-    fused = fuse(array, t, array.readings(t, attacks, seed, honest))
-    result = simulate(params, duration=duration, control_period=control_period,
-                      dw_meas_attack=Samples(t, fused.error[:, 0]),
-                      rocof_meas_attack=Samples(t, fused.error[:, 1]), **scenario)
-    return SensorRun(result, fused)
+
+    array: SensorArray
+    lies: dict = field(default_factory=dict)
+    noise: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.array, SensorArray):
+            raise ParameterTypeError(f"array must be a SensorArray, got "
+                                     f"{type(self.array).__name__}")
+        for name in ("lies", "noise"):
+            entries = getattr(self, name)
+            if not isinstance(entries, dict):
+                raise ParameterTypeError(f"{name} must be a dict {{sensor: {{channel: "
+                                         f"signal}}}}, got {entries!r:.80}")
+            for sensor, channels in entries.items():
+                if isinstance(sensor, bool) or not isinstance(sensor, int) \
+                        or not 0 <= sensor < self.array.count:
+                    raise ValueError(f"{name}: sensor must be an int in [0, "
+                                     f"{self.array.count}), got {sensor!r}")
+                if not isinstance(channels, dict) or set(channels) - set(CHANNELS):
+                    raise ValueError(f"{name}[{sensor}] must be a dict with keys among "
+                                     f"{CHANNELS}, got {channels!r:.80}")
+                for channel, signal in channels.items():
+                    if isinstance(signal, Reading):
+                        raise ValueError(
+                            f"{name}[{sensor}][{channel!r}]: a {type(signal).__name__} "
+                            f"reads the state, which these errors are computed without; "
+                            f"give it as a waveform of time (the proof covers any lie)")
+                    if not callable(signal):
+                        raise ParameterTypeError(f"{name}[{sensor}][{channel!r}] must be a "
+                                                 f"signal (a callable of time), got "
+                                                 f"{signal!r:.80}")
+
+    def fused(self, times: np.ndarray, seed) -> Fused:
+        """The median's error and the sensors named at the control samples ``times``
+        (s): :func:`fuse` of every sensor's noise (``noise``, else uniform draws seeded
+        by ``seed``, an int or a sequence of ints) plus its lies.  ``ValueError`` naming
+        ``noise[sensor][channel]`` if it leaves ``±bound`` at a sample."""
+        times = np.asarray(times, float)
+        b = np.asarray(self.array.bound)
+        honest = np.random.default_rng(seed).uniform(
+            -1.0, 1.0, (len(times), self.array.count, 2)) * b
+        for sensor, channels in self.noise.items():
+            for channel, signal in channels.items():
+                c = CHANNELS.index(channel)
+                values = np.broadcast_to(np.asarray(signal(times), float), times.shape)
+                if not np.all(np.abs(values) <= b[c]):
+                    raise ValueError(f"noise[{sensor}][{channel!r}] must stay within "
+                                     f"±{b[c]} (the array's bound: an honest sensor's "
+                                     f"noise) at every control sample; give a lie as lies")
+                honest[:, sensor, c] = values
+        return fuse(self.array, times, self.array.readings(times, self.lies, honest=honest))
+
+    def attacks(self, fused: Fused) -> dict[str, Signal]:
+        """The fused error as the area's sensor attacks, ``{"dw_meas": ...,
+        "rocof_meas": ...}`` (pu, pu/s; :class:`~lfc.signals.Samples` at ``fused.t``)."""
+        return {c: Samples(fused.t, fused.error[:, i]) for i, c in enumerate(CHANNELS)}
+
+
+def alarm_rows(fused: Fused) -> pd.DataFrame:
+    """The alarm log's rows (``ALARM_COLUMNS``: ``t`` and ``reason``, the rest empty)
+    for each reading :func:`fuse` named a lie (``"spoofed: sensor k (channel)"``) and
+    each sample beyond the statement (``"beyond: more than tolerate lie
+    (channel)"``), in time order."""
+    parts = [pd.DataFrame({"t": f.t.to_numpy(float), "reason": reason})
+             for f, reason in ((fused.spoofed, "spoofed: sensor "
+                                + fused.spoofed.sensor.astype(str) + " ("
+                                + fused.spoofed.channel + ")"),
+                               (fused.beyond, "beyond: more than tolerate lie ("
+                                + fused.beyond.channel + ")"))
+             if len(f)]
+    rows = pd.concat(parts, ignore_index=True) if parts else pd.DataFrame(
+        {"t": np.zeros(0), "reason": np.zeros(0, object)})
+    rows = rows.sort_values("t", kind="stable").reset_index(drop=True)
+    for column in ("infeasible", "outside", "invalid_input", "solver_error"):
+        rows[column] = False
+    rows["binding"] = ""
+    return rows.reindex(columns=list(ALARM_COLUMNS))
+
+
+def with_sensors(sensors: dict, attacks: dict, times: np.ndarray,
+                 seed) -> tuple[dict, dict[int, pd.DataFrame]]:
+    """``attacks`` (``{area: {channel: signal}}``) with each area's redundant sensors
+    (``sensors``, ``{area: Redundant}``) as its sensor channels' attacks — the median's
+    error at the control samples ``times`` (s), the noise drawn from ``seed`` in area 0
+    and ``(seed, a)`` in area ``a``, as the measurement noise is — and each such area's
+    alarm-log rows (:func:`alarm_rows`)."""
+    attacks, logs = dict(attacks), {}
+    for a, red in sensors.items():
+        fused = red.fused(times, seed if a == 0 else (seed, a))
+        attacks[a] = {**attacks.get(a, {}), **red.attacks(fused)}
+        logs[a] = alarm_rows(fused)
+    return attacks, logs

@@ -757,6 +757,9 @@ def scenario_row(scenario: Scenario, params: LFCParams) -> dict:
     if "following_load" in kw:
         raise ValueError("a table row has no following load (lfc.load_attacks.FollowingLoad): "
                          "give it to lfc.simulate or a grid's simulate_many")
+    if "sensors" in kw:
+        raise ValueError("a table row has no redundant sensors (lfc.sensors.Redundant): give "
+                         "them to lfc.simulate or simulate_many of a list of Scenario")
     plant = scenario.plant
     if plant is not None and plant != params:
         if not isinstance(plant, LFCParams) or any(

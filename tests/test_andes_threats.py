@@ -130,3 +130,25 @@ def test_on_andes_simulate_many_runs_both_threats_as_simulate_does():
         one = lfc.simulate(CASE, duration=5.0, **row.keywords("grid")).table()
         got = many[many.scenario == i].drop(columns="scenario").reset_index(drop=True)
         pd.testing.assert_frame_equal(got[one.columns], one, check_exact=True, check_dtype=False)
+
+
+def test_on_andes_redundant_sensors_run_as_their_median():
+    """Redundant sensors on a grid case (``sensors={area: Redundant}``): the AGC of area
+    0 reads the median of three sensors, one lying 0.5 pu off from 1 s; the run equals
+    the one given the median's error as the area's sensor attack, bit for bit, and its
+    log names the liar at every sample from 1 s; ``simulate_many`` of the scenario gives
+    ``simulate``'s metrics."""
+    from lfc.sensors import Redundant, SensorArray
+    red = Redundant(SensorArray(bound=(1e-4, 1e-3)), {1: {"dw_meas": lfc.Step(0.5, start=1.0)}})
+    kw = dict(duration=4.0, loads={0: lfc.Step(KICK, start=1.0)})
+    sensed = lfc.simulate(CASE, sensors={0: red}, **kw)
+    told = red.attacks(red.fused(np.arange(400) * 0.01, 0))
+    plain = lfc.simulate(CASE, attacks={0: told}, **kw)
+    pd.testing.assert_frame_equal(sensed.trace, plain.trace, check_exact=True)
+    lies = sensed.alarms[sensed.alarms.reason.astype(str).str.startswith("spoofed")]
+    assert set(lies.area) == {0} and len(lies) == 300 and lies.t.min() == pytest.approx(1.0)
+    many = lfc.simulate_many(CASE, [lfc.Scenario(sensors={0: red}, **{"loads": kw["loads"]})],
+                             duration=4.0)
+    one = sensed.table()
+    pd.testing.assert_frame_equal(many.drop(columns="scenario")[one.columns], one,
+                                  check_exact=True, check_dtype=False)

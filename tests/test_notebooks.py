@@ -738,11 +738,13 @@ def test_loads_notebook_shows_its_figures_and_its_claims_hold(tmp_path):
     decays below its gain and grows above it; the load alarm comes before every trip of
     the red team's load attacks, ``outside`` too on the exact state; a command attack
     leaves the load alarm unchanged; the certified filter trusts a lying sensor, and a
-    blinded ROCOF sensor lets an attack through it unflagged; a stuck meter and an honest
-    load step trip through the coupled filters only, unflagged)."""
+    blinded ROCOF sensor lets an attack through it unflagged; three sensors with a liar
+    trip nothing through the filter built for their median, nor under the red team's
+    worst lie on a grid; a stuck meter and an honest load step trip through the coupled
+    filters only, unflagged)."""
     run_chapter("loads", tmp_path, check_claims=True)
     claims = json.loads((tmp_path / "res" / "claims.json").read_text())
-    assert len(claims) == 12 and all(claims.values())
+    assert len(claims) == 13 and all(claims.values())
 
 
 def test_a_notebook_runs_kernel_gets_the_environment_it_is_given(tmp_path):

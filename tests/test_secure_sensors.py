@@ -13,33 +13,47 @@ import itertools
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import lfc
 import tiers
-from lfc.sensors import SensorArray, fuse, simulate_sensors
+from lfc.sensors import Redundant, SensorArray, fuse
 
 P, RELAYS = lfc.LFCParams(), lfc.RelaySettings()
 WIDE = SensorArray(bound=(0.003, 0.02))     # pu, pu/s: coarse meters, where it shows
 DURATION = 10.0
-N = int(DURATION / 0.01) + 1
+N = int(DURATION / 0.01)                    # control samples
+TC = np.arange(N) * 0.01
 ATTACKS = {"square 1 pu 0.3 Hz": lfc.Square(1.0, 0.3, start=1.0),
            "sinusoid 0.5 pu 1 Hz": lfc.Sinusoid(0.5, 1.0, start=1.0),
            "square 3 pu 0.5 Hz": lfc.Square(3.0, 0.5, start=1.0),
            "step 2 pu": lfc.Step(2.0, start=1.0)}
 
 
-def honest(pattern: str, array: SensorArray = WIDE) -> np.ndarray:
-    """The honest sensors' noise at the corners of its bound: all at +bound, all at
-    -bound, or flipping sign every sample."""
-    h = np.ones((N, array.count, 2)) * np.asarray(array.bound)
-    if pattern == "low":
-        h = -h
-    elif pattern == "flipping":
-        h[::2] *= -1
-    return h
+def honest(pattern: str, array: SensorArray = WIDE) -> dict:
+    """The honest sensors' noise at the corners of its bound (``Redundant.noise``): all
+    at +bound, all at -bound, or flipping sign every sample (-bound at the first)."""
+    sign = {"high": np.ones(N), "low": -np.ones(N),
+            "flipping": np.where(np.arange(N) % 2 == 0, -1.0, 1.0)}[pattern]
+    return {k: {c: lfc.Samples(TC, sign * b) for c, b in zip(("dw_meas", "rocof_meas"),
+                                                               array.bound)}
+            for k in range(array.count)}
+
+
+def sensed(array: SensorArray = WIDE, *, attacks: dict | None = None,
+           honest: dict | None = None, duration: float = DURATION, **kwargs) -> lfc.Result:
+    """``lfc.simulate`` of ``P`` whose AGC and filter read the median of ``array``'s
+    sensors, the liars' ``attacks`` added to the ``honest`` noise."""
+    return lfc.simulate(P, duration=duration, sensors=Redundant(array, attacks or {},
+                                                                honest or {}), **kwargs)
+
+
+def spoofed(result: lfc.Result) -> pd.DataFrame:
+    """The alarm log's rows naming a lie."""
+    return result.alarms[result.alarms.reason.astype(str).str.startswith("spoofed")]
 
 
 def lies(sensor: int, kind: str, array: SensorArray = WIDE) -> dict:
@@ -73,14 +87,14 @@ def test_the_median_is_within_the_bound_and_names_only_the_liar(noise, liar, lie
 def test_the_run_reads_the_median_exactly_and_names_the_liar_every_sample():
     """What the filter reads is the meters' state plus the median's error (to 1e-15), and
     a liar far off is named at every sample from its start on both channels."""
-    run = simulate_sensors(P, WIDE, duration=DURATION, attacks=lies(1, "far"),
-                           honest=honest("flipping"), pc_attack=ATTACKS["step 2 pu"])
-    c, trace = run.result.controls, run.result.trace.set_index("t")
+    red = Redundant(WIDE, lies(1, "far"), honest("flipping"))
+    run = lfc.simulate(P, duration=DURATION, sensors=red, pc_attack=ATTACKS["step 2 pu"])
+    c, trace = run.controls, run.trace.set_index("t")
     read = c.dw_hat.to_numpy() - trace.loc[c.t, "dw_meas"].to_numpy()
-    np.testing.assert_allclose(read, run.fused.error[:len(c), 0], rtol=0, atol=1e-15)
-    named = run.fused.spoofed
-    assert set(named.sensor) == {1} and len(named) == 2 * (N - 100)
-    assert named.t.min() == pytest.approx(1.0)
+    np.testing.assert_allclose(read, red.fused(TC, 0).error[:, 0], rtol=0, atol=1e-15)
+    named = spoofed(run)
+    assert set(named.reason) == {"spoofed: sensor 1 (dw_meas)", "spoofed: sensor 1 (rocof_meas)"}
+    assert len(named) == 2 * (N - 100) and named.t.min() == pytest.approx(1.0)
 
 
 @pytest.mark.parametrize("attack", list(ATTACKS))
@@ -96,12 +110,12 @@ def test_the_secure_filter_trips_nothing_at_the_worst_cases(attack):
     trips = []
     for sensor, kind, pattern in itertools.product(range(3), ("far", "inside"),
                                                    ("high", "low", "flipping")):
-        run = dict(duration=DURATION, attacks=lies(sensor, kind), honest=honest(pattern),
+        run = dict(attacks=lies(sensor, kind), honest=honest(pattern),
                    pc_attack=ATTACKS[attack])
-        r = simulate_sensors(P, WIDE, scc=secure, **run).result
+        r = sensed(scc=secure, **run)
         assert not r.tripped, (attack, sensor, kind, pattern, r.first_trip)
         if kind == "far" and pattern == "high":
-            trips.append(simulate_sensors(P, WIDE, scc=naive, **run).result.tripped)
+            trips.append(sensed(scc=naive, **run).tripped)
     assert any(trips) == (attack != "step 2 pu"), (attack, trips)
 
 
@@ -115,17 +129,18 @@ def test_finding_two_colluding_sensors_beat_the_median():
     sample."""
     secure = lfc.SafetyFilter(P, RELAYS, method="certified", sensor_bound=WIDE.bound)
     lie = {s: {"dw_meas": lfc.Step(0.05, start=1.0)} for s in (0, 1)}
-    run = simulate_sensors(P, WIDE, scc=secure, duration=DURATION, attacks=lie,
-                           honest=honest("flipping"))
-    assert set(run.fused.spoofed.sensor) == {2} and run.fused.beyond.empty
-    m = run.result.metrics()
-    assert not m["tripped"] and m["outside"] == N - 101       # every sample from 1 s
+    run = sensed(scc=secure, attacks=lie, honest=honest("flipping"))
+    assert set(spoofed(run).reason.str[:17]) == {"spoofed: sensor 2"}
+    assert not run.alarms.reason.astype(str).str.startswith("beyond").any()
+    m = run.metrics()
+    assert not m["tripped"] and m["outside"] == N - 100       # every sample from 1 s
     assert m["max_abs_dw_meas"] < 1e-5       # the AGC moved only on the noise before it
     split = {0: {"dw_meas": lfc.Step(0.05, start=1.0)},
              1: {"dw_meas": lfc.Step(-0.05, start=1.0)}}
-    run = simulate_sensors(P, WIDE, scc=secure, duration=DURATION, attacks=split,
-                           honest=honest("flipping"))
-    assert len(run.fused.beyond) == N - 100 and set(run.fused.beyond.channel) == {"dw_meas"}
+    beyond = sensed(scc=secure, attacks=split, honest=honest("flipping")).alarms
+    beyond = beyond[beyond.reason.astype(str).str.startswith("beyond")]
+    assert len(beyond) == N - 100
+    assert set(beyond.reason) == {"beyond: more than tolerate lie (dw_meas)"}
 
 
 def test_bad_sensor_models_are_refused_naming_what():
@@ -141,9 +156,19 @@ def test_bad_sensor_models_are_refused_naming_what():
             WIDE.readings(t, attacks)
     with pytest.raises(ValueError, match="honest"):
         WIDE.readings(t, None, honest=np.full((3, 3, 2), 1.0))
-    for key in ("estimator", "dw_meas_attack"):
-        with pytest.raises(ValueError, match=key):
-            simulate_sensors(P, WIDE, duration=1.0, **{key: None})
+    for red, what in ((lambda: Redundant(WIDE, {3: {"dw_meas": lfc.Step(1.0)}}), "sensor"),
+                      (lambda: Redundant(WIDE, {0: {"pc": lfc.Step(1.0)}}), "lies\\[0\\]"),
+                      (lambda: Redundant(WIDE, {}, {0: {"wref": lfc.Step(1.0)}}), "noise"),
+                      (lambda: Redundant(WIDE, {0: {"dw_meas": 1.0}}), "signal"),
+                      (lambda: Redundant(WIDE.bound), "array")):
+        with pytest.raises((ValueError, TypeError), match=what):
+            red()
+    with pytest.raises(ValueError, match=r"noise\[1\]\['dw_meas'\]"):
+        sensed(honest={1: {"dw_meas": lfc.Step(1.001 * WIDE.bound[0])}}, duration=1.0)
+    with pytest.raises(ValueError, match=r"attacks\[0\].*sensors\[0\]"):
+        sensed(dw_meas_attack=lfc.Step(0.1), duration=1.0)
+    with pytest.raises(ValueError, match="noise_std"):
+        sensed(noise_std=(1e-4, 1e-3), estimator="kalman", duration=1.0)
     with pytest.raises(ValueError, match="sensor_bound"):
         lfc.SafetyFilter(P, RELAYS, method="certified", sensor_bound=(1e-4, 1e-3),
                          noise_std=(1e-4, 1e-3))
@@ -167,25 +192,32 @@ def test_the_secure_filter_trips_nothing_with_loads_within_its_bound(array, load
     instants = (2.003, 4.5) if tiers.exhaustive() else (2.003,)
     for attack, sensor, pattern, start, sign in itertools.product(
             ATTACKS, range(3), patterns, instants, (1, -1)):
-        r = simulate_sensors(P, array, scc=secure, duration=DURATION,
-                             attacks=lies(sensor, "far", array), honest=honest(pattern, array),
-                             pc_attack=ATTACKS[attack],
-                             load=lfc.Step(sign * load_bound, start=start)).result
+        r = sensed(array, scc=secure, attacks=lies(sensor, "far", array),
+                   honest=honest(pattern, array), pc_attack=ATTACKS[attack],
+                   load=lfc.Step(sign * load_bound, start=start))
         assert not r.tripped, (attack, sensor, pattern, start, sign, r.first_trip)
 
 
 def test_the_alarm_log_names_the_spoofed_sensor_and_what_is_beyond():
-    """``SensorRun.alarms``: the filter's log with a row per lie named, in time order;
-    two disagreeing liars put ``beyond`` rows in it."""
+    """The run's alarm log: the filter's rows (as without the sensors' rows) and a row
+    per lie named, in time order, the filter's first at a tie; its ``alarms`` metric
+    counts both; two disagreeing liars put ``beyond`` rows in it."""
     scc = lfc.SafetyFilter(P, RELAYS, method="certified", sensor_bound=WIDE.bound)
-    one = simulate_sensors(P, WIDE, duration=3.0, scc=scc, honest=honest("high")[:301],
-                           attacks=lies(2, "far"))
-    log = one.alarms
-    spoofed = log[log.reason.astype(str).str.startswith("spoofed")]
-    assert len(spoofed) == len(one.fused.spoofed) > 0
-    assert set(spoofed.reason) == {"spoofed: sensor 2 (dw_meas)", "spoofed: sensor 2 (rocof_meas)"}
-    assert log.t.is_monotonic_increasing and len(log) == len(spoofed) + len(one.result.alarms)
-    two = simulate_sensors(P, WIDE, duration=3.0, scc=scc, honest=honest("high")[:301],
-                           attacks={**lies(1, "far"),
-                                    2: {"dw_meas": lfc.Step(-1.0, start=1.0)}})
+    red = Redundant(WIDE, lies(2, "far"), honest("high"))
+    one = lfc.simulate(P, duration=3.0, scc=scc, sensors=red, pc_attack=ATTACKS["step 2 pu"])
+    log, named = one.alarms, spoofed(one)
+    fused = red.fused(TC[:300], 0)
+    assert len(named) == len(fused.spoofed) > 0
+    assert set(named.reason) == {"spoofed: sensor 2 (dw_meas)", "spoofed: sensor 2 (rocof_meas)"}
+    assert log.t.is_monotonic_increasing and one.metrics()["alarms"] == len(log)
+    told = red.attacks(fused)                  # the median's error as a plain sensor attack
+    plain = lfc.simulate(P, duration=3.0, scc=scc, pc_attack=ATTACKS["step 2 pu"],
+                         dw_meas_attack=told["dw_meas"], rocof_meas_attack=told["rocof_meas"])
+    assert len(plain.alarms) > 0
+    pd.testing.assert_frame_equal(log.drop(named.index).reset_index(drop=True), plain.alarms)
+    at = log.reset_index(drop=True)
+    first = at.groupby("t").head(1)
+    assert not first.reason.astype(str).str.startswith("spoofed").any()   # filter's first
+    two = sensed(scc=scc, duration=3.0, honest=honest("high"),
+                 attacks={**lies(1, "far"), 2: {"dw_meas": lfc.Step(-1.0, start=1.0)}})
     assert two.alarms.reason.astype(str).str.startswith("beyond").any()

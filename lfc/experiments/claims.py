@@ -265,7 +265,7 @@ def detection_claims(detection: pd.DataFrame) -> dict[str, bool]:
 
 def loads_claims(growth: pd.DataFrame, gain_map: tuple, warnings: pd.DataFrame,
                  invariant: bool, lie: Runs, lie_pu: float, redundant: Runs,
-                 blinded: Runs, stuck: Runs) -> dict[str, bool]:
+                 spoof: pd.DataFrame, blinded: Runs, stuck: Runs) -> dict[str, bool]:
     """Loads and sensors as weapons (chapter 12).  ``growth``: a row per area and
     ``factor`` of its smallest destabilizing gain with the ``simulated`` growth rate
     (1/s) — below the gain the response decays, above it grows.  ``gain_map``:
@@ -283,9 +283,12 @@ def loads_claims(growth: pd.DataFrame, gain_map: tuple, warnings: pd.DataFrame,
     flags ``outside`` and holds its command (the frequency never moves), no trip.
     ``redundant``: three sensors, one lying, read through their median by the certified
     filter ``"without sensor_bound"`` (it trips) and ``"with sensor_bound"`` (it does
-    not).  ``blinded``: the certified filter under a square attack, its ROCOF sensor
-    ``"honest"`` (no trip) and blinded in other ways (frozen, scaled, replayed: each
-    trips, never flagging ``outside``).  ``stuck``: a grid's frequency meter in area 0
+    not).  ``spoof``: the red team's searches for the worst lie of one sensor in three
+    in every area of a grid (a row each: ``filters`` ``"built for the median"`` or
+    ``"trusting the median"``, ``tripped``) — none trips the first.  ``blinded``: the
+    certified filter under a square attack, its ROCOF sensor ``"honest"`` (no trip) and
+    blinded in other ways (frozen, scaled, replayed: each trips, never flagging
+    ``outside``).  ``stuck``: a grid's frequency meter in area 0
     stuck and an honest load step there, on the grid estimate, without a filter
     (``"none"``) and through ``"certified"`` and ``"coupled"`` filters in every area —
     nothing trips but through the coupled filters, which never flag ``outside``, and on
@@ -315,6 +318,10 @@ def loads_claims(growth: pd.DataFrame, gain_map: tuple, warnings: pd.DataFrame,
             not redundant["with sensor_bound"].tripped,
         "three sensors, one lying: the filter that trusts their median trips":
             redundant["without sensor_bound"].tripped,
+        "the red team finds no lie of one sensor in three that trips the filters built "
+        "for the median":
+            not spoof[spoof["filters"] == "built for the median"]["tripped"].any()
+            and (spoof["filters"] == "built for the median").sum() > 0,
         "a blinded ROCOF sensor lets an attack the filter holds off trip, unflagged":
             not blinded["honest"].tripped and all(
                 r.tripped and r.metrics()["outside"] == 0

@@ -54,6 +54,7 @@ from lfc.multiarea import MultiAreaParams
 from lfc.relays import RelaySettings, relays_or_default
 from lfc.run import simulate_many
 from lfc.scenarios import Scenario
+from lfc.sensors import Redundant
 from lfc.signals import Step
 from lfc.tables import scenario_signal, table_scenarios
 
@@ -96,8 +97,13 @@ LOAD_FAMILIES = {
     "ramp on load": ("load", "ramp", [(-2.0, 2.0), (0.0, 0.3)]),
     "following load": ("following", "gain", [(0.0, 20.0), (0.01, 0.3)]),
 }
+# the sensor families' waveforms told by one sensor (LIAR) of each area's redundant array
+# (lfc.sensors.Redundant, the scenario's sensors): the search looks for the liar's worst lie
+LIAR = 0
+SPOOF_FAMILIES = {f"{name} of sensor {LIAR}": entry for name, entry in SENSOR_FAMILIES.items()
+                  if entry[1] in ("step", "sinusoid")}
 # what coordinated_search and its replay take
-_GRID = {**MULTI_FAMILIES, **SENSOR_FAMILIES, **LOAD_FAMILIES}
+_GRID = {**MULTI_FAMILIES, **SENSOR_FAMILIES, **LOAD_FAMILIES, **SPOOF_FAMILIES}
 
 
 READ_BY = {"none": (), "paper": ("alpha", "Ts"), "certified": ("uncertainty", "declare_noise")}
@@ -304,10 +310,11 @@ def _search(table_of, n_attack, bounds, params, relays, duration, seed, maxiter,
 
 
 #: what a single-area search's ``scenario`` may fix in every run: signals on the channels
-#: the searched family leaves alone (the rest of a run is the table's: filter, noise, plant)
+#: the searched family leaves alone, or redundant sensors with their liars (the rest of a
+#: run is the table's: filter, noise, plant)
 FIXED_KEYS = {"pc": "pc_attack", "wref": "wref_attack", "load": "load",
               "dw_meas": "dw_meas_attack", "rocof_meas": "rocof_meas_attack",
-              "following": "following_load"}
+              "following": "following_load", "sensors": "sensors"}
 
 
 def _fixed_scenario(scenario: dict | None, channel: str) -> Scenario | None:
@@ -333,7 +340,8 @@ def _with_fixed(scenario: Scenario, fixed: Scenario) -> Scenario:
     attacks = {**fixed.attacks.get(0, {}), **scenario.attacks.get(0, {})}
     return replace(scenario, attacks={0: attacks} if attacks else {},
                    loads=scenario.loads or fixed.loads,
-                   following_loads=scenario.following_loads or fixed.following_loads)
+                   following_loads=scenario.following_loads or fixed.following_loads,
+                   sensors=fixed.sensors)
 
 
 def family_search(params: LFCParams, defender: Defender, family: str, *,
@@ -444,8 +452,9 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
                        jobs: int = 2, control_period: float = 0.01,
                        scenario: dict | None = None) -> dict:
     """Worst coordinated attack of one family (``MULTI_FAMILIES``, ``SENSOR_FAMILIES``:
-    what the sensors read, or ``LOAD_FAMILIES``: a botnet's load) on an interconnected
-    grid: differential
+    what the sensors read, ``LOAD_FAMILIES``: a botnet's load, or ``SPOOF_FAMILIES``:
+    the lie of sensor ``LIAR`` of each area's redundant sensors, which ``scenario``'s
+    ``sensors`` gives) on an interconnected grid: differential
     evolution over the family's parameters in every area at once (an area may get
     amplitude 0: single-area attacks are included), maximizing the worst
     :func:`severity` over the areas.
@@ -476,6 +485,9 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
     if any(channel in channels for channels in fixed.values()):
         raise ValueError(f"scenario's attacks must not be on {channel!r} (the family "
                          f"{family!r} searches it), got {fixed!r:.120}")
+    if family in SPOOF_FAMILIES:                     # its liars' arrays, checked first
+        spoofed({"attacks": {a: {} for a in range(params.n_areas)}},
+                scenario.get("sensors"), params.n_areas)
     check_search(duration=duration, seed=seed, maxiter=maxiter, popsize=popsize, relays=relays)
     check_count("jobs", jobs)
     relays = relays_or_default(relays)
@@ -486,6 +498,9 @@ def coordinated_search(params: MultiAreaParams, filters: dict, family: str, *,
                for a, f in filters.items()}                                # not per generation
 
     def with_fixed(found: dict) -> dict:
+        if family in SPOOF_FAMILIES:
+            found = {**found, "sensors": spoofed(found, scenario.get("sensors"), n)}
+            del found["attacks"]
         attacks = found.get("attacks", {})
         merged = {a: {**fixed.get(a, {}), **attacks.get(a, {})} for a in range(n)}
         return {**found, "attacks": {a: c for a, c in merged.items() if c}}
@@ -547,6 +562,24 @@ def coordinated_scenario(family: str, theta, n_areas: int, duration: float) -> d
     if channel == "load":
         return {"loads": signals}
     return {"attacks": {a: {channel: signal} for a, signal in signals.items()}}
+
+
+def spoofed(found: dict, sensors: dict | None, n_areas: int) -> dict:
+    """``sensors`` (``{area: Redundant}``, one per area) with the attacks of ``found``
+    (:func:`coordinated_scenario` of a ``SPOOF_FAMILIES`` family) as sensor ``LIAR``'s
+    lies, added to any it tells already; ``ValueError`` unless every area has its
+    redundant sensors."""
+    sensors = sensors or {}
+    if set(sensors) != set(range(n_areas)) or not all(
+            isinstance(r, Redundant) for r in sensors.values()):
+        raise ValueError(f"a spoofed sensor's family needs scenario['sensors'] = {{area: "
+                         f"lfc.sensors.Redundant}} for each of the {n_areas} areas, got "
+                         f"{sensors!r:.120}")
+    out = {}
+    for a, red in sensors.items():
+        lies = {**red.lies, LIAR: {**red.lies.get(LIAR, {}), **found["attacks"][a]}}
+        out[a] = replace(red, lies=lies)
+    return out
 
 
 def coordinated_attacks(family: str, theta, n_areas: int, duration: float) -> dict:

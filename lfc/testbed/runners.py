@@ -9,10 +9,14 @@ to the case, cached on disk; required for a plant of your own).  Importing
 
 from __future__ import annotations
 
+import numpy as np
+
+from lfc._validate import check_positive
 from lfc.engine import SENSOR_CHANNELS, check_load_measured
-from lfc.linear_grid import results_table
+from lfc.linear_grid import SCENARIO_KEYS, results_table
 from lfc.run import Runner, register, register_protocol
-from lfc.scenarios import grid_scenarios
+from lfc.scenarios import Scenario, grid_scenarios
+from lfc.sensors import with_sensors
 from lfc.testbed.grids import GridCase
 from lfc.testbed.loop import AndesPlant
 from lfc.testbed.microgrid import MicrogridCase
@@ -30,10 +34,28 @@ def _microgrid_refuses(scenario: dict) -> None:
     if named:
         raise ValueError(f"{', '.join(named)}: attacks on the sensors run on the linear plants "
                          f"and the ANDES grid cases (GridCase), not on the microgrid yet")
-    if scenario.get("following_load") is not None:
-        raise ValueError("following_load: a load that follows the frequency "
-                         "(lfc.load_attacks) runs on the linear plants and the ANDES grid "
-                         "cases (GridCase), not on the microgrid yet")
+    for name, what in (("following_load", "a load that follows the frequency "
+                                          "(lfc.load_attacks)"),
+                       ("sensors", "redundant sensors (lfc.sensors.Redundant)")):
+        if scenario.get(name) is not None:
+            raise ValueError(f"{name}: {what} run on the linear plants and the ANDES grid "
+                             f"cases (GridCase), not on the microgrid yet")
+
+
+def _lowered(scenario: dict, duration: float, period: float) -> tuple[dict, dict]:
+    """An ANDES grid's ``scenario`` (:func:`~lfc.testbed.grids.simulate_andes_grid`'s
+    keywords) with its redundant sensors (``sensors``) given as their fused error on the
+    areas' sensor channels, at the generator sides' control samples of ``period`` s
+    (:func:`lfc.sensors.with_sensors`), and their alarm rows by area."""
+    if not scenario.get("sensors"):
+        return {k: v for k, v in scenario.items() if k != "sensors"}, {}
+    check_positive("duration", duration)
+    check_positive("control_period", period)
+    checked = Scenario(**{k: scenario[k] for k in ("sensors", "attacks", "noise_std", "seed")
+                          if k in scenario})
+    tc = np.arange(int(np.ceil(duration / period - 1e-9))) * period
+    attacks, logs = with_sensors(checked.sensors, checked.attacks, tc, checked.seed)
+    return {**{k: v for k, v in scenario.items() if k != "sensors"}, "attacks": attacks}, logs
 
 
 def _fitted_model(case: MicrogridCase):
@@ -64,16 +86,21 @@ def _grid_case(case: GridCase, *, duration: float, design=None, **scenario):
     from lfc.testbed.grids import simulate_andes_grid
     check_load_measured(scenario.get("filters") or {}, scenario.get("estimator"),
                         scenario.get("feedforward", True))
+    scenario, logs = _lowered(scenario, duration, scenario.get("control_period", 0.01))
     return simulate_andes_grid(design if design is not None else _fitted_grid(case),
-                               duration=duration, case=case, **scenario)
+                               duration=duration, case=case, **scenario).with_alarms(logs)
 
 
 def _grid_case_many(case: GridCase, scenarios: list[dict], *, duration: float, design=None,
                     keep: str = "metrics", **kwargs):
     from lfc.testbed.grids import simulate_andes_grid_table
+    shared = {k: kwargs.pop(k) for k in SCENARIO_KEYS if k in kwargs}   # every scenario's
+    lowered = [_lowered({**shared, **s}, duration, kwargs.get("control_period", 0.01))
+               for s in grid_scenarios(scenarios)]
     results = simulate_andes_grid_table(design if design is not None else _fitted_grid(case),
-                                        grid_scenarios(scenarios), duration=duration,
+                                        [s for s, _ in lowered], duration=duration,
                                         case=case, **kwargs)
+    results = [r.with_alarms(logs) for r, (_, logs) in zip(results, lowered)]
     return results if keep == "results" else results_table(results)
 
 
@@ -83,7 +110,9 @@ def _own_plant(plant, *, duration: float, design=None, **scenario):
         _no_design(plant)
     check_load_measured(scenario.get("filters") or {}, scenario.get("estimator"),
                         scenario.get("feedforward", True))
-    return simulate_andes_grid(design, duration=duration, plant=plant, **scenario)
+    scenario, logs = _lowered(scenario, duration, scenario.get("control_period", 0.01))
+    return simulate_andes_grid(design, duration=duration, plant=plant,
+                               **scenario).with_alarms(logs)
 
 
 def is_andes_plant(plant) -> bool:

@@ -56,6 +56,8 @@ from lfc.multiarea import MultiAreaParams, as_grid
 from lfc.relays import relays_or_default
 from lfc.result import Result
 from lfc.run import runner_of
+from lfc.scenarios import Scenario
+from lfc.sensors import with_sensors
 from lfc.wire.attacks import WireAttack
 from lfc.wire.link import Link
 from lfc.wire.network import NETWORKS
@@ -156,7 +158,8 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
              anti_windup: bool = False, agc: str = "generator", mode: str = "lockstep",
              feedforward: bool | None = None, capture: str | Path | None = None,
              impairment: Impairment | None = None,
-             select_before_operate: bool = False, network: str = "loopback") -> WireResult:
+             select_before_operate: bool = False, network: str = "loopback",
+             sensors=None) -> WireResult:
     """Run one area, or every area of a grid, over the wire (module docstring).
 
     Parameters
@@ -213,6 +216,12 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
         centre, the substation's relays and the generators in network namespaces of
         their own joined by veth links, made for the run and removed after it: root,
         else a ``PermissionError`` naming ``"loopback"``).
+    sensors : Redundant or dict, optional
+        Linear plants only: the generator's redundant frequency and ROCOF sensors,
+        some of which may lie (:class:`lfc.sensors.Redundant`; for a grid ``{area:
+        Redundant}``), as in :func:`lfc.simulate`: the generator side reads their
+        median; ``sim``'s alarm log names each reading found a lie (the reports carry
+        the filter's flags).  Not with ``noise_std``.
 
     Returns
     -------
@@ -245,6 +254,9 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
         raise ValueError(f"select_before_operate is DNP3's (SELECT, then OPERATE); "
                          f"protocol {protocol!r} has no such function: use protocol='dnp3'")
     if testbed is not None:
+        if sensors is not None:
+            raise ValueError("sensors: redundant sensors run over the wire on the linear "
+                             "plants (lfc.simulate takes them on an ANDES GridCase)")
         return _on_andes(params, testbed, duration=duration, attack=attack, scc=scc,
                          protocol=protocol, load=load, noise_std=noise_std, seed=seed,
                          control_period=control_period, relays=relays,
@@ -283,13 +295,17 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
     n_steps = int(round(duration / dt))
     n_ctrl = -(-n_steps // ratio)
     tc = np.arange(n_ctrl) * period
+    redundant = Scenario(sensors={0: sensors} if single else sensors, noise_std=noise_std,
+                         seed=seed)
+    check_area_keys(redundant.sensors, n_a, "sensors")
+    told, logs = with_sensors(redundant.sensors, {}, tc, seed)
     k_freq, k_tie = grid.agc_gains()
     feedforward = (not single) if feedforward is None else feedforward
     gens = [GeneratorSide(grid.areas[a], filters.get(a), None, noise_std,
                           seed if a == 0 else (seed, a), tc, None, None,
                           feedforward and filters.get(a) is not None, period,
                           k_agc=(k_freq[a], k_tie[a]) if local else (0.0, 0.0), network=True,
-                          anti_windup=anti_windup and local)
+                          anti_windup=anti_windup and local, sensor_attacks=told.get(a))
             for a in range(n_a)]
     plant = LinearGrid(grid, loads, n_steps, ratio, dt, relays)
 
@@ -331,8 +347,10 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
                 "agc": agc, "mode": mode, "feedforward": feedforward,
                 "capture": None if capture is None else str(capture), "ports": link.ports,
                 "impairment": repr(impairment),
-                "select_before_operate": select_before_operate, "network": network}
-    sim = plant.result(single, tc, [gen.ctrl for gen in gens], filters, settings)
+                "select_before_operate": select_before_operate, "network": network,
+                **({"sensors": repr(sensors)} if sensors else {})}
+    sim = plant.result(single, tc, [gen.ctrl for gen in gens], filters,
+                       settings).with_alarms(logs)
     return WireResult(sim, *link.outcome(n_ctrl), settings)
 
 
