@@ -28,6 +28,11 @@ class LinearGrid:
     grid : MultiAreaParams
     loads : dict
         ``{area: signal}``: each area's load change (pu).
+    following : dict, optional
+        ``{area: FollowingLoad}``: a botnet's load that follows the area's frequency
+        meter (:class:`lfc.load_attacks.FollowingLoad`), added to its load, switched at
+        every plant step from the meter then and held over the step, as the engine
+        does; the plant then steps one ``dt`` at a time.
     n_steps, ratio : int
         Plant steps of the run and per control period.
     dt : float
@@ -45,8 +50,9 @@ class LinearGrid:
     """
 
     def __init__(self, grid: MultiAreaParams, loads: dict, n_steps: int, ratio: int,
-                 dt: float, relays: RelaySettings) -> None:
+                 dt: float, relays: RelaySettings, following: dict | None = None) -> None:
         self.grid, self.n_steps, self.ratio, self.dt = grid, n_steps, ratio, dt
+        self.following = dict(following or {})
         self.n_a = grid.n_areas
         self.t = np.arange(n_steps + 1) * dt
         self.p = np.column_stack([sample_signal(loads.get(a), self.t, f"load[{a}]")
@@ -84,7 +90,7 @@ class LinearGrid:
         states, the load, the tie-line export and their sum."""
         m = N_AREA_STATES
         tie = self.ties()
-        load = self.p[j * self.ratio]
+        load = self.p[j * self.ratio] + self._followed(j * self.ratio, self.x)
         return np.column_stack([self.x[:m * self.n_a].reshape(self.n_a, m), load, tie,
                                 load + tie])
 
@@ -98,10 +104,17 @@ class LinearGrid:
         bits = np.zeros(self.n_a, np.int64)
         if steps <= 0:
             return bits
-        loads = np.zeros(self.ratio * self.n_a)
-        loads[:steps * self.n_a] = self.p[k0:k0 + steps].ravel()
         with np.errstate(over="ignore", invalid="ignore"):   # non-finite: the caller refuses
-            xs = (self._free @ self.x + self._held @ u + self._loads @ loads).reshape(-1, n)
+            if self.following:                     # the load follows the state: step by step
+                xs = np.zeros((steps, n))
+                x = self.x
+                for i in range(steps):
+                    p = self.p[k0 + i] + self._followed(k0 + i, x)
+                    x = xs[i] = self.A @ x + self.Bu @ u + self.Bl @ p
+            else:
+                loads = np.zeros(self.ratio * self.n_a)
+                loads[:steps * self.n_a] = self.p[k0:k0 + steps].ravel()
+                xs = (self._free @ self.x + self._held @ u + self._loads @ loads).reshape(-1, n)
         self.xs[k0 + 1:k0 + steps + 1] = xs[:steps]
         if watch:
             for k in range(k0 + 1, k0 + steps + 1):
@@ -113,6 +126,22 @@ class LinearGrid:
                     bits[a] |= self.trips[k, a]
         self.x = xs[steps - 1].copy()
         return bits
+
+    def _followed(self, k: int, x: np.ndarray) -> np.ndarray:
+        """Each area's following load (pu) over plant step ``k`` from the state ``x``."""
+        p = np.zeros(self.n_a)
+        for a, botnet in self.following.items():
+            p[a] = botnet.load(np.array([k * self.dt]), np.array([x[N_AREA_STATES * a + 3]]))[0]
+        return p
+
+    def loads(self) -> np.ndarray:
+        """Each area's load at every step (n_steps + 1, n_areas; pu): its signal and its
+        following load."""
+        p = self.p.copy()
+        states = self.states()
+        for a, botnet in self.following.items():
+            p[:, a] += botnet.load(self.t, states[:, a, 3])
+        return p
 
     def trip_rows(self) -> list[pd.DataFrame]:
         """Each area's trips: one row per relay and instant (``relay``, ``t``)."""
@@ -142,7 +171,7 @@ class LinearGrid:
             trace = pd.DataFrame({"t": self.t})
             for i, name in enumerate(STATES):
                 trace[name] = states[:, 0, i]
-            trace["p_load"] = self.p[:, 0]
+            trace["p_load"] = self.loads()[:, 0]
             return area_result(trace, tc, ctrl[0], trips[0], filters.get(0), settings)
-        return grid_result(self.grid, self.t, states, self.p, self.exports(), trips, tc,
-                                ctrl, filters, settings)
+        return grid_result(self.grid, self.t, states, self.loads(), self.exports(), trips, tc,
+                           ctrl, filters, settings)

@@ -227,3 +227,31 @@ def test_finding_two_following_loads_at_once_are_neither_a_box_nor_a_triangle():
     assert 7.0 < alone and growth_rate(TWO, {0: 7.0, 1: 7.0}) > 0.001
     assert growth_rate(TWO, {0: 8.0}) > 0.04 and growth_rate(TWO, {0: 8.0, 1: 6.75}) < -0.01
     assert growth_rate(TWO, {0: 6.5, 1: 6.5}) < -0.05
+
+
+@pytest.mark.parametrize("protocol", ["modbus", "dnp3"])
+def test_over_the_wire_a_following_load_runs_as_simulate_runs_it(protocol):
+    """A dynamic load-altering attack over the wire (``run_wire(following_load=...)``):
+    on the default area at twice the held loop's critical gain with the certified filter,
+    and in area 1 of the two-area preset at 12 pu/pu with the certified filters, the
+    lockstep run equals ``lfc.simulate``'s to 1e-12 pu — the trace with the botnet's load,
+    the trips (both trip) and the alarm log."""
+    from lfc.wire import run_wire
+    params = lfc.LFCParams()
+    botnet = FollowingLoad(2 * critical_gain(params, 0, agc=False), limit=0.5, start=1.0)
+    kw = dict(duration=10.0, load=lfc.Step(0.01, start=1.0), following_load=botnet,
+              scc=lfc.SafetyFilter(params, method="certified"))
+    cases = [(run_wire(params, protocol=protocol, **kw), lfc.simulate(params, **kw))]
+    grid = lfc.MultiAreaParams.two_area()
+    botnets, loads = {1: FollowingLoad(12.0, limit=0.5, start=1.0)}, {1: lfc.Step(0.01, start=1.0)}
+    filters = {0: "certified", 1: "certified"}
+    cases.append((run_wire(grid, duration=10.0, load=loads, scc=filters, protocol=protocol,
+                           following_load=botnets),
+                  lfc.simulate(grid, duration=10.0, loads=loads, filters=filters,
+                               following_loads=botnets)))
+    for wire, sim in cases:
+        diff = wire.sim.trace.select_dtypes(float).to_numpy() \
+            - sim.trace.select_dtypes(float).to_numpy()
+        assert np.abs(diff).max() < 1e-12
+        assert wire.sim.tripped and wire.sim.trips.equals(sim.trips)
+        assert len(wire.sim.alarms) == len(sim.alarms)

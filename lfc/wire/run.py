@@ -159,7 +159,7 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
              feedforward: bool | None = None, capture: str | Path | None = None,
              impairment: Impairment | None = None,
              select_before_operate: bool = False, network: str = "loopback",
-             sensors=None) -> WireResult:
+             sensors=None, following_load=None) -> WireResult:
     """Run one area, or every area of a grid, over the wire (module docstring).
 
     Parameters
@@ -222,6 +222,11 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
         Redundant}``), as in :func:`lfc.simulate`: the generator side reads their
         median; ``sim``'s alarm log names each reading found a lie (the reports carry
         the filter's flags).  Not with ``noise_std``.
+    following_load : FollowingLoad or dict, optional
+        Linear plants only: a botnet's load that follows the area's frequency meter
+        (:class:`lfc.load_attacks.FollowingLoad`; for a grid ``{area:
+        FollowingLoad}``), added to ``load``, as :func:`lfc.simulate`'s
+        ``following_load`` (``following_loads`` of a grid).
 
     Returns
     -------
@@ -254,9 +259,10 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
         raise ValueError(f"select_before_operate is DNP3's (SELECT, then OPERATE); "
                          f"protocol {protocol!r} has no such function: use protocol='dnp3'")
     if testbed is not None:
-        if sensors is not None:
-            raise ValueError("sensors: redundant sensors run over the wire on the linear "
-                             "plants (lfc.simulate takes them on an ANDES GridCase)")
+        for name, given in (("sensors", sensors), ("following_load", following_load)):
+            if given is not None:
+                raise ValueError(f"{name}: runs over the wire on the linear plants "
+                                 f"(lfc.simulate takes it on an ANDES GridCase)")
         return _on_andes(params, testbed, duration=duration, attack=attack, scc=scc,
                          protocol=protocol, load=load, noise_std=noise_std, seed=seed,
                          control_period=control_period, relays=relays,
@@ -296,8 +302,10 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
     n_ctrl = -(-n_steps // ratio)
     tc = np.arange(n_ctrl) * period
     redundant = Scenario(sensors={0: sensors} if single else sensors, noise_std=noise_std,
-                         seed=seed)
+                         seed=seed, following_loads={0: following_load} if single
+                         else following_load)
     check_area_keys(redundant.sensors, n_a, "sensors")
+    check_area_keys(redundant.following_loads, n_a, "following_load")
     told, logs = with_sensors(redundant.sensors, {}, tc, seed)
     k_freq, k_tie = grid.agc_gains()
     feedforward = (not single) if feedforward is None else feedforward
@@ -307,7 +315,7 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
                           k_agc=(k_freq[a], k_tie[a]) if local else (0.0, 0.0), network=True,
                           anti_windup=anti_windup and local, sensor_attacks=told.get(a))
             for a in range(n_a)]
-    plant = LinearGrid(grid, loads, n_steps, ratio, dt, relays)
+    plant = LinearGrid(grid, loads, n_steps, ratio, dt, relays, redundant.following_loads)
 
     link = Link(n_a, transport(protocol), policies, np.arange(n_ctrl) * ratio * dt, period,
                 None if local else k_freq[0] * period, anti_windup, impairment,
@@ -348,7 +356,8 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
                 "capture": None if capture is None else str(capture), "ports": link.ports,
                 "impairment": repr(impairment),
                 "select_before_operate": select_before_operate, "network": network,
-                **({"sensors": repr(sensors)} if sensors else {})}
+                **({"sensors": repr(sensors)} if sensors else {}),
+                **({"following_load": repr(following_load)} if following_load else {})}
     sim = plant.result(single, tc, [gen.ctrl for gen in gens], filters,
                        settings).with_alarms(logs)
     return WireResult(sim, *link.outcome(n_ctrl), settings)
