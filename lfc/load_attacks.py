@@ -18,7 +18,8 @@ from the meter's value at its start.  :func:`critical_gain` is the smallest gain
 which the closed loop of the continuous-time design model (:func:`closed_loop`:
 every area, its tie-lines' reachable flows, its AGC integrator on its measured
 frequency and export, or its command held) has an eigenvalue with a non-negative
-real part.
+real part.  :func:`secure_load` is the least load to secure in each area so that a
+botnet of the rest cannot destabilize it.
 """
 
 from __future__ import annotations
@@ -28,10 +29,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lfc._validate import check_index, check_number, check_range
-from lfc.multiarea import reduced_model
+from scipy.optimize import linprog
+
+from lfc._validate import check_count, check_index, check_number, check_positive, check_range
 from lfc.model import STATES, LFCParams
-from lfc.multiarea import N_AREA_STATES, MultiAreaParams, as_grid
+from lfc.multiarea import N_AREA_STATES, MultiAreaParams, as_grid, reduced_model
 
 #: the state of an area the devices read (the frequency meter)
 DW_MEAS = STATES.index("dw_meas")
@@ -165,3 +167,123 @@ def critical_gain(params: LFCParams | MultiAreaParams, area: int = 0, *, agc: bo
             return high
         stable = float(gain)
     return math.inf
+
+
+@dataclass(frozen=True)
+class SecuredLoad:
+    """What :func:`secure_load` found.
+
+    Attributes
+    ----------
+    secured : ndarray
+        The load to secure in each area (pu).
+    gains : ndarray
+        The gain the botnet keeps in each area (pu/pu).
+    growth : float
+        The exact closed loop's largest real part at those gains (1/s).
+    rounds : int
+        The linear programs solved.
+    converged : bool
+        Whether the last two agreed and the exact loop meets the margin.
+    first : ndarray
+        The one-shot linear program's answer (linearized at the full attack, as in
+        Lakshminarayana et al.), pu per area; ``first_growth`` its exact growth (1/s).
+    first_growth : float
+    """
+
+    secured: np.ndarray
+    gains: np.ndarray
+    growth: float
+    rounds: int
+    converged: bool
+    first: np.ndarray
+    first_growth: float
+
+
+def _sensitivities(params, gains: np.ndarray, agc: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The real parts of :func:`closed_loop`'s eigenvalues at ``gains`` and their
+    first-order sensitivities to each area's gain, ``(n_modes,)`` and ``(n_modes,
+    n_areas)`` (1/s, 1/s per pu/pu): ``w_i E_a v_i`` with ``v_i``, ``w_i`` the right
+    and left eigenvectors (``W V = I``) and ``E_a`` the loop's change per unit gain."""
+    n_a = len(gains)
+    A = closed_loop(params, dict(enumerate(gains)), agc=agc)
+    zero = closed_loop(params, {}, agc=agc)
+    change = [closed_loop(params, {a: 1.0}, agc=agc) - zero for a in range(n_a)]
+    lam, V = np.linalg.eig(A)
+    W = np.linalg.inv(V)
+    return lam.real, np.array([[(W[i] @ E @ V[:, i]).real for E in change]
+                               for i in range(len(lam))])
+
+
+def secure_load(params: LFCParams | MultiAreaParams, vulnerable, gain_per_pu: float, *,
+                margin: float = 0.0, agc: bool = True, rounds: int = 50) -> SecuredLoad:
+    """The least load to secure in each area so that a botnet of the rest of its
+    vulnerable load cannot destabilize the design model's closed loop.
+
+    A botnet that compromises ``vulnerable[a] - s_a`` pu of area ``a``'s load makes it
+    follow the frequency with the gain ``K_a = gain_per_pu (vulnerable[a] - s_a)``
+    (pu/pu: each pu of devices switched fully for a frequency deviation of
+    ``1 / gain_per_pu`` pu).  The linear program over the eigenvalues' first-order
+    sensitivities (Lakshminarayana et al., IEEE Trans. Smart Grid 2021):
+    ``min sum s_a`` subject to ``Re l_i(K0) + sum_a dRe l_i/dK_a (K_a - K0_a) <= -margin``
+    for every eigenvalue ``l_i`` of :func:`closed_loop` and ``0 <= s_a <=
+    vulnerable[a]``, first linearized at the full attack (``K0``: nothing secured: the
+    one-shot program, kept as ``first``), then again at each answer until two agree
+    and the exact eigenvalues there meet the margin (a sequential linear program).  The
+    stable set of the gains is not convex (docs/guarantees.md), so the answer is a local
+    one, and the one-shot program's may be unstable: its exact growth is reported.
+
+    Parameters
+    ----------
+    params : LFCParams or MultiAreaParams
+        The design model.
+    vulnerable : sequence of float
+        The load the botnet can compromise in each area (pu), each >= 0.
+    gain_per_pu : float
+        The gain a pu of compromised load gives the botnet (pu/pu per pu), > 0.
+    margin : float
+        The decay rate the loop keeps (1/s), >= 0 and below its own without the attack.
+    agc : bool
+        The AGC on (default) or every command held (:func:`closed_loop`).
+    rounds : int
+        At most this many linear programs, >= 1.
+
+    Raises
+    ------
+    ValueError
+        Naming the parameter: out of its range, ``vulnerable`` not one value per area,
+        or a loop not stable by ``margin`` without the attack.
+    """
+    n_a = as_grid(params).n_areas
+    v = np.asarray(vulnerable, float)
+    if v.shape != (n_a,) or not np.all(np.isfinite(v)) or np.any(v < 0):
+        raise ValueError(f"vulnerable must be {n_a} finite loads >= 0 pu (one per area), got "
+                         f"{vulnerable!r:.80}")
+    check_positive("gain_per_pu", gain_per_pu)
+    check_range("margin", margin, 0.0, math.inf, closed=True)
+    check_count("rounds", rounds)
+    if growth_rate(params, {}, agc=agc) > -margin:
+        raise ValueError(f"margin={margin!r} 1/s: the closed loop does not decay that fast "
+                         f"without the attack (its largest real part is "
+                         f"{growth_rate(params, {}, agc=agc):.4g} 1/s)")
+
+    def exact(s: np.ndarray) -> float:
+        return growth_rate(params, dict(enumerate(gain_per_pu * (v - s))), agc=agc)
+
+    s, first = np.zeros(n_a), None
+    for done in range(1, rounds + 1):
+        gains = gain_per_pu * (v - s)
+        re, sens = _sensitivities(params, gains, agc)
+        # re + sens (g (v - s') - gains) <= -margin, as A_ub s' <= b_ub
+        lp = linprog(np.ones(n_a), A_ub=-gain_per_pu * sens,
+                     b_ub=-margin - re - sens @ (gain_per_pu * v - gains),
+                     bounds=list(zip(np.zeros(n_a), v)), method="highs")
+        new = lp.x if lp.status == 0 else v.copy()        # infeasible: secure it all
+        first = new.copy() if first is None else first
+        settled = np.max(np.abs(new - s), initial=0.0) <= 1e-9
+        s = new
+        if settled and exact(s) <= -margin + 1e-9:
+            break
+    growth = exact(s)
+    return SecuredLoad(s, gain_per_pu * (v - s), growth, done,
+                       bool(settled and growth <= -margin + 1e-9), first, exact(first))
