@@ -744,7 +744,7 @@ def test_loads_notebook_shows_its_figures_and_its_claims_hold(tmp_path):
     filters only, unflagged)."""
     run_chapter("loads", tmp_path, check_claims=True)
     claims = json.loads((tmp_path / "res" / "claims.json").read_text())
-    assert len(claims) == 13 and all(claims.values())
+    assert len(claims) == 14 and all(claims.values())
 
 
 def test_a_notebook_runs_kernel_gets_the_environment_it_is_given(tmp_path):

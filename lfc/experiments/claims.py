@@ -263,7 +263,7 @@ def detection_claims(detection: pd.DataFrame) -> dict[str, bool]:
     })
 
 
-def loads_claims(growth: pd.DataFrame, gain_map: tuple, warnings: pd.DataFrame,
+def loads_claims(growth: pd.DataFrame, gain_map: tuple, secured, warnings: pd.DataFrame,
                  invariant: bool, lie: Runs, lie_pu: float, redundant: Runs,
                  spoof: pd.DataFrame, blinded: Runs, stuck: Runs) -> dict[str, bool]:
     """Loads and sensors as weapons (chapter 12).  ``growth``: a row per area and
@@ -272,7 +272,9 @@ def loads_claims(growth: pd.DataFrame, gain_map: tuple, warnings: pd.DataFrame,
     ``(axis, rates, critical)``, the growth rate (1/s) over two areas' gains
     (``rates[i, j]``: area 0 at ``axis[j]``, area 1 at ``axis[i]``, pu/pu) and each
     area's own smallest destabilizing gain — on the diagonal, both at once destabilize
-    below either's own.  ``warnings``: a row
+    below either's own.  ``secured``: :func:`lfc.load_attacks.secure_load`'s answer —
+    stable (on the boundary: its sequential program converged).
+    ``warnings``: a row
     per red-team winner with ``filters`` (``"none"``: no filter), ``estimate`` (bool),
     ``trip``, ``outside`` and
     ``load alarm`` (first times, s; NaN: none) — the load alarm comes before every
@@ -303,6 +305,8 @@ def loads_claims(growth: pd.DataFrame, gain_map: tuple, warnings: pd.DataFrame,
             ((growth.factor < 1) == (growth.simulated < 0)).all(),
         "two following loads at once destabilize below either area's own gain":
             any(rate > 0 for k, rate in zip(axis, np.diag(rates)) if k < min(critical)),
+        "the least load to secure leaves the loop stable (the sequential program converged)":
+            secured.converged and secured.growth <= 1e-9,
         "the red team's load attacks trip relays": len(tripped) > 0,
         "the load alarm comes before every trip": (tripped["load alarm"]
                                                    < tripped["trip"]).all(),
