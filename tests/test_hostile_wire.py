@@ -383,3 +383,54 @@ def test_an_outstation_checks_its_select_options():
         dn.Outstation(select_timeout=0.0)
     with pytest.raises(TypeError, match="select_before_operate"):
         dn.Outstation(select_before_operate="yes")
+
+
+@pytest.mark.parametrize("protocol", ["modbus", "dnp3"])
+def test_the_control_centre_connects_again_after_a_reset(protocol):
+    """A man in the middle that resets the connection (``reset``: a TCP RST both ways
+    instead of forwarding the command of 1 s): the control centre connects again (DNP3:
+    and starts up again), the period's command is lost — the run is the one that drops
+    it, bit for bit — and the reconnection is logged with what failed.  Before, the
+    first failed request ended the run."""
+    import numpy as np
+
+    import lfc
+    from lfc.wire import run_wire
+    params, load = lfc.LFCParams(), lfc.Step(0.05, start=0.5)
+    reset = run_wire(params, duration=2.0, protocol=protocol, load=load,
+                     attack=[{"op": "reset", "start": 1.0, "stop": 1.005}])
+    dropped = run_wire(params, duration=2.0, protocol=protocol, load=load,
+                       attack=[{"op": "drop", "start": 1.0, "stop": 1.005}])
+    a, b = reset.sim.trace.to_numpy(float), dropped.sim.trace.to_numpy(float)
+    assert np.array_equal(np.isnan(a), np.isnan(b)) and np.array_equal(a[~np.isnan(a)],
+                                                                       b[~np.isnan(b)])
+    assert reset.exchanges.link.tolist() == dropped.exchanges.link.tolist()
+    assert reset.exchanges.link.sum() == 1
+    assert reset.reconnects[["t", "area", "seq"]].values.tolist() == [[1.0, 0, 100]]
+    assert "reset" in reset.reconnects.reason.iat[0].lower()
+    assert dropped.reconnects.empty and reset.rejected.empty
+
+
+@pytest.mark.parametrize("protocol", ["modbus", "dnp3"])
+def test_a_reset_storm_loses_its_commands_and_nothing_else(protocol):
+    """Every command reset for half a second under Fig. 4's attack, the certified filter
+    at the generator: 50 reconnections, 50 periods flagged, no trip, within 30 s."""
+    import time
+
+    import lfc
+    from lfc.wire import run_wire
+    from lfc.wire.attacks import ATTACKS
+    params = lfc.LFCParams()
+    t0 = time.perf_counter()
+    run = run_wire(params, duration=3.0, protocol=protocol,
+                   scc=lfc.SafetyFilter(params, method="certified"),
+                   attack=[{"op": "reset", "start": 1.0, "stop": 1.495}, *ATTACKS["fig4"]])
+    assert time.perf_counter() - t0 < 30.0
+    assert len(run.reconnects) == 50 and run.exchanges.link.sum() == 50
+    assert not run.tripped
+
+
+def test_reset_takes_no_field():
+    from lfc.wire.attacks import WireAttack
+    with pytest.raises(ValueError, match="reset takes no field"):
+        WireAttack([{"op": "reset", "field": "pc"}])

@@ -183,3 +183,26 @@ def test_in_real_time_on_namespaces_the_commands_arrive_and_the_filter_rides_the
     assert ex.received.abs().max() == pytest.approx(ATTACKS["fig4"][0]["signal"]["amplitude"],
                                                     rel=0.01)
     assert not run.tripped and run.sim.trace.rocof_meas.abs().max() < relays.rocof_limit
+
+
+@needs_netns
+@pytest.mark.parametrize("protocol", ["modbus", "dnp3"])
+def test_a_reset_connection_is_made_again_on_the_network(protocol, tmp_path):
+    """The man in the middle resets the connection (``reset``: a TCP RST both ways) at
+    the command of 1 s: the capture holds the RSTs and a second handshake on each leg
+    (the control centre connects again, the relay again to the outstation), and the run
+    is the one that drops that one command, bit for bit."""
+    path = tmp_path / "reset.pcap"
+    reset = run_wire(PARAMS, duration=1.5, protocol=protocol, load=LOAD, network="namespaces",
+                     capture=path, attack=[{"op": "reset", "start": 1.0, "stop": 1.005}])
+    dropped = run_wire(PARAMS, duration=1.5, protocol=protocol, load=LOAD,
+                       attack=[{"op": "drop", "start": 1.0, "stop": 1.005}])
+    assert _same(reset.sim.trace.to_numpy(float), dropped.sim.trace.to_numpy(float))
+    assert reset.reconnects.seq.tolist() == [100]
+    packets = rdpcap(str(path))
+    syn = [p for p in packets if p[TCP].flags == "S"]
+    assert sorted((p[IP].src, p[IP].dst) for p in syn) == sorted(
+        2 * [(VETH.centre, VETH.relay(0)), (VETH.relay_upstream(0), VETH.generator(0))])
+    rst = {(p[IP].src, p[IP].dst) for p in packets if p[TCP].flags & 0x04}
+    assert (VETH.relay(0), VETH.centre) in rst and (VETH.relay_upstream(0),
+                                                   VETH.generator(0)) in rst

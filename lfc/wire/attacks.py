@@ -24,6 +24,11 @@ freeze    (none)                                     the value sent in the last 
 drop      (command fields only; ``field`` omitted)   the frame is not forwarded: the
                                                      generator holds its last command
                                                      and flags the link
+reset     (``field`` omitted)                        the command is not forwarded and
+                                                     the connection is reset (a TCP
+                                                     RST both ways): the control
+                                                     centre reconnects, the generator
+                                                     holds and flags the link
 ========  =========================================  ================================
 
 The paper's attacks on the wire: Fig. 4's sinusoid on the command is ``add`` on
@@ -42,8 +47,9 @@ import math
 from lfc import signals
 from lfc._validate import as_float, check_finite, check_integer, check_number
 from lfc.wire.registers import COMMAND, REPORT
+from lfc.wire.relay import RESET
 
-OPS = ("add", "scale", "bias", "delay", "replay", "freeze", "drop")
+OPS = ("add", "scale", "bias", "delay", "replay", "freeze", "drop", "reset")
 SIGNALS = {"sinusoid": signals.Sinusoid, "square": signals.Square, "step": signals.Step,
            "ramp": signals.Ramp, "chirp": signals.Chirp, "samples": signals.Samples}
 SCALE = {"sinusoid": "amplitude", "square": "amplitude", "step": "value", "ramp": "slope",
@@ -142,9 +148,9 @@ class WireAttack:
             raise ValueError(f"attack[{k}] must be a dict with op among {OPS}, got {op!r}")
         kind, field = op["op"], op.get("field")
         fields = COMMAND + REPORT
-        if kind == "drop":
+        if kind in ("drop", "reset"):
             if field is not None:
-                raise ValueError(f"attack[{k}]: drop takes no field (the whole frame)")
+                raise ValueError(f"attack[{k}]: {kind} takes no field (the whole frame)")
         elif field not in fields:
             raise ValueError(f"attack[{k}].field must be one of {fields} for {kind}, got "
                              f"{field!r}")
@@ -169,15 +175,16 @@ class WireAttack:
         return out
 
     def command(self, j: int, t: float, period: float,
-                values: dict[str, float]) -> dict[str, float] | None:
-        """Period ``j``'s command (time ``t``, s) as forwarded, or None (dropped)."""
+                values: dict[str, float]) -> dict[str, float] | str | None:
+        """Period ``j``'s command (time ``t``, s) as forwarded, None (dropped) or
+        ``RESET`` (dropped, the connection reset)."""
         self.sent.append(dict(values))
         out = dict(values)
         for op in self.ops:
             if not op["start"] <= t < op["stop"]:
                 continue
-            if op["op"] == "drop":
-                return None
+            if op["op"] in ("drop", "reset"):
+                return None if op["op"] == "drop" else RESET
             if op["field"] in COMMAND:
                 out[op["field"]] = self._apply(op, j, t, period, out[op["field"]])
         return out

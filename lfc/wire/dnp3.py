@@ -53,6 +53,8 @@ import math
 import struct
 import threading
 import time
+from contextlib import nullcontext
+from typing import Callable
 
 from lfc._validate import check_flag, check_positive
 from lfc.wire.registers import seq_problem, value_problem
@@ -500,22 +502,36 @@ class Centre:
     On connecting it does what a master does (IEEE 1815 5.1): an integrity poll,
     then, as the outstation's internal indications ask, a time synchronization
     (a WRITE of g50v1, the wall clock) and the clearing of DEVICE_RESTART (a WRITE
-    of g80v1 index 7).  ``startup_iin`` holds the indications it found, ``iin`` the
-    latest response's.  With ``select_before_operate`` a command is a SELECT, then an
-    OPERATE of the same block."""
+    of g80v1 index 7).  ``startup_iin`` holds the indications the last start-up
+    found, ``iin`` the latest response's.  With ``select_before_operate`` a command
+    is a SELECT, then an OPERATE of the same block.  A connection that fails (reset, closed) is made again
+    and started up again, as a real master's is: the period's command is lost, the
+    report read on the new connection; each is kept in ``reconnects`` (the period's
+    ``seq`` and what failed).  ``inside``: ``() -> context manager``, the block it
+    connects again in (its namespace, :mod:`lfc.wire.network`)."""
 
     def __init__(self, port: int, loop: EventLoop, timeout: float = 10.0,
-                 host: str = "127.0.0.1", select_before_operate: bool = False) -> None:
-        from dnp3.master import DefaultSOEHandler, Master, MasterConfig, MasterTcpRunner
+                 host: str = "127.0.0.1", select_before_operate: bool = False,
+                 inside: Callable = nullcontext) -> None:
         check_flag("select_before_operate", select_before_operate)
         self.select_before_operate = select_before_operate
-        self.loop, self.handler = loop, DefaultSOEHandler()
+        self.loop, self.where, self.inside = loop, (host, port, timeout), inside
+        self.reconnects: list[tuple[int, str]] = []
+        self.seq = 0
+        self._connect()
+
+    def _connect(self) -> None:
+        """Connect, then the start-up: an integrity poll, time and restart as asked."""
+        from dnp3.master import DefaultSOEHandler, Master, MasterConfig, MasterTcpRunner
+        host, port, timeout = self.where
+        self.handler = DefaultSOEHandler()
         self.master = Master(handler=self.handler,
                              config=MasterConfig(address=MASTER, outstation_address=OUTSTATION))
         self.runner = MasterTcpRunner(master=self.master, host=host, port=port,
                                       response_timeout=timeout)
-        loop.run(self.runner.open())
-        self.iin = self.startup_iin = self._request(self.master.build_integrity_poll())
+        self.loop.run(self.runner.open())
+        self.iin = 0
+        self.startup_iin = self._request(self.master.build_integrity_poll())
         self._start_up()
 
     def _request(self, request) -> int:
@@ -523,6 +539,25 @@ class Centre:
         responses = self.loop.run(self.runner.request(request))
         self.iin = int(responses[-1].iin) if responses else self.iin
         return self.iin
+
+    def _call(self, make) -> bool:
+        """Send the requests ``make()`` builds; False after the connection failed and was
+        made again (a master's request sequence starts over on it)."""
+        from dnp3.master.tcp_runner import LinkError
+        from dnp3.transport_io.channel import ChannelError
+        try:
+            for request in make():
+                self._request(request)
+            return True
+        except (LinkError, ChannelError, ConnectionError, asyncio.IncompleteReadError) as err:
+            self.reconnects.append((self.seq, f"{type(err).__name__}: {err}"[:200]))
+            try:
+                self.loop.run(self.runner.close())
+            except (ChannelError, ConnectionError):
+                pass                             # what was left of it is gone
+            with self.inside():
+                self._connect()
+            return False
 
     def _start_up(self) -> None:
         from dnp3.application.builder import build_write_request
@@ -547,16 +582,20 @@ class Centre:
                                               build_operate_request, build_select_request)
         from dnp3.application.fragment import ObjectBlock
         from dnp3.application.qualifiers import ObjectHeader
+        self.seq = seq
         objects = (ObjectBlock(header=ObjectHeader(group=41, variation=4, qualifier=0x17),
                                data=_ao_block(values, seq)[3:]),)
         builders = ((build_select_request, build_operate_request) if self.select_before_operate
                     else (build_direct_operate_request,))
-        for build in builders:
-            self._request(build(objects=objects, seq=self.master.next_request_sequence()))
+        self._call(lambda: (build(objects=objects, seq=self.master.next_request_sequence())
+                            for build in builders))
 
     def poll(self) -> dict:
-        """Read the report (a range poll of g30v1, points 0-8)."""
-        self._request(self.master.build_range_poll(30, 1, 0, len(REPORT_POINTS) - 1))
+        """Read the report (a range poll of g30v1, points 0-8; again on a new connection
+        if it failed)."""
+        def read():
+            return (self.master.build_range_poll(30, 1, 0, len(REPORT_POINTS) - 1),)
+        self._call(read) or self._call(read)
         points = self.handler.analog_inputs
         return from_counts([points[i].value for i in range(len(REPORT_POINTS))])
 

@@ -22,7 +22,7 @@ import pandas as pd
 from lfc.engine import CTRL_COLUMNS, agc_step
 from lfc.filters.base import ACTIVE, ALARM_BITS, binding_names
 from lfc.wire.network import NETWORKS, Loopback, Namespaces
-from lfc.wire.relay import Impairment
+from lfc.wire.relay import RESET, Impairment
 
 U_COL, FLAG_COL = CTRL_COLUMNS.index("u_ref"), CTRL_COLUMNS.index("flags")
 
@@ -87,7 +87,7 @@ class Link:
             j = self.clocks[a]
             out = self.policies[a].command(j, self.times[min(j, len(self.times) - 1)],
                                            self.period, values)
-            return None if out is None else (out, seq)
+            return out if out is None or out is RESET else (out, seq)
 
         def on_report(report):
             j = max(self.clocks[a], 0)   # before the first command (DNP3's startup poll): 0
@@ -117,7 +117,8 @@ class Link:
                 self.ports.append((self.loop.run(relay.start()), port))
             with net.inside("centre", self.loop):
                 self.centres.append(tr.Centre(self.ports[-1][0], self.loop,
-                                              host=plan.relay(a), **self.device))
+                                              host=plan.relay(a), **self.device,
+                                              inside=lambda: net.inside("centre", self.loop)))
 
     def close(self) -> None:
         """Hang up, stop the relays and outstations, stop the event loop."""
@@ -191,8 +192,10 @@ class Link:
                                  ";".join(binding_names(rep["flags"]))
                                  if rep["flags"] & ACTIVE else "", rep["link"]))
 
-    def outcome(self, n_ctrl: int) -> tuple[pd.DataFrame, pd.DataFrame, list, pd.DataFrame]:
-        """``(exchanges, alarm_log, frames, rejected)`` of :class:`lfc.wire.run.WireResult`."""
+    def outcome(self, n_ctrl: int) -> tuple[pd.DataFrame, pd.DataFrame, list, pd.DataFrame,
+                                            pd.DataFrame]:
+        """``(exchanges, alarm_log, frames, rejected, reconnects)`` of
+        :class:`lfc.wire.run.WireResult`."""
         rows = [(self.times[j], a, self.centre_rows[j, a][0], *self.side[j, a][:3],
                  self.centre_rows[j, a][1], self.centre_rows[j, a][2], self.side[j, a][3])
                 for j in range(n_ctrl) for a in range(self.n_areas)
@@ -207,4 +210,8 @@ class Link:
                                        in enumerate(self.stations or [])
                                        for t, what, why in station.rejected),
                                 columns=["time", "area", "what", "reason"])
-        return exchanges, alarm_log, frames, rejected
+        reconnects = pd.DataFrame(sorted((self.times[min(seq, len(self.times) - 1)], a, seq,
+                                          why) for a, centre in enumerate(self.centres or [])
+                                         for seq, why in centre.reconnects),
+                                  columns=["t", "area", "seq", "reason"])
+        return exchanges, alarm_log, frames, rejected, reconnects

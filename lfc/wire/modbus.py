@@ -17,6 +17,8 @@ import asyncio
 import struct
 import threading
 import time
+from contextlib import nullcontext
+from typing import Callable
 
 from lfc._validate import check_positive
 from lfc.wire.registers import (N_COMMAND, N_REPORT, command_registers, read_command,
@@ -274,25 +276,51 @@ class Centre:
     not used: the client is synchronous).  A command the outstation refuses (an
     exception response: what reached it was not what was sent) is kept in
     ``refused`` (its period's ``seq`` and the exception), and the run goes on: the
-    generator holds its last command, as a real master's would."""
+    generator holds its last command, as a real master's would.  A connection that
+    fails (reset, closed) is made again, as a real master's is: the period's command
+    is lost, the report read on the new connection; each is kept in ``reconnects``
+    (the period's ``seq`` and what failed).  ``inside``: ``() -> context manager``, the
+    block it connects again in (its namespace, :mod:`lfc.wire.network`)."""
 
     def __init__(self, port: int, loop: EventLoop | None = None, timeout: float = 10.0,
-                 host: str = "127.0.0.1") -> None:
+                 host: str = "127.0.0.1", inside: Callable = nullcontext) -> None:
         from pymodbus.client import ModbusTcpClient
         self.client = ModbusTcpClient(host, port=port, timeout=timeout, retries=0)
-        if not self.client.connect():
-            raise ConnectionError(f"the control centre could not connect to {host}:{port}")
+        self.where, self.inside = f"{host}:{port}", inside
+        self._connect()
         self.refused: list[tuple[int, str]] = []
+        self.reconnects: list[tuple[int, str]] = []
+        self.seq = 0
+
+    def _connect(self) -> None:
+        if not self.client.connect():
+            raise ConnectionError(f"the control centre could not connect to {self.where}")
+
+    def _call(self, request):
+        """``request()``, or None after the connection failed and was made again."""
+        from pymodbus.exceptions import ModbusException
+        try:
+            return request()
+        except (ModbusException, OSError) as err:
+            self.reconnects.append((self.seq, f"{type(err).__name__}: {err}"[:200]))
+            self.client.close()
+            with self.inside():
+                self._connect()
+            return None
 
     def send(self, values: dict[str, float], seq: int) -> None:
         """Write one period's command (function 16 at 0)."""
-        reply = self.client.write_registers(0, command_registers(values, seq), device_id=1)
-        if reply.isError():
+        self.seq = seq
+        reply = self._call(lambda: self.client.write_registers(
+            0, command_registers(values, seq), device_id=1))
+        if reply is not None and reply.isError():
             self.refused.append((seq, str(reply)))
 
     def poll(self) -> dict:
-        """Read the report (function 4 at 0)."""
-        reply = self.client.read_input_registers(0, count=N_REPORT, device_id=1)
+        """Read the report (function 4 at 0; again on a new connection if it failed)."""
+        def read():
+            return self.client.read_input_registers(0, count=N_REPORT, device_id=1)
+        reply = self._call(read) or read()
         if reply.isError():
             raise ConnectionError(f"the outstation refused the read: {reply}")
         report = read_report(list(reply.registers))

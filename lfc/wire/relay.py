@@ -30,6 +30,7 @@ from __future__ import annotations
 import asyncio
 import random
 import socket
+import struct
 import threading
 import time
 from dataclasses import dataclass
@@ -38,6 +39,10 @@ from typing import Callable
 
 from lfc._validate import check_number, check_range, check_seed
 from lfc.wire.network import LOOPBACK
+
+
+#: what ``on_command`` returns to have the relay reset the connection (:class:`Relay`)
+RESET = "reset"
 
 
 class EventLoop:
@@ -143,8 +148,9 @@ class Relay:
     codec : object
         The protocol's frame codec (module docstring).
     on_command : callable
-        ``(values, seq) -> (values, seq) or None``: a command as forwarded
-        (None: drop the frame and answer it).
+        ``(values, seq) -> (values, seq), None or RESET``: a command as forwarded
+        (None: drop the frame and answer it; ``RESET``: drop it and reset the
+        connection, both legs, with a TCP RST).
     on_report : callable
         ``report -> report``: a report (dict of its fields) as returned.
     host, upstream_host : str
@@ -243,6 +249,9 @@ class Relay:
                 command = codec.command(frame)
                 if command is not None:
                     forwarded = session["command"] = self.on_command(*command)
+                    if forwarded is RESET:
+                        _reset(c_writer, g_writer)
+                        return
                     sent = None if forwarded is None else codec.with_command(frame, *forwarded)
                 else:
                     sent = codec.downstream(frame, session)
@@ -267,3 +276,16 @@ class Relay:
                 if report is not None:
                     frame = codec.with_report(frame, self.on_report(report))
                 await self._send(c_writer, "relay>centre", frame)
+
+
+def _reset(*writers) -> None:
+    """Close each writer's connection with a TCP RST (``SO_LINGER`` 0), what is queued
+    discarded (an :class:`_Impaired` writer's queue too)."""
+    for w in writers:
+        if isinstance(w, _Impaired):
+            w.task.cancel()
+            w = w.writer
+        sock = w.get_extra_info("socket")
+        if sock is not None:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+        w.transport.abort()

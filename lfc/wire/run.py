@@ -108,6 +108,11 @@ class WireResult:
         Every command an outstation refused: ``time`` (wall clock, s, as ``frames``),
         ``area``, ``what`` (the write or the point operated) and ``reason`` (a partial
         or misplaced write, a value out of range or not finite, a point out of order).
+    reconnects : DataFrame
+        Every time the control centre lost its connection and made a new one: ``t``
+        (the period's time, s), ``area``, ``seq`` (the period) and ``reason`` (what
+        failed); the period's command is lost (the generator holds it and flags the
+        link), the report is read on the new connection.
     settings : dict
     """
 
@@ -116,6 +121,7 @@ class WireResult:
     alarm_log: pd.DataFrame
     frames: list
     rejected: pd.DataFrame
+    reconnects: pd.DataFrame
     settings: dict
 
     @property
