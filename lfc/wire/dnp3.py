@@ -504,10 +504,10 @@ class Centre:
     (a WRITE of g50v1, the wall clock) and the clearing of DEVICE_RESTART (a WRITE
     of g80v1 index 7).  ``startup_iin`` holds the indications the last start-up
     found, ``iin`` the latest response's.  With ``select_before_operate`` a command
-    is a SELECT, then an OPERATE of the same block.  A connection that fails (reset, closed) is made again
-    and started up again, as a real master's is: the period's command is lost, the
-    report read on the new connection; each is kept in ``reconnects`` (the period's
-    ``seq`` and what failed).  ``inside``: ``() -> context manager``, the block it
+    is a SELECT, then an OPERATE of the same block.  A connection that fails (reset,
+    closed) is made again and started up again, as a real master's is: the period's
+    command is lost, the report read on the new connection; each is kept in
+    ``reconnects`` (the period's ``seq`` and what failed).  ``inside``: ``() -> context manager``, the block it
     connects again in (its namespace, :mod:`lfc.wire.network`)."""
 
     def __init__(self, port: int, loop: EventLoop, timeout: float = 10.0,
