@@ -507,8 +507,9 @@ class Centre:
     is a SELECT, then an OPERATE of the same block.  A connection that fails (reset,
     closed) is made again and started up again, as a real master's is: the period's
     command is lost, the report read on the new connection; each is kept in
-    ``reconnects`` (the period's ``seq`` and what failed).  ``inside``: ``() -> context manager``, the block it
-    connects again in (its namespace, :mod:`lfc.wire.network`)."""
+    ``reconnects`` (the period's ``seq`` and what failed).  ``inside``: ``() ->
+    context manager``, the block it connects again in (its namespace,
+    :mod:`lfc.wire.network`)."""
 
     def __init__(self, port: int, loop: EventLoop, timeout: float = 10.0,
                  host: str = "127.0.0.1", select_before_operate: bool = False,
