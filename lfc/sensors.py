@@ -35,6 +35,7 @@ sample beyond the statement (:func:`alarm_rows`).  The generator's own signals
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from numbers import Integral
 
 import numpy as np
 import pandas as pd
@@ -184,7 +185,7 @@ class Redundant:
                 raise ParameterTypeError(f"{name} must be a dict {{sensor: {{channel: "
                                          f"signal}}}}, got {entries!r:.80}")
             for sensor, channels in entries.items():
-                if isinstance(sensor, bool) or not isinstance(sensor, int) \
+                if isinstance(sensor, bool) or not isinstance(sensor, Integral) \
                         or not 0 <= sensor < self.array.count:
                     raise ValueError(f"{name}: sensor must be an int in [0, "
                                      f"{self.array.count}), got {sensor!r}")
