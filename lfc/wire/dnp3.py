@@ -419,14 +419,21 @@ class _Checked:
     bit is checked before dnp3py's parser (which drops the link header) sees it.  A
     frame marked as coming from an outstation (DIR = 0) is logged in ``owner``'s
     ``rejected`` and dropped; bytes that are not DNP3 link frames pass to dnp3py's
-    parser, which resynchronizes on the next start bytes."""
+    parser, which resynchronizes on the next start bytes.  A connection its peer
+    resets ends as one it closes (an empty read), not as a transport error."""
 
     def __init__(self, channel, owner: Outstation) -> None:
         self.channel, self.owner, self.buffer = channel, owner, bytearray()
 
     async def read(self, n: int) -> bytes:
+        from dnp3.transport_io.channel import ChannelError
         while True:
-            data = await self.channel.read(n)
+            try:
+                data = await self.channel.read(n)
+            except ChannelError as err:
+                if isinstance(err.__cause__, ConnectionResetError):
+                    return b""
+                raise
             if not data:
                 return data
             self.buffer.extend(data)
