@@ -208,3 +208,15 @@ def test_what_cannot_hold_redundant_sensors_says_so():
     from lfc.wire import run_wire
     with pytest.raises(ValueError, match="sensors"):
         run_wire(testbed.GridCase.kundur(), duration=1.0, sensors={0: Redundant(WIDE)})
+
+
+def test_the_single_area_red_team_takes_redundant_sensors_as_a_fixed_part():
+    """``family_search(..., scenario={"sensors": Redundant(...)})``: every run of the
+    search reads three coarse sensors, one lying; against the certified filter built
+    without ``sensor_bound`` (a ``Defender`` has no such column) the search finds a
+    trip, as on grids."""
+    from lfc.experiments.redteam import Defender, family_search
+    found = family_search(P, Defender("certified", method="certified"), "sinusoid on P_c",
+                          maxiter=2, popsize=3,
+                          scenario={"sensors": Redundant(WIDE, far(0))})
+    assert found["tripped"] and found["outside"] > 0
