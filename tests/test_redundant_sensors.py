@@ -220,3 +220,34 @@ def test_the_single_area_red_team_takes_redundant_sensors_as_a_fixed_part():
                           maxiter=2, popsize=3,
                           scenario={"sensors": Redundant(WIDE, far(0))})
     assert found["tripped"] and found["outside"] > 0
+
+
+def test_the_single_area_red_team_finds_no_trip_through_the_filter_built_for_the_median():
+    """The single-area red team's every command family (``FAMILIES``, 3 generations × 4)
+    while sensor 0 of three lies far off (1 pu, -1 pu/s from 1 s), coarse meters: against
+    ``Defender(method="certified", sensor_bound=...)`` no family trips (the proof's
+    statement); against the same filter without it, the sinusoid, square and chirp
+    families on the command and the square on the reference trip (measured: 4 of 6)."""
+    from lfc.experiments.redteam import FAMILIES, Defender, family_search
+    fixed = {"sensors": Redundant(WIDE, far(0))}
+    for name, bound in (("secure", WIDE.bound), ("naive", None)):
+        defender = Defender(name, method="certified", sensor_bound=bound)
+        tripped = [family_search(P, defender, family, maxiter=3, popsize=4,
+                                 scenario=fixed)["tripped"] for family in FAMILIES]
+        assert sum(tripped) == (0 if bound else 4), (name, tripped)
+
+
+def test_a_table_row_holds_the_filter_built_for_the_median():
+    """The certified filter's ``sensor_bound`` is a scenario table's ``sensor_bound_w``,
+    ``sensor_bound_rocof`` columns: a row written from a scenario reads back to the same
+    filter (its metrics equal), and a row with one of the two is refused naming it."""
+    from lfc.tables import scenario_row
+    secure = lfc.SafetyFilter(P, RELAYS, method="certified", sensor_bound=WIDE.bound)
+    row = scenario_row(lfc.Scenario.for_area(scc=secure, pc_attack=SQUARE), P)
+    assert (row["sensor_bound_w"], row["sensor_bound_rocof"]) == WIDE.bound
+    table = pd.DataFrame([row])
+    got = lfc.simulate_many(P, table, duration=3.0)
+    one = lfc.simulate(P, duration=3.0, scc=secure, pc_attack=SQUARE).metrics()
+    assert got.alarms.iat[0] == one["alarms"] and got.outside.iat[0] == one["outside"]
+    with pytest.raises(ValueError, match="sensor_bound"):
+        lfc.simulate_many(P, table.assign(sensor_bound_rocof=np.nan), duration=1.0)

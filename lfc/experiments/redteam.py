@@ -41,7 +41,8 @@ from scipy.optimize import differential_evolution
 
 from lfc._format import number
 from lfc._validate import (ParameterTypeError, check_array, check_count, check_flag,
-                           check_multiple, check_number, check_positive, check_seed)
+                           check_multiple, check_number, check_pair, check_positive,
+                           check_seed)
 from lfc.engine import check_area_keys, check_attacks
 from lfc.estimation import check_noise_std
 from lfc.experiments.scenarios import ATTACK_START
@@ -106,15 +107,18 @@ SPOOF_FAMILIES = {f"{name} of sensor {LIAR}": entry for name, entry in SENSOR_FA
 _GRID = {**MULTI_FAMILIES, **SENSOR_FAMILIES, **LOAD_FAMILIES, **SPOOF_FAMILIES}
 
 
-READ_BY = {"none": (), "paper": ("alpha", "Ts"), "certified": ("uncertainty", "declare_noise")}
+READ_BY = {"none": (), "paper": ("alpha", "Ts"),
+           "certified": ("uncertainty", "declare_noise", "sensor_bound")}
 
 
 @dataclass(frozen=True)
 class Defender:
     """A filter setting to attack: ``method`` "none", "paper" (with ``alpha``,
     ``Ts``; the default reading) or "certified" (with its plant box
-    ``uncertainty`` and, with ``declare_noise``, the measurement noise covered).
-    A field the method does not read keeps its default (else ``ValueError``)."""
+    ``uncertainty``, with ``declare_noise`` the measurement noise covered, and with
+    ``sensor_bound`` (pu, pu/s) the median of redundant sensors' error: give the search
+    ``scenario={"sensors": Redundant(...)}``).  A field the method does not read keeps
+    its default (else ``ValueError``)."""
 
     name: str
     method: str = "paper"
@@ -122,6 +126,7 @@ class Defender:
     Ts: float = 0.25
     uncertainty: float = 0.0
     declare_noise: bool = False
+    sensor_bound: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str):
@@ -133,6 +138,9 @@ class Defender:
         if not 0.0 <= self.uncertainty < 1.0:
             raise ValueError(f"uncertainty must lie in [0, 1), got {self.uncertainty!r}")
         check_flag("declare_noise", self.declare_noise)
+        if self.sensor_bound is not None:
+            object.__setattr__(self, "sensor_bound",
+                               check_pair("sensor_bound", self.sensor_bound, positive=True))
         unread = [f.name for f in fields(self)
                   if f.name not in ("name", "method", *READ_BY[self.method])
                   and getattr(self, f.name) != f.default]
@@ -146,7 +154,9 @@ class Defender:
         """The scenario-table columns that select this filter."""
         if self.method == "none":
             return {"alpha": np.nan, "Ts": self.Ts, "method": "paper"}
-        extra = ({"uncertainty": self.uncertainty, "declare_noise": self.declare_noise}
+        bound = self.sensor_bound or (math.nan, math.nan)
+        extra = ({"uncertainty": self.uncertainty, "declare_noise": self.declare_noise,
+                  "sensor_bound_w": bound[0], "sensor_bound_rocof": bound[1]}
                  if self.method == "certified" else {})
         return {"alpha": self.alpha, "Ts": self.Ts, "method": self.method, **extra}
 

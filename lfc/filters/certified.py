@@ -233,7 +233,8 @@ class CertifiedOptions(Options):
                                    "period of the calls (the Kalman estimate's covariance)")
 
     COLUMNS: ClassVar[tuple[str, ...]] = ("uncertainty", "margin", "declare_noise",
-                                          "trips_per_hour", "noise_w", "noise_rocof")
+                                          "trips_per_hour", "noise_w", "noise_rocof",
+                                          "sensor_bound_w", "sensor_bound_rocof")
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -290,26 +291,32 @@ class CertifiedOptions(Options):
             object.__setattr__(self, name, float(getattr(self, name)))
 
     def to_columns(self) -> dict:
-        """``uncertainty``, ``margin``, ``trips_per_hour`` (NaN: none) and
-        ``declare_noise`` (whether a noise model is declared: the row's noise)."""
+        """``uncertainty``, ``margin``, ``trips_per_hour`` (NaN: none),
+        ``declare_noise`` (whether a noise model is declared: the row's noise) and
+        ``sensor_bound_w``, ``sensor_bound_rocof`` (NaN: none)."""
+        bound = self.sensor_bound or (math.nan, math.nan)
         return {"uncertainty": self.uncertainty, "margin": self.margin,
                 "trips_per_hour": math.nan if self.trips_per_hour is None
-                else self.trips_per_hour, "declare_noise": self.noise_std is not None}
+                else self.trips_per_hour, "declare_noise": self.noise_std is not None,
+                "sensor_bound_w": bound[0], "sensor_bound_rocof": bound[1]}
 
     @classmethod
     def from_columns(cls, row: dict) -> dict:
         """The plant box ``uncertainty``, ``margin``, ``trips_per_hour`` and, with
         ``declare_noise``, the noise model of the row's Kalman estimate
         (:func:`lfc.estimation.measurement_std` of ``noise_w``, ``noise_rocof``:
-        pu, pu/s)."""
+        pu, pu/s), and the redundant sensors' bound ``sensor_bound_w``,
+        ``sensor_bound_rocof`` (pu, pu/s; both or neither)."""
         raw = tuple(float(row.get(c, 0.0)) for c in ("noise_w", "noise_rocof"))
         noise = measurement_std(raw)
         declared = bool(row.get("declare_noise", False)) and any(v > 0 for v in raw)
         box, rate, margin = row.get("uncertainty"), row.get("trips_per_hour"), row.get("margin")
+        bound = tuple(row.get(c) for c in ("sensor_bound_w", "sensor_bound_rocof"))
         return {"uncertainty": float(box) if given(box) else 0.0,
                 "margin": float(margin) if given(margin) else 0.0,
                 "noise_std": noise if declared else None,
-                "trips_per_hour": float(rate) if given(rate) else None}
+                "trips_per_hour": float(rate) if given(rate) else None,
+                "sensor_bound": tuple(map(float, bound)) if any(map(given, bound)) else None}
 
 
 class CertifiedSet:
