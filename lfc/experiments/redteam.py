@@ -545,7 +545,9 @@ def coordinated_scenario(family: str, theta, n_areas: int, duration: float) -> d
     (its result's ``search`` and ``theta`` replay its winner, e.g. on ANDES):
     ``attacks`` for ``MULTI_FAMILIES``, ``loads`` or ``following_loads`` for
     ``LOAD_FAMILIES`` (with a following load, ``loads`` holds its
-    ``FOLLOWING_KICK`` in every area it attacks); ``duration`` (s) ends a chirp."""
+    ``FOLLOWING_KICK`` in every area it attacks); ``duration`` (s) ends a chirp.  For
+    ``SPOOF_FAMILIES`` the ``attacks`` are sensor ``LIAR``'s lies: :func:`spoofed` puts
+    them into the search's redundant sensors, as the search does."""
     check_choice("family", family, tuple(_GRID))
     channel, waveform, bounds = _GRID[family]
     k = len(bounds)
