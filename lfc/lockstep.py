@@ -90,7 +90,9 @@ class LinearGrid:
         states, the load, the tie-line export and their sum."""
         m = N_AREA_STATES
         tie = self.ties()
-        load = self.p[j * self.ratio] + self._followed(j * self.ratio, self.x)
+        load = self.p[j * self.ratio]
+        if self.following:
+            load = load + self._followed(j * self.ratio, self.x)
         return np.column_stack([self.x[:m * self.n_a].reshape(self.n_a, m), load, tie,
                                 load + tie])
 

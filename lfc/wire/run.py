@@ -307,12 +307,12 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
     n_steps = int(round(duration / dt))
     n_ctrl = -(-n_steps // ratio)
     tc = np.arange(n_ctrl) * period
-    redundant = Scenario(sensors={0: sensors} if single else sensors, noise_std=noise_std,
-                         seed=seed, following_loads={0: following_load} if single
-                         else following_load)
-    check_area_keys(redundant.sensors, n_a, "sensors")
-    check_area_keys(redundant.following_loads, n_a, "following_load")
-    told, logs = with_sensors(redundant.sensors, {}, tc, seed)
+    checked = Scenario(sensors={0: sensors} if single else sensors, noise_std=noise_std,
+                       seed=seed, following_loads={0: following_load} if single
+                       else following_load)          # the threats beyond the command
+    check_area_keys(checked.sensors, n_a, "sensors")
+    check_area_keys(checked.following_loads, n_a, "following_load")
+    told, logs = with_sensors(checked.sensors, {}, tc, seed)
     k_freq, k_tie = grid.agc_gains()
     feedforward = (not single) if feedforward is None else feedforward
     gens = [GeneratorSide(grid.areas[a], filters.get(a), None, noise_std,
@@ -321,7 +321,7 @@ def run_wire(params: LFCParams | MultiAreaParams, *, duration: float,
                           k_agc=(k_freq[a], k_tie[a]) if local else (0.0, 0.0), network=True,
                           anti_windup=anti_windup and local, sensor_attacks=told.get(a))
             for a in range(n_a)]
-    plant = LinearGrid(grid, loads, n_steps, ratio, dt, relays, redundant.following_loads)
+    plant = LinearGrid(grid, loads, n_steps, ratio, dt, relays, checked.following_loads)
 
     link = Link(n_a, transport(protocol), policies, np.arange(n_ctrl) * ratio * dt, period,
                 None if local else k_freq[0] * period, anti_windup, impairment,
