@@ -138,14 +138,14 @@ class Scenarios:
         if plant.n_areas != n or len(plant.tie) != len(grid.tie):
             raise ValueError(f"plant must have the design's {n} area(s) and {len(grid.tie)} "
                              f"tie-line(s), got {plant!r}")
+        attacks, logs = with_sensors(scenario.sensors, attacks, self.tc, seed)
         check_coupled(filters, grid, estimator, noise_std)
-        check_sensed(attacks, filters, estimator)
+        check_sensed(attacks, filters, estimator)     # the redundant sensors' median too
         check_load_measured(filters, estimator, feedforward)
         p_i = self._plants.index(plant, lambda: discretize_grid(plant, self.dt))
         f_is = [-1 if filters.get(a) is None else self._filters.index(
             id(filters[a]), lambda: self._checked(a, filters[a])) for a in range(n)]
         row, noise, sig, n_samples = [], [], [], self._n_samples   # kept once all areas pass
-        attacks, logs = with_sensors(scenario.sensors, attacks, self.tc, seed)
         for a, area in enumerate(grid.areas):
             channels = attacks.get(a, {})
             scc = filters.get(a)
