@@ -210,8 +210,7 @@ class Redundant:
         ``noise[sensor][channel]`` if it leaves ``±bound`` at a sample."""
         times = np.asarray(times, float)
         b = np.asarray(self.array.bound)
-        honest = np.random.default_rng(seed).uniform(
-            -1.0, 1.0, (len(times), self.array.count, 2)) * b
+        honest = self.array.readings(times, None, seed)      # the drawn noise, no lie
         for sensor, channels in self.noise.items():
             for channel, signal in channels.items():
                 c = CHANNELS.index(channel)
